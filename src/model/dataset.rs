@@ -1,0 +1,336 @@
+//! poses.csv: the recorded poses, validated row by row.
+
+use std::collections::HashSet;
+use std::io::Read;
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use super::{Rig, Robot};
+use crate::error::{Error, Result};
+
+/// Which side of the train/test split a pose is on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Split {
+    /// Used to identify the parameters.
+    Train,
+    /// Held out to check them.
+    Test,
+}
+
+/// What the instrument recorded at a pose.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Measurement {
+    /// Drawstring readings `l_k` (mm), one per anchor.
+    Strings(Vec<f64>),
+    /// The point T measured directly in the rig frame (mm).
+    Point(Vector3<f64>),
+}
+
+/// One recorded pose.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseRecord {
+    /// Id, unique in the dataset.
+    pub id: String,
+    /// Commanded joint angles (rad).
+    pub q_rad: Vec<f64>,
+    /// The measurement.
+    pub measurement: Measurement,
+    /// Seconds since the session began.
+    pub time_s: Option<f64>,
+    /// Ambient temperature (°C).
+    pub temp_c: Option<f64>,
+    /// Payload (kg).
+    pub payload_kg: Option<f64>,
+    /// Split given in the file.
+    pub split: Option<Split>,
+}
+
+/// A validated set of poses, in visiting order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    /// The poses.
+    pub poses: Vec<PoseRecord>,
+    /// Number of strings per pose (0 for point data).
+    pub n_strings: usize,
+}
+
+fn parse_num(row: usize, col: &str, raw: &str) -> Result<f64> {
+    let v: f64 = raw
+        .trim()
+        .parse()
+        .map_err(|_| Error::cell(row, col, format!("'{raw}' is not a number")))?;
+    if !v.is_finite() {
+        return Err(Error::cell(
+            row,
+            col,
+            format!("'{raw}' is not a finite number"),
+        ));
+    }
+    Ok(v)
+}
+
+fn parse_opt(
+    row: usize,
+    col: Option<(usize, &str)>,
+    rec: &csv::StringRecord,
+) -> Result<Option<f64>> {
+    match col {
+        Some((i, name)) => {
+            let raw = rec.get(i).unwrap_or("").trim();
+            if raw.is_empty() {
+                Ok(None)
+            } else {
+                parse_num(row, name, raw).map(Some)
+            }
+        }
+        None => Ok(None),
+    }
+}
+
+impl Dataset {
+    /// Parse poses.csv for this robot and rig. Every row is checked before
+    /// anything is returned; the first problem is reported with its row
+    /// (1-based, header excluded) and column.
+    pub fn from_csv<R: Read>(input: R, robot: &Robot, rig: &Rig) -> Result<Self> {
+        let mut rdr = csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .flexible(true)
+            .from_reader(input);
+        let headers = rdr
+            .headers()
+            .map_err(|e| Error::field("header", e.to_string()))?
+            .clone();
+        let idx = |name: &str| headers.iter().position(|h| h == name);
+        let n = robot.dof();
+        let pose_col = idx("pose").ok_or_else(|| Error::field("pose", "missing column 'pose'"))?;
+        let mut q_cols = Vec::with_capacity(n);
+        for j in 1..=n {
+            let name = format!("q{j}_deg");
+            q_cols.push(idx(&name).ok_or_else(|| {
+                Error::field(&name, format!("missing column (the robot has {n} joints)"))
+            })?);
+        }
+        if idx(&format!("q{}_deg", n + 1)).is_some() {
+            return Err(Error::field(
+                format!("q{}_deg", n + 1),
+                format!("the file has more joint columns than the robot's {n} joints"),
+            ));
+        }
+        let m = rig.n_strings();
+        let l_cols: Vec<Option<usize>> = (1..=m).map(|k| idx(&format!("l{k}_mm"))).collect();
+        let has_strings = m > 0 && l_cols.iter().all(|c| c.is_some());
+        if m > 0 && !has_strings && l_cols.iter().any(|c| c.is_some()) {
+            let k = l_cols.iter().position(|c| c.is_none()).unwrap() + 1;
+            return Err(Error::field(
+                format!("l{k}_mm"),
+                format!("missing column (the rig has {m} strings)"),
+            ));
+        }
+        if has_strings && idx(&format!("l{}_mm", m + 1)).is_some() {
+            return Err(Error::field(
+                format!("l{}_mm", m + 1),
+                format!("the file has more string columns than the rig's {m} anchors"),
+            ));
+        }
+        let xyz = [idx("x_mm"), idx("y_mm"), idx("z_mm")];
+        let has_points = xyz.iter().all(|c| c.is_some());
+        if !has_strings && !has_points {
+            return Err(Error::field(
+                "header",
+                if m > 0 {
+                    format!("no measurement columns: expected l1_mm..l{m}_mm (or x_mm,y_mm,z_mm)")
+                } else {
+                    "no measurement columns: expected x_mm,y_mm,z_mm (the rig has no strings)"
+                        .to_string()
+                },
+            ));
+        }
+        let time_col = idx("time_s").map(|i| (i, "time_s"));
+        let temp_col = idx("temp_c").map(|i| (i, "temp_c"));
+        let payload_col = idx("payload_kg").map(|i| (i, "payload_kg"));
+        let split_col = idx("split");
+        let range = rig.sensor.and_then(|s| s.range_mm);
+
+        let mut poses = Vec::new();
+        let mut seen = HashSet::new();
+        for (r, rec) in rdr.records().enumerate() {
+            let row = r + 1;
+            let rec = rec.map_err(|e| Error::cell(row, "row", e.to_string()))?;
+            if rec.len() != headers.len() {
+                return Err(Error::cell(
+                    row,
+                    "row",
+                    format!(
+                        "{} columns where the header has {}",
+                        rec.len(),
+                        headers.len()
+                    ),
+                ));
+            }
+            let id = rec.get(pose_col).unwrap_or("").trim().to_string();
+            if id.is_empty() {
+                return Err(Error::cell(row, "pose", "empty pose id"));
+            }
+            if !seen.insert(id.clone()) {
+                return Err(Error::cell(
+                    row,
+                    "pose",
+                    format!("duplicate pose id '{id}'"),
+                ));
+            }
+            let mut q_rad = Vec::with_capacity(n);
+            for (j, &c) in q_cols.iter().enumerate() {
+                let name = format!("q{}_deg", j + 1);
+                let v = parse_num(row, &name, rec.get(c).unwrap_or(""))?;
+                let js = &robot.joints[j];
+                if v < js.q_min_deg - 1e-6 || v > js.q_max_deg + 1e-6 {
+                    return Err(Error::cell(
+                        row,
+                        &name,
+                        format!(
+                            "{v} deg is outside the joint limits [{}, {}]",
+                            js.q_min_deg, js.q_max_deg
+                        ),
+                    ));
+                }
+                q_rad.push(v.to_radians());
+            }
+            let measurement = if has_strings {
+                let mut ls = Vec::with_capacity(m);
+                for (k, c) in l_cols.iter().enumerate() {
+                    let name = format!("l{}_mm", k + 1);
+                    let v = parse_num(row, &name, rec.get(c.unwrap()).unwrap_or(""))?;
+                    if v < 0.0 {
+                        return Err(Error::cell(
+                            row,
+                            &name,
+                            format!("{v} mm: a string reading cannot be negative"),
+                        ));
+                    }
+                    if let Some(rg) = range {
+                        if v > rg {
+                            return Err(Error::cell(
+                                row,
+                                &name,
+                                format!("{v} mm is past the sensor's range of {rg} mm"),
+                            ));
+                        }
+                    }
+                    ls.push(v);
+                }
+                Measurement::Strings(ls)
+            } else {
+                let mut p = [0.0; 3];
+                for (c, name) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
+                    p[c] = parse_num(row, name, rec.get(xyz[c].unwrap()).unwrap_or(""))?;
+                }
+                Measurement::Point(Vector3::from(p))
+            };
+            let split = match split_col.map(|c| rec.get(c).unwrap_or("").trim()) {
+                None | Some("") => None,
+                Some(s) if s.eq_ignore_ascii_case("train") => Some(Split::Train),
+                Some(s) if s.eq_ignore_ascii_case("test") => Some(Split::Test),
+                Some(s) => {
+                    return Err(Error::cell(
+                        row,
+                        "split",
+                        format!("'{s}': expected train or test"),
+                    ));
+                }
+            };
+            poses.push(PoseRecord {
+                id,
+                q_rad,
+                measurement,
+                time_s: parse_opt(row, time_col, &rec)?,
+                temp_c: parse_opt(row, temp_col, &rec)?,
+                payload_kg: parse_opt(row, payload_col, &rec)?,
+                split,
+            });
+        }
+        if poses.is_empty() {
+            return Err(Error::InsufficientData("the file holds no poses".into()));
+        }
+        Ok(Dataset {
+            poses,
+            n_strings: if has_strings { m } else { 0 },
+        })
+    }
+
+    /// True when the poses carry string readings (not points).
+    pub fn is_strings(&self) -> bool {
+        self.n_strings > 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn robot() -> Robot {
+        Robot::from_json(r#"{"joints":[{"a_mm":100,"alpha_deg":0,"d_mm":0,"q_min_deg":-90,"q_max_deg":90},{"a_mm":100,"alpha_deg":0,"d_mm":0}],"tool_point_mm":[0,0,0]}"#).unwrap()
+    }
+    fn rig() -> Rig {
+        Rig::from_json(
+            r#"{"anchors_mm":[[0,0,0],[0,900,0],[1200,0,0]],"r_mm":35,"sensor":{"range_mm":2000}}"#,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn parses_strings_and_context() {
+        let csv = "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm,time_s,split,extra\n1,10,20,100,200,300,1.5,test,x\n";
+        let d = Dataset::from_csv(csv.as_bytes(), &robot(), &rig()).unwrap();
+        assert_eq!(d.poses.len(), 1);
+        assert_eq!(d.poses[0].split, Some(Split::Test));
+        assert_eq!(d.poses[0].time_s, Some(1.5));
+        assert!(
+            matches!(d.poses[0].measurement, Measurement::Strings(ref l) if l == &vec![100.0, 200.0, 300.0])
+        );
+    }
+
+    #[test]
+    fn names_row_and_column() {
+        let csv =
+            "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm\n1,10,20,100,200,300\n2,10,NaN,100,200,300\n";
+        let e = Dataset::from_csv(csv.as_bytes(), &robot(), &rig()).unwrap_err();
+        assert!(
+            matches!(e, Error::Input { ref field, row: Some(2), .. } if field == "q2_deg"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn refuses_readings_past_range_and_short_rows() {
+        let csv = "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm\n1,10,20,100,2500,300\n";
+        let e = Dataset::from_csv(csv.as_bytes(), &robot(), &rig())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("l2_mm") && e.contains("range"), "{e}");
+        let csv = "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm\n1,10,20,100,200\n";
+        let e = Dataset::from_csv(csv.as_bytes(), &robot(), &rig())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("row 1") && e.contains("columns"), "{e}");
+    }
+
+    #[test]
+    fn refuses_duplicate_ids_and_limits() {
+        let csv = "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm\n1,10,20,1,2,3\n1,10,20,1,2,3\n";
+        assert!(
+            Dataset::from_csv(csv.as_bytes(), &robot(), &rig())
+                .unwrap_err()
+                .to_string()
+                .contains("duplicate")
+        );
+        let csv = "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm\n1,100,20,1,2,3\n";
+        assert!(
+            Dataset::from_csv(csv.as_bytes(), &robot(), &rig())
+                .unwrap_err()
+                .to_string()
+                .contains("limits")
+        );
+    }
+}

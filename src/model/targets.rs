@@ -1,0 +1,172 @@
+//! targets.csv: what is to be compensated, one row per target.
+
+use std::io::Read;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// A compensation target.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Target {
+    /// Id, unique in the file.
+    pub target: String,
+    /// What the target asks for.
+    #[serde(flatten)]
+    pub kind: TargetKind,
+}
+
+/// Nominal joints, or a point (and optionally the flange orientation) in the
+/// robot base frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum TargetKind {
+    /// Joint angles as taught with the nominal model (deg): T should go
+    /// where the nominal model says these angles put it.
+    Joints {
+        /// Nominal joint angles (deg).
+        q_deg: Vec<f64>,
+    },
+    /// T in the robot base frame (mm), optionally with the flange
+    /// orientation as roll-pitch-yaw (deg).
+    Cartesian {
+        /// Position of T (mm).
+        xyz_mm: [f64; 3],
+        /// Wanted flange orientation, `Rz(yaw) Ry(pitch) Rx(roll)` (deg).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        rpy_deg: Option<[f64; 3]>,
+    },
+}
+
+/// Parse targets.csv for a robot with `dof` joints.
+pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .flexible(true)
+        .from_reader(input);
+    let headers = rdr
+        .headers()
+        .map_err(|e| Error::field("header", e.to_string()))?
+        .clone();
+    let idx = |name: &str| headers.iter().position(|h| h == name);
+    let id_col = idx("target").ok_or_else(|| Error::field("target", "missing column 'target'"))?;
+    let q_cols: Vec<Option<usize>> = (1..=dof).map(|j| idx(&format!("q{j}_deg"))).collect();
+    let joints = q_cols.iter().all(|c| c.is_some());
+    let xyz: Vec<Option<usize>> = ["x_mm", "y_mm", "z_mm"].iter().map(|n| idx(n)).collect();
+    let rpy: Vec<Option<usize>> = ["roll_deg", "pitch_deg", "yaw_deg"]
+        .iter()
+        .map(|n| idx(n))
+        .collect();
+    let cart = xyz.iter().all(|c| c.is_some());
+    if !joints && !cart {
+        return Err(Error::field(
+            "header",
+            format!("expected q1_deg..q{dof}_deg or x_mm,y_mm,z_mm"),
+        ));
+    }
+    if joints && idx(&format!("q{}_deg", dof + 1)).is_some() {
+        return Err(Error::field(
+            format!("q{}_deg", dof + 1),
+            format!("more joint columns than the robot's {dof} joints"),
+        ));
+    }
+    let with_rpy = rpy.iter().all(|c| c.is_some());
+    if !with_rpy && rpy.iter().any(|c| c.is_some()) {
+        return Err(Error::field(
+            "roll_deg",
+            "give all of roll_deg, pitch_deg, yaw_deg or none",
+        ));
+    }
+    let num = |row: usize, name: &str, rec: &csv::StringRecord, c: usize| -> Result<f64> {
+        let raw = rec.get(c).unwrap_or("");
+        let v: f64 = raw
+            .trim()
+            .parse()
+            .map_err(|_| Error::cell(row, name, format!("'{raw}' is not a number")))?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(Error::cell(row, name, "not a finite number"))
+        }
+    };
+    let mut out = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for (r, rec) in rdr.records().enumerate() {
+        let row = r + 1;
+        let rec = rec.map_err(|e| Error::cell(row, "row", e.to_string()))?;
+        if rec.len() != headers.len() {
+            return Err(Error::cell(
+                row,
+                "row",
+                format!(
+                    "{} columns where the header has {}",
+                    rec.len(),
+                    headers.len()
+                ),
+            ));
+        }
+        let id = rec.get(id_col).unwrap_or("").trim().to_string();
+        if id.is_empty() {
+            return Err(Error::cell(row, "target", "empty target id"));
+        }
+        if !seen.insert(id.clone()) {
+            return Err(Error::cell(
+                row,
+                "target",
+                format!("duplicate target id '{id}'"),
+            ));
+        }
+        let kind = if joints {
+            let mut q = Vec::with_capacity(dof);
+            for (j, c) in q_cols.iter().enumerate() {
+                q.push(num(row, &format!("q{}_deg", j + 1), &rec, c.unwrap())?);
+            }
+            TargetKind::Joints { q_deg: q }
+        } else {
+            let mut p = [0.0; 3];
+            for (k, n) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
+                p[k] = num(row, n, &rec, xyz[k].unwrap())?;
+            }
+            let rpy_deg = if with_rpy {
+                let mut a = [0.0; 3];
+                for (k, n) in ["roll_deg", "pitch_deg", "yaw_deg"].iter().enumerate() {
+                    a[k] = num(row, n, &rec, rpy[k].unwrap())?;
+                }
+                Some(a)
+            } else {
+                None
+            };
+            TargetKind::Cartesian { xyz_mm: p, rpy_deg }
+        };
+        out.push(Target { target: id, kind });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_both_kinds() {
+        let t = targets_from_csv("target,q1_deg,q2_deg\na,1,2\n".as_bytes(), 2).unwrap();
+        assert_eq!(
+            t[0].kind,
+            TargetKind::Joints {
+                q_deg: vec![1.0, 2.0]
+            }
+        );
+        let t = targets_from_csv("target,x_mm,y_mm,z_mm\na,1,2,3\n".as_bytes(), 6).unwrap();
+        assert_eq!(
+            t[0].kind,
+            TargetKind::Cartesian {
+                xyz_mm: [1.0, 2.0, 3.0],
+                rpy_deg: None
+            }
+        );
+        let e = targets_from_csv("target,x_mm,y_mm,z_mm\na,1,x,3\n".as_bytes(), 6)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("row 1") && e.contains("y_mm"), "{e}");
+    }
+}
