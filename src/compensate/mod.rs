@@ -1,1 +1,1 @@
-//! Compensation.
+//! Compensation (in progress).

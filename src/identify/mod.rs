@@ -1,1 +1,716 @@
-//! Identification.
+//! Identification: from recorded poses to a calibrated model and its report.
+//!
+//! The pipeline ([`identify`]):
+//! 1. split the poses into train and test (the file's `split`, or a seeded
+//!    random hold-out);
+//! 2. locate T at every pose (least-squares multilateration) to start the
+//!    base pose (a rigid fit of the nominal model's points) and for the
+//!    statistics;
+//! 3. "before": the nominal model with only the base pose and tool point
+//!    fitted, by Levenberg-Marquardt on the raw string readings;
+//! 4. identifiability: the parameters the data cannot separate are held at
+//!    nominal and named;
+//! 5. "after": Levenberg-Marquardt on all identifiable parameters, optionally
+//!    with a robust loss that down-weights and flags outlier poses;
+//! 6. covariance, statistics, the paper's one-step method beside it.
+
+pub mod identifiability;
+pub mod lm;
+pub mod paper;
+pub mod problem;
+pub mod report;
+pub mod stats;
+
+use nalgebra::{DMatrix, Matrix3, Vector3};
+
+use crate::error::{Error, Result};
+use crate::kinematics::chain::{Chain, OutputFrame};
+use crate::kinematics::{JointParam, Params};
+use crate::measure::{self, Located};
+use crate::model::{BasePose, Dataset, Measurement, Rig, Robot, Split};
+use crate::rng::Rng;
+use lm::{LmResult, LmSettings};
+use problem::CalibrationProblem;
+use report::*;
+
+/// Which identification method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Method {
+    /// Levenberg-Marquardt to convergence on the raw measurements.
+    #[default]
+    Lm,
+    /// The paper: linearised error model, one pseudo-inverse step on located
+    /// points.
+    Paper,
+}
+
+/// Identification options.
+#[derive(Debug, Clone)]
+pub struct IdentifyOptions {
+    /// Method.
+    pub method: Method,
+    /// Robust (Huber) loss at the pose level, with outlier poses flagged.
+    pub robust: bool,
+    /// Run the physics analysis after the geometric identification.
+    pub physics: bool,
+    /// Fraction held out when the file has no split.
+    pub holdout_fraction: f64,
+    /// Seed of the hold-out choice.
+    pub seed: u64,
+    /// Also identify each string's zero offset.
+    pub identify_string_offsets: bool,
+    /// Identifiability tolerance (sine of the angle to the kept columns).
+    pub identifiability_tolerance: f64,
+}
+
+impl Default for IdentifyOptions {
+    fn default() -> Self {
+        IdentifyOptions {
+            method: Method::Lm,
+            robust: false,
+            physics: true,
+            holdout_fraction: 0.3,
+            seed: 1,
+            identify_string_offsets: false,
+            identifiability_tolerance: identifiability::DEFAULT_TOLERANCE,
+        }
+    }
+}
+
+/// Progress reporting and cancellation for long identifications.
+pub trait Progress: Sync {
+    /// Called as work advances; `fraction` in [0, 1].
+    fn update(&self, stage: &str, fraction: f64);
+    /// Polled between solver iterations; `true` stops the work with
+    /// [`Error::Cancelled`].
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+/// A [`Progress`] that ignores everything.
+pub struct NoProgress;
+impl Progress for NoProgress {
+    fn update(&self, _: &str, _: f64) {}
+}
+
+/// The working state shared by the pipeline's steps.
+pub struct Session<'a> {
+    /// Nominal robot.
+    pub robot: &'a Robot,
+    /// Rig.
+    pub rig: &'a Rig,
+    /// All poses.
+    pub data: &'a Dataset,
+    /// Kinematic structure.
+    pub chain: Chain,
+    /// Anchors (empty for point data).
+    pub anchors: Vec<Vector3<f64>>,
+    /// Indices of the train poses.
+    pub train: Vec<usize>,
+    /// Indices of the test poses.
+    pub test: Vec<usize>,
+    /// Measured T per pose in the rig frame (located from the strings with
+    /// the nominal string constants, or as measured).
+    pub measured: Vec<Vector3<f64>>,
+    /// Multilateration results per pose (string data).
+    pub located: Vec<Located>,
+}
+
+impl<'a> Session<'a> {
+    /// Prepare: check shapes, split, locate.
+    pub fn new(
+        robot: &'a Robot,
+        rig: &'a Rig,
+        data: &'a Dataset,
+        opts: &IdentifyOptions,
+    ) -> Result<Self> {
+        let n = robot.dof();
+        if let Some(p) = data.poses.iter().find(|p| p.q_rad.len() != n) {
+            return Err(Error::field(
+                "poses",
+                format!(
+                    "pose {} has {} joint angles for a {n}-joint robot",
+                    p.id,
+                    p.q_rad.len()
+                ),
+            ));
+        }
+        let m = data.n_strings;
+        if m > 0 && m != rig.n_strings() {
+            return Err(Error::field(
+                "poses",
+                format!(
+                    "{m} string columns for a rig with {} anchors",
+                    rig.n_strings()
+                ),
+            ));
+        }
+        let chain = Chain::new(robot.convention, n, m);
+        let anchors: Vec<Vector3<f64>> = if m > 0 {
+            (0..m).map(|k| rig.anchor(k)).collect()
+        } else {
+            vec![]
+        };
+        let (train, test) = choose_split(data, opts);
+        if train.len() < 3 {
+            return Err(Error::InsufficientData(format!(
+                "{} train poses: at least 3 are needed",
+                train.len()
+            )));
+        }
+        // Side hint for mirror-ambiguous (coplanar) anchors: the nominal
+        // model's point with the base guess, when there is one.
+        let guess = rig.base_in_rig;
+        let nominal = guess.map(|b| Params::nominal(robot, &b, rig, m));
+        let mut measured = Vec::with_capacity(data.poses.len());
+        let mut located = Vec::new();
+        for pose in &data.poses {
+            match &pose.measurement {
+                Measurement::Strings(l) => {
+                    let hint = nominal
+                        .as_ref()
+                        .map(|p| chain.point(&p.values, &pose.q_rad, OutputFrame::Rig).1);
+                    let dist: Vec<f64> = l.iter().map(|v| v + rig.r_mm).collect();
+                    let loc = measure::locate(&anchors, &dist, hint.as_ref())
+                        .map_err(|e| Error::field("poses", format!("pose {}: {e}", pose.id)))?;
+                    measured.push(loc.point);
+                    located.push(loc);
+                }
+                Measurement::Point(p) => measured.push(*p),
+            }
+        }
+        Ok(Session {
+            robot,
+            rig,
+            data,
+            chain,
+            anchors,
+            train,
+            test,
+            measured,
+            located,
+        })
+    }
+
+    /// The train poses.
+    pub fn train_poses(&self) -> Vec<&'a crate::model::PoseRecord> {
+        self.train.iter().map(|&i| &self.data.poses[i]).collect()
+    }
+
+    /// A problem over the train poses.
+    pub fn problem(&self, full: Vec<f64>, free: Vec<usize>) -> CalibrationProblem<'a> {
+        CalibrationProblem::new(
+            self.chain,
+            self.anchors.clone(),
+            self.train_poses(),
+            full,
+            free,
+        )
+    }
+
+    /// Errors (model minus measured T, robot base frame) of `p` at poses `idx`.
+    pub fn errors(&self, p: &[f64], idx: &[usize]) -> Vec<Vector3<f64>> {
+        let b = self.chain.layout.base();
+        let rb = crate::kinematics::rpy_matrix(p[b + 3], p[b + 4], p[b + 5]);
+        idx.iter()
+            .map(|&i| {
+                let (_, t) = self
+                    .chain
+                    .point(p, &self.data.poses[i].q_rad, OutputFrame::Rig);
+                rb.transpose() * (t - self.measured[i])
+            })
+            .collect()
+    }
+
+    /// Before/after figures on train and test.
+    pub fn stats(&self, before: &[f64], after: &[f64]) -> Stats {
+        let split = |idx: &[usize]| SplitStats {
+            n: idx.len(),
+            before: stats::error_stats(&self.errors(before, idx)),
+            after: stats::error_stats(&self.errors(after, idx)),
+        };
+        Stats {
+            train: split(&self.train),
+            test: split(&self.test),
+        }
+    }
+
+    /// String noise (1 sigma, mm) from the strings' redundancy.
+    pub fn string_sigma(&self) -> Option<f64> {
+        measure::string_sigma(&self.located)
+    }
+
+    /// Held-out 3-D RMS a perfect model would show: the located points'
+    /// own scatter, from the string noise and each test pose's geometry.
+    pub fn noise_floor(&self, sigma: Option<f64>) -> Option<f64> {
+        let s = sigma?;
+        if self.located.is_empty() || self.test.is_empty() {
+            return None;
+        }
+        let mean_trace = self
+            .test
+            .iter()
+            .map(|&i| self.located[i].cov_unit.trace())
+            .sum::<f64>()
+            / self.test.len() as f64;
+        Some(s * mean_trace.sqrt())
+    }
+}
+
+fn choose_split(data: &Dataset, opts: &IdentifyOptions) -> (Vec<usize>, Vec<usize>) {
+    let has_test = data.poses.iter().any(|p| p.split == Some(Split::Test));
+    let has_train = data.poses.iter().any(|p| p.split == Some(Split::Train));
+    if has_test && has_train {
+        let test = (0..data.poses.len())
+            .filter(|&i| data.poses[i].split == Some(Split::Test))
+            .collect();
+        let train = (0..data.poses.len())
+            .filter(|&i| data.poses[i].split != Some(Split::Test))
+            .collect();
+        return (train, test);
+    }
+    let n = data.poses.len();
+    let n_test = ((n as f64 * opts.holdout_fraction.clamp(0.0, 0.9)).round() as usize)
+        .min(n.saturating_sub(3));
+    let mut order: Vec<usize> = (0..n).collect();
+    Rng::new(opts.seed).shuffle(&mut order);
+    let mut test: Vec<usize> = order[..n_test].to_vec();
+    let mut train: Vec<usize> = order[n_test..].to_vec();
+    test.sort_unstable();
+    train.sort_unstable();
+    (train, test)
+}
+
+/// Describe where the split came from.
+fn split_source(data: &Dataset, session: &Session, opts: &IdentifyOptions) -> String {
+    let from_file = data.poses.iter().any(|p| p.split == Some(Split::Test))
+        && data.poses.iter().any(|p| p.split == Some(Split::Train));
+    if from_file {
+        "file".into()
+    } else {
+        format!(
+            "chosen: {} of {} poses held out at random (seed {})",
+            session.test.len(),
+            data.poses.len(),
+            opts.seed
+        )
+    }
+}
+
+/// Rigid transform (R, t) minimising `Σ |R a + t - b|²` (Kabsch).
+pub fn rigid_fit(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+    if a.len() < 3 {
+        return None;
+    }
+    let ca = a.iter().sum::<Vector3<f64>>() / a.len() as f64;
+    let cb = b.iter().sum::<Vector3<f64>>() / b.len() as f64;
+    let mut h = Matrix3::zeros();
+    for (x, y) in a.iter().zip(b) {
+        h += (x - ca) * (y - cb).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u?, svd.v_t?);
+    let mut d = Matrix3::identity();
+    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = vt.transpose() * d * u.transpose();
+    Some((r, cb - r * ca))
+}
+
+fn run_lm(problem: &CalibrationProblem, progress: &dyn Progress, stage: &str) -> Result<LmResult> {
+    let settings = LmSettings::default();
+    lm::minimize(problem, &problem.x0(), &settings, |it, _| {
+        progress.update(stage, (it as f64 / 30.0).min(0.95));
+        !progress.cancelled()
+    })
+}
+
+/// The geometric calibration: base and tool first, then every identifiable
+/// parameter. Returns the "before" and "after" parameter vectors and the
+/// solver state.
+pub struct Geometric {
+    /// Nominal joints, fitted base and tool.
+    pub before: Params,
+    /// Calibrated.
+    pub after: Params,
+    /// Identifiability analysis.
+    pub selection: identifiability::Selection,
+    /// Solver result of the final fit (normal matrix at the solution).
+    pub result: LmResult,
+    /// Pose weights of the robust loss (train poses), 1 without it.
+    pub weights: Vec<f64>,
+    /// Residual scale of the final fit: `sqrt(2 cost / (N - k))` (mm).
+    pub sigma: f64,
+}
+
+/// Candidate parameters in priority order (see [`identifiability`]).
+pub fn candidates(session: &Session, opts: &IdentifyOptions) -> Vec<usize> {
+    let l = session.chain.layout;
+    let mut c: Vec<usize> = (l.base()..l.base() + 6)
+        .chain(l.tool()..l.tool() + 3)
+        .collect();
+    for j in 0..l.n_joints {
+        for p in [
+            JointParam::Theta,
+            JointParam::D,
+            JointParam::A,
+            JointParam::Alpha,
+        ] {
+            c.push(l.joint(j, p));
+        }
+    }
+    for j in 0..l.n_joints {
+        c.push(l.joint(j, JointParam::Beta));
+    }
+    if opts.identify_string_offsets && l.n_strings > 0 {
+        c.extend((0..l.n_strings).map(|k| l.string_offset(k)));
+    }
+    c
+}
+
+/// Steps 3-5 of the pipeline.
+pub fn geometric(
+    session: &Session,
+    opts: &IdentifyOptions,
+    progress: &dyn Progress,
+) -> Result<Geometric> {
+    let robot = session.robot;
+    let l = session.chain.layout;
+    // Start the base from a rigid fit of the nominal points to the measured ones.
+    let start = Params::nominal(
+        robot,
+        &BasePose {
+            xyz_mm: [0.0; 3],
+            rpy_deg: [0.0; 3],
+        },
+        session.rig,
+        l.n_strings,
+    );
+    let a: Vec<Vector3<f64>> = session
+        .train
+        .iter()
+        .map(|&i| {
+            session
+                .chain
+                .point(
+                    &start.values,
+                    &session.data.poses[i].q_rad,
+                    OutputFrame::Base,
+                )
+                .1
+        })
+        .collect();
+    let b: Vec<Vector3<f64>> = session.train.iter().map(|&i| session.measured[i]).collect();
+    let mut before = start.clone();
+    match rigid_fit(&a, &b) {
+        Some((r, t)) => before.set_base_rt(&r, &t),
+        None => return Err(Error::InsufficientData("cannot fit the base pose".into())),
+    }
+    progress.update("fitting base and tool", 0.0);
+    let base_tool: Vec<usize> = (l.base()..l.tool() + 3).collect();
+    let pb = session.problem(before.values.clone(), base_tool);
+    let rb = run_lm(&pb, progress, "fitting base and tool")?;
+    before.values = pb.expand(&rb.x);
+
+    // Identifiability at the before solution.
+    let cands = candidates(session, opts);
+    let pc = session.problem(before.values.clone(), cands.clone());
+    let mut jtj = DMatrix::zeros(cands.len(), cands.len());
+    let mut g = nalgebra::DVector::zeros(cands.len());
+    lm::LeastSquares::normal_equations(&pc, &pc.x0(), &mut jtj, &mut g);
+    let selection = identifiability::select(&jtj, &cands, &l, opts.identifiability_tolerance);
+
+    progress.update("identifying", 0.0);
+    let mut problem = session.problem(before.values.clone(), selection.free.clone());
+    let mut result = run_lm(&problem, progress, "identifying")?;
+    if opts.robust {
+        for _ in 0..8 {
+            problem.full = problem.expand(&result.x);
+            let res = pose_rms(&problem, &problem.full);
+            let scale = 1.4826 * stats::median(&res);
+            let k = 2.5 * scale.max(1e-12);
+            let w: Vec<f64> = res
+                .iter()
+                .map(|&e| if e <= k { 1.0 } else { k / e })
+                .collect();
+            let change = w
+                .iter()
+                .zip(&problem.weights)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            problem.weights = w;
+            result = run_lm(&problem, progress, "identifying (robust)")?;
+            if change < 1e-3 {
+                break;
+            }
+        }
+    }
+    let mut after = before.clone();
+    after.values = problem.expand(&result.x);
+    let dof =
+        (lm::LeastSquares::n_residuals(&problem) as f64 - selection.free.len() as f64).max(1.0);
+    let wsum = problem.weights.iter().sum::<f64>() / problem.weights.len().max(1) as f64;
+    let sigma = (2.0 * result.cost / (dof * wsum.max(1e-12))).sqrt();
+    Ok(Geometric {
+        before,
+        after,
+        selection,
+        result,
+        weights: problem.weights,
+        sigma,
+    })
+}
+
+/// Per-pose RMS residual of a problem's poses at `p`.
+pub fn pose_rms(problem: &CalibrationProblem, p: &[f64]) -> Vec<f64> {
+    let mut r = Vec::new();
+    problem
+        .poses
+        .iter()
+        .map(|pose| {
+            problem.pose_residuals(p, pose, &mut r);
+            (r.iter().map(|v| v * v).sum::<f64>() / r.len() as f64).sqrt()
+        })
+        .collect()
+}
+
+/// 1-sigma of every free parameter from `σ² (JᵀWJ)⁻¹`, in internal units.
+pub fn sigmas(jtj: &DMatrix<f64>, sigma: f64) -> Vec<f64> {
+    let n = jtj.nrows();
+    let d: Vec<f64> = (0..n).map(|i| jtj[(i, i)].sqrt().max(1e-300)).collect();
+    let scaled = DMatrix::from_fn(n, n, |i, j| jtj[(i, j)] / (d[i] * d[j]));
+    match scaled.cholesky() {
+        Some(ch) => {
+            let inv = ch.inverse();
+            (0..n)
+                .map(|i| sigma * inv[(i, i)].max(0.0).sqrt() / d[i])
+                .collect()
+        }
+        None => vec![f64::NAN; n],
+    }
+}
+
+/// Run the whole identification and build the report.
+pub fn identify(
+    robot: &Robot,
+    rig: &Rig,
+    data: &Dataset,
+    opts: &IdentifyOptions,
+    progress: &dyn Progress,
+) -> Result<Report> {
+    let session = Session::new(robot, rig, data, opts)?;
+    let geo = geometric(&session, opts, progress)?;
+    let l = session.chain.layout;
+    let string_sigma = session
+        .string_sigma()
+        .or_else(|| (l.n_strings > 0).then_some(geo.sigma));
+    let noise_floor_mm = session.noise_floor(string_sigma);
+
+    let paper = paper::one_step(&session, &geo.before);
+    let (after_values, method, fixed_sel, sig) = match opts.method {
+        Method::Lm => (
+            geo.after.values.clone(),
+            "lm",
+            Some(&geo.selection),
+            sigmas(&geo.result.jtj, geo.sigma),
+        ),
+        Method::Paper => {
+            let p = paper
+                .as_ref()
+                .map_err(|e| Error::Numerical(format!("paper method: {e}")))?;
+            (p.values.clone(), "paper", None, vec![])
+        }
+    };
+    let stats = session.stats(&geo.before.values, &after_values);
+    let paper_stats = match (&paper, opts.method) {
+        (Ok(p), Method::Lm) => Some(session.stats(&geo.before.values, &p.values)),
+        _ => None,
+    };
+
+    let mut sigma_of = vec![None; l.len()];
+    if let Some(sel) = fixed_sel {
+        for (k, &i) in sel.free.iter().enumerate() {
+            sigma_of[i] = sig.get(k).copied();
+        }
+    }
+    let after = Params {
+        layout: l,
+        values: after_values,
+    };
+    let nominal = Params::nominal(robot, &geo.before.base(), rig, l.n_strings);
+    let unit = |i: usize| {
+        if l.is_angle(i) {
+            (f64::to_degrees as fn(f64) -> f64, "deg")
+        } else {
+            (std::convert::identity as fn(f64) -> f64, "mm")
+        }
+    };
+    let deviations = (0..l.n_joints)
+        .map(|j| {
+            let dev = |p: JointParam| {
+                let i = l.joint(j, p);
+                let (conv, _) = unit(i);
+                (
+                    conv(after.values[i] - nominal.values[i]),
+                    sigma_of[i].map(conv),
+                )
+            };
+            let (a, a_s) = dev(JointParam::A);
+            let (al, al_s) = dev(JointParam::Alpha);
+            let (d, d_s) = dev(JointParam::D);
+            let (th, th_s) = dev(JointParam::Theta);
+            let (be, be_s) = dev(JointParam::Beta);
+            JointDeviation {
+                joint: j + 1,
+                a_mm: a,
+                a_mm_sigma: a_s,
+                alpha_deg: al,
+                alpha_deg_sigma: al_s,
+                d_mm: d,
+                d_mm_sigma: d_s,
+                theta_offset_deg: th,
+                theta_offset_deg_sigma: th_s,
+                beta_deg: be,
+                beta_deg_sigma: be_s,
+            }
+        })
+        .collect();
+    let parameters = match fixed_sel {
+        Some(sel) => sel
+            .free
+            .iter()
+            .map(|&i| {
+                let (conv, u) = unit(i);
+                let start = if i < l.base() || i >= l.tool() {
+                    Params::nominal(robot, &geo.before.base(), rig, l.n_strings).values[i]
+                } else {
+                    geo.before.values[i]
+                };
+                ParamEstimate {
+                    name: l.name(i),
+                    value: conv(after.values[i]),
+                    deviation: conv(after.values[i] - start),
+                    sigma: sigma_of[i].map(conv).unwrap_or(f64::NAN),
+                    unit: u.into(),
+                }
+            })
+            .collect(),
+        None => vec![],
+    };
+    let identifiability = Identifiability {
+        n_candidates: candidates(&session, opts).len(),
+        n_identified: fixed_sel.map(|s| s.free.len()).unwrap_or(5 * l.n_joints),
+        condition_number: geo.selection.condition_number,
+        fixed: fixed_sel.map(|s| s.fixed.clone()).unwrap_or_default(),
+    };
+
+    // Outliers: poses far beyond the robust residual scale.
+    let train_problem = session.problem(after.values.clone(), vec![]);
+    let res = pose_rms(&train_problem, &after.values);
+    let scale = 1.4826 * stats::median(&res);
+    let outliers = session
+        .train
+        .iter()
+        .zip(&res)
+        .filter(|(_, e)| scale > 0.0 && **e > 4.0 * scale)
+        .map(|(&i, &e)| Outlier {
+            pose: session.data.poses[i].id.clone(),
+            residual_mm: e,
+            score: e / scale,
+        })
+        .collect();
+
+    let mut per_pose = Vec::with_capacity(data.poses.len());
+    let all: Vec<usize> = (0..data.poses.len()).collect();
+    let eb = session.errors(&geo.before.values, &all);
+    let ea = session.errors(&after.values, &all);
+    let test_set: std::collections::HashSet<usize> = session.test.iter().copied().collect();
+    let mut r = Vec::new();
+    for i in all {
+        let strings_mm = if l.n_strings > 0 {
+            train_problem.pose_residuals(&after.values, &data.poses[i], &mut r);
+            Some(r.clone())
+        } else {
+            None
+        };
+        per_pose.push(PoseResidual {
+            pose: data.poses[i].id.clone(),
+            split: if test_set.contains(&i) {
+                Split::Test
+            } else {
+                Split::Train
+            },
+            before_mm: eb[i].into(),
+            after_mm: ea[i].into(),
+            strings_mm,
+        });
+    }
+
+    let closed_form_vs_lsq = closed_form_comparison(&session);
+    let calibrated_robot = after.to_robot(robot, &format!("{} (calibrated)", robot.name));
+    Ok(Report {
+        format: REPORT_FORMAT.into(),
+        method: method.into(),
+        robust: opts.robust,
+        nominal_robot: robot.clone(),
+        calibrated_robot,
+        base_in_rig: after.base(),
+        tool_point_mm: after.tool(),
+        deviations,
+        parameters,
+        fixed: identifiability
+            .fixed
+            .iter()
+            .map(|f| f.name.clone())
+            .collect(),
+        identifiability,
+        stats,
+        paper_stats,
+        noise_floor_mm,
+        string_sigma_mm: string_sigma,
+        held_out: session
+            .test
+            .iter()
+            .map(|&i| data.poses[i].id.clone())
+            .collect(),
+        split_source: split_source(data, &session, opts),
+        outliers,
+        convergence: Convergence {
+            iterations: geo.result.iterations,
+            termination: geo.result.termination.as_str().into(),
+            residual_rms_mm: (2.0 * geo.result.cost
+                / lm::LeastSquares::n_residuals(&train_problem).max(1) as f64)
+                .sqrt(),
+        },
+        closed_form_vs_lsq,
+        per_pose,
+        findings: vec![],
+    })
+}
+
+/// The paper's closed form against least squares over every pose (rigs
+/// with at least four anchors).
+pub fn closed_form_comparison(session: &Session) -> Option<ClosedFormComparison> {
+    if session.anchors.len() < 4 {
+        return None;
+    }
+    let r = session.rig.r_mm;
+    let mut d2 = Vec::new();
+    for (pose, loc) in session.data.poses.iter().zip(&session.located) {
+        if let Measurement::Strings(l) = &pose.measurement {
+            if let Ok(p) = measure::paper_closed_form(&session.anchors, l[0], l[2], l[3], r) {
+                d2.push((p - loc.point).norm());
+            }
+        }
+    }
+    if d2.is_empty() {
+        return None;
+    }
+    Some(ClosedFormComparison {
+        n: d2.len(),
+        rms_mm: (d2.iter().map(|v| v * v).sum::<f64>() / d2.len() as f64).sqrt(),
+        max_mm: d2.iter().cloned().fold(0.0, f64::max),
+    })
+}

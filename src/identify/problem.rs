@@ -1,0 +1,216 @@
+//! The calibration least-squares problem: residuals of the raw measurements
+//! (string readings, or measured points) against the model, with any subset
+//! of the parameters free.
+
+use nalgebra::{DMatrix, DVector, Vector3};
+
+use super::lm::LeastSquares;
+use crate::kinematics::chain::{Chain, OutputFrame, PointJacobian};
+use crate::model::{Measurement, PoseRecord};
+
+/// How a free parameter enters a residual row.
+#[derive(Debug, Clone, Copy)]
+enum Column {
+    /// A geometric parameter: moves T.
+    Geom(usize),
+    /// Zero offset of string k.
+    Offset(usize),
+    /// The common r.
+    R,
+}
+
+/// Residuals of a set of poses for the parameters in `free`; the others are
+/// held at their value in `full`.
+pub struct CalibrationProblem<'a> {
+    /// Kinematic structure.
+    pub chain: Chain,
+    /// Anchors (empty for point data).
+    pub anchors: Vec<Vector3<f64>>,
+    /// The poses fitted.
+    pub poses: Vec<&'a PoseRecord>,
+    /// Per-pose weights (robust loss), 1 by default.
+    pub weights: Vec<f64>,
+    /// Full parameter vector; free entries are overwritten from `x`.
+    pub full: Vec<f64>,
+    /// Indices of the free parameters.
+    free: Vec<usize>,
+    columns: Vec<Column>,
+}
+
+impl<'a> CalibrationProblem<'a> {
+    /// A problem over `poses` with `free` parameters starting from `full`.
+    pub fn new(
+        chain: Chain,
+        anchors: Vec<Vector3<f64>>,
+        poses: Vec<&'a PoseRecord>,
+        full: Vec<f64>,
+        free: Vec<usize>,
+    ) -> Self {
+        let l = chain.layout;
+        let columns = free
+            .iter()
+            .map(|&i| {
+                if i < l.n_geometric() {
+                    Column::Geom(i)
+                } else if i < l.n_geometric() + l.n_strings {
+                    Column::Offset(i - l.n_geometric())
+                } else {
+                    Column::R
+                }
+            })
+            .collect();
+        let weights = vec![1.0; poses.len()];
+        CalibrationProblem {
+            chain,
+            anchors,
+            poses,
+            weights,
+            full,
+            free,
+            columns,
+        }
+    }
+
+    /// The free parameter indices.
+    pub fn free(&self) -> &[usize] {
+        &self.free
+    }
+
+    /// Current values of the free parameters.
+    pub fn x0(&self) -> Vec<f64> {
+        self.free.iter().map(|&i| self.full[i]).collect()
+    }
+
+    /// The full vector with the free entries from `x`.
+    pub fn expand(&self, x: &[f64]) -> Vec<f64> {
+        let mut p = self.full.clone();
+        for (k, &i) in self.free.iter().enumerate() {
+            p[i] = x[k];
+        }
+        p
+    }
+
+    /// Residuals of one pose (predicted minus measured, mm) into `out`.
+    pub fn pose_residuals(&self, p: &[f64], pose: &PoseRecord, out: &mut Vec<f64>) {
+        out.clear();
+        let (_, t) = self.chain.point(p, &pose.q_rad, OutputFrame::Rig);
+        match &pose.measurement {
+            Measurement::Strings(l) => {
+                let g = self.chain.layout.n_geometric();
+                let r = p[self.chain.layout.r()];
+                for (k, a) in self.anchors.iter().enumerate() {
+                    out.push((t - a).norm() - r - p[g + k] - l[k]);
+                }
+            }
+            Measurement::Point(m) => out.extend((t - m).iter()),
+        }
+    }
+
+    /// Residual rows per pose (4 per pose for four strings, 3 for points).
+    pub fn rows_per_pose(&self) -> usize {
+        if self.anchors.is_empty() {
+            3
+        } else {
+            self.anchors.len()
+        }
+    }
+}
+
+impl LeastSquares for CalibrationProblem<'_> {
+    fn n_params(&self) -> usize {
+        self.free.len()
+    }
+
+    fn n_residuals(&self) -> usize {
+        self.poses.len() * self.rows_per_pose()
+    }
+
+    fn cost(&self, x: &[f64]) -> f64 {
+        let p = self.expand(x);
+        let mut r = Vec::new();
+        let mut c = 0.0;
+        for (pose, w) in self.poses.iter().zip(&self.weights) {
+            self.pose_residuals(&p, pose, &mut r);
+            c += w * r.iter().map(|v| v * v).sum::<f64>();
+        }
+        0.5 * c
+    }
+
+    fn normal_equations(&self, x: &[f64], jtj: &mut DMatrix<f64>, jtr: &mut DVector<f64>) -> f64 {
+        let p = self.expand(x);
+        let n = self.free.len();
+        jtj.fill(0.0);
+        jtr.fill(0.0);
+        let mut jac: PointJacobian = self.chain.new_jacobian();
+        let mut row = vec![0.0; n];
+        let mut cost = 0.0;
+        let g = self.chain.layout.n_geometric();
+        // Accumulate the upper triangle in a flat buffer (cache friendly),
+        // mirror at the end.
+        let mut upper = vec![0.0; n * n];
+        let add = |row: &[f64], r: f64, w: f64, upper: &mut [f64], jtr: &mut DVector<f64>| {
+            for a in 0..n {
+                let wa = w * row[a];
+                if wa == 0.0 {
+                    continue;
+                }
+                jtr[a] += wa * r;
+                let base = a * n;
+                for b in a..n {
+                    upper[base + b] += wa * row[b];
+                }
+            }
+        };
+        for (pose, &w) in self.poses.iter().zip(&self.weights) {
+            self.chain
+                .point_jacobian(&p, &pose.q_rad, OutputFrame::Rig, &mut jac);
+            let t = jac.point;
+            match &pose.measurement {
+                Measurement::Strings(l) => {
+                    let rr = p[self.chain.layout.r()];
+                    for (k, a) in self.anchors.iter().enumerate() {
+                        let v = t - a;
+                        let dist = v.norm();
+                        let u = v / dist;
+                        let r = dist - rr - p[g + k] - l[k];
+                        cost += w * r * r;
+                        for (f, col) in self.columns.iter().enumerate() {
+                            row[f] = match *col {
+                                Column::Geom(i) => u.dot(&jac.d_params[i]),
+                                Column::Offset(s) => {
+                                    if s == k {
+                                        -1.0
+                                    } else {
+                                        0.0
+                                    }
+                                }
+                                Column::R => -1.0,
+                            };
+                        }
+                        add(&row, r, w, &mut upper, jtr);
+                    }
+                }
+                Measurement::Point(m) => {
+                    for c in 0..3 {
+                        let r = t[c] - m[c];
+                        cost += w * r * r;
+                        for (f, col) in self.columns.iter().enumerate() {
+                            row[f] = match *col {
+                                Column::Geom(i) => jac.d_params[i][c],
+                                _ => 0.0,
+                            };
+                        }
+                        add(&row, r, w, &mut upper, jtr);
+                    }
+                }
+            }
+        }
+        for a in 0..n {
+            for b in a..n {
+                jtj[(a, b)] = upper[a * n + b];
+                jtj[(b, a)] = upper[a * n + b];
+            }
+        }
+        0.5 * cost
+    }
+}

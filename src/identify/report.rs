@@ -1,0 +1,250 @@
+//! The calibration report: what `drawcal identify` writes and the service
+//! stores. Documented field by field in the README.
+
+use serde::{Deserialize, Serialize};
+
+use crate::model::{BasePose, Robot};
+
+/// Current report format tag.
+pub const REPORT_FORMAT: &str = "drawcal report v1";
+
+/// Error figures of one model on one set of poses (the paper's Tables 3 and
+/// 4 plus RMS). Errors are model T minus measured T, in the robot base frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct ErrorStats {
+    /// 3-D RMS (mm).
+    pub rms_mm: f64,
+    /// 3-D mean (mm).
+    pub mean_mm: f64,
+    /// 3-D max (mm).
+    pub max_mm: f64,
+    /// Per axis x, y, z of the robot base frame.
+    pub x: AxisStats,
+    /// y axis.
+    pub y: AxisStats,
+    /// z axis.
+    pub z: AxisStats,
+}
+
+/// Per-axis figures.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct AxisStats {
+    /// Max absolute error (mm).
+    pub max_abs_mm: f64,
+    /// Mean absolute error (mm).
+    pub mean_abs_mm: f64,
+    /// RMS (mm).
+    pub rms_mm: f64,
+}
+
+/// Before (nominal model, base and tool fitted) and after (calibrated).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct SplitStats {
+    /// Number of poses.
+    pub n: usize,
+    /// Nominal joints, fitted base and tool.
+    pub before: ErrorStats,
+    /// Calibrated model.
+    pub after: ErrorStats,
+}
+
+/// Train and test figures.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct Stats {
+    /// Poses used for identification.
+    pub train: SplitStats,
+    /// Held-out poses.
+    pub test: SplitStats,
+}
+
+/// Identified deviation of one joint from nominal, with 1-sigma
+/// uncertainties (`None` where the parameter was fixed).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[allow(missing_docs)]
+pub struct JointDeviation {
+    /// Joint number, 1-based.
+    pub joint: usize,
+    pub a_mm: f64,
+    pub a_mm_sigma: Option<f64>,
+    pub alpha_deg: f64,
+    pub alpha_deg_sigma: Option<f64>,
+    pub d_mm: f64,
+    pub d_mm_sigma: Option<f64>,
+    pub theta_offset_deg: f64,
+    pub theta_offset_deg_sigma: Option<f64>,
+    pub beta_deg: f64,
+    pub beta_deg_sigma: Option<f64>,
+}
+
+/// A parameter the data cannot separate from others, held at nominal.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FixedParam {
+    /// Parameter name (`j3.d`).
+    pub name: String,
+    /// The free parameters it moves T like (its alias), strongest first.
+    pub aliased_with: Vec<String>,
+}
+
+/// What the data can identify.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct Identifiability {
+    /// Parameters considered.
+    pub n_candidates: usize,
+    /// Parameters identified.
+    pub n_identified: usize,
+    /// Condition number of the column-scaled Jacobian of the identified set.
+    pub condition_number: f64,
+    /// Fixed parameters and their aliases.
+    pub fixed: Vec<FixedParam>,
+}
+
+/// An identified parameter's value and 1-sigma, in report units.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParamEstimate {
+    /// Name (`j2.theta`, `base.x`...).
+    pub name: String,
+    /// Value (mm or deg).
+    pub value: f64,
+    /// Deviation from the starting value (mm or deg).
+    pub deviation: f64,
+    /// 1 sigma (mm or deg).
+    pub sigma: f64,
+    /// Unit.
+    pub unit: String,
+}
+
+/// A pose flagged by the robust loss.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Outlier {
+    /// Pose id.
+    pub pose: String,
+    /// Its residual RMS (mm) under the calibrated model.
+    pub residual_mm: f64,
+    /// Residual in units of the robust scale.
+    pub score: f64,
+}
+
+/// Residual of one pose, for plots.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseResidual {
+    /// Pose id.
+    pub pose: String,
+    /// `train` or `test`.
+    pub split: crate::model::Split,
+    /// Error before calibration, base frame (mm).
+    pub before_mm: [f64; 3],
+    /// Error after calibration, base frame (mm).
+    pub after_mm: [f64; 3],
+    /// String residuals after calibration (mm), string data only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub strings_mm: Option<Vec<f64>>,
+}
+
+/// How the solver ended.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct Convergence {
+    /// Iterations used.
+    pub iterations: usize,
+    /// Why it stopped.
+    pub termination: String,
+    /// Final RMS of the residuals it minimised (mm).
+    pub residual_rms_mm: f64,
+}
+
+/// Distance between the paper's closed-form points and the least-squares
+/// multilaterated points over the dataset.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ClosedFormComparison {
+    /// Poses compared.
+    pub n: usize,
+    /// RMS distance (mm).
+    pub rms_mm: f64,
+    /// Max distance (mm).
+    pub max_mm: f64,
+}
+
+/// One physical effect found beyond the geometric model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Finding {
+    /// Effect name from the catalogue (`joint_compliance`...), or
+    /// `unexplained`.
+    pub effect: String,
+    /// Joint it applies to (1-based).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint: Option<usize>,
+    /// Sensor it applies to (1-based).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<usize>,
+    /// Fitted magnitude.
+    pub magnitude: f64,
+    /// Its 1-sigma.
+    pub sigma: f64,
+    /// Unit of magnitude and sigma.
+    pub unit: String,
+    /// The physics, in one sentence.
+    pub explanation: String,
+    /// What located it.
+    pub evidence: String,
+    /// Held-out RMS before the effect was modelled (mm).
+    pub test_rms_before_mm: f64,
+    /// Held-out RMS after (mm).
+    pub test_rms_after_mm: f64,
+    /// The effect's fitted parameters, for compensation and re-use.
+    #[serde(default)]
+    pub parameters: serde_json::Value,
+}
+
+/// The whole result of an identification.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Report {
+    /// Format tag, [`REPORT_FORMAT`].
+    pub format: String,
+    /// `lm` or `paper`.
+    pub method: String,
+    /// Whether the robust loss was used.
+    pub robust: bool,
+    /// The nominal model the calibration started from.
+    pub nominal_robot: Robot,
+    /// The identified model, in robot.json form.
+    pub calibrated_robot: Robot,
+    /// Identified pose of the robot base in the rig frame.
+    pub base_in_rig: BasePose,
+    /// Identified tool point in the flange frame (mm).
+    pub tool_point_mm: [f64; 3],
+    /// Deviations from nominal, one per joint.
+    pub deviations: Vec<JointDeviation>,
+    /// Every identified parameter with its 1-sigma (joints, base, tool,
+    /// sensors).
+    pub parameters: Vec<ParamEstimate>,
+    /// Names of the parameters held at nominal.
+    pub fixed: Vec<String>,
+    /// Rank analysis behind `fixed`.
+    pub identifiability: Identifiability,
+    /// Before/after figures, train and test.
+    pub stats: Stats,
+    /// The paper's one-step method on the same split, for comparison
+    /// (present when `method` is `lm` and the paper method could run).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub paper_stats: Option<Stats>,
+    /// Expected held-out 3-D RMS of a perfect model: the point noise implied
+    /// by the string noise and the rig geometry (mm). `None` for point data.
+    pub noise_floor_mm: Option<f64>,
+    /// String noise (1 sigma, mm) estimated from the strings' redundancy.
+    pub string_sigma_mm: Option<f64>,
+    /// Held-out pose ids.
+    pub held_out: Vec<String>,
+    /// `file` when the split came from the `split` column, else how it was
+    /// chosen.
+    pub split_source: String,
+    /// Poses flagged as outliers by the robust loss.
+    pub outliers: Vec<Outlier>,
+    /// Solver summary.
+    pub convergence: Convergence,
+    /// Paper closed form versus least squares, four-anchor rigs only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub closed_form_vs_lsq: Option<ClosedFormComparison>,
+    /// Per-pose errors before and after.
+    pub per_pose: Vec<PoseResidual>,
+    /// Physics found beyond geometry (see the physics analysis).
+    pub findings: Vec<Finding>,
+}

@@ -1,0 +1,23 @@
+//! Shared helpers for the integration tests: load a dataset copied under
+//! tests/data.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+use drawcal::model::{Dataset, Rig, Robot};
+
+pub fn dir(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
+}
+
+pub fn load(name: &str) -> (Robot, Rig, Dataset) {
+    let d = dir(name);
+    let robot = Robot::from_json(&std::fs::read_to_string(d.join("robot.json")).unwrap()).unwrap();
+    let rig = Rig::from_json(&std::fs::read_to_string(d.join("rig.json")).unwrap()).unwrap();
+    let data = Dataset::from_csv(std::fs::File::open(d.join("poses.csv")).unwrap(), &robot, &rig).unwrap();
+    (robot, rig, data)
+}
+
+pub fn truth(name: &str) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir(name).join("truth.json")).unwrap()).unwrap()
+}
