@@ -1,1 +1,339 @@
-//! CLI.
+//! The `drawcal` command line: a thin layer over the core that reads files,
+//! prints summaries and writes results.
+
+pub mod summary;
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::compensate::{self, Compensator};
+use crate::identify::report::Report;
+use crate::identify::{self, IdentifyOptions, Method, Progress};
+use crate::measure;
+use crate::model::{Dataset, Rig, Robot, targets::targets_from_csv};
+
+/// The CLI layer's error: what went wrong and with which file.
+#[derive(Debug, thiserror::Error)]
+pub enum CliError {
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The core refused the input or failed.
+    #[error("{path}: {source}")]
+    Core {
+        /// The file being processed.
+        path: PathBuf,
+        /// The cause.
+        source: crate::Error,
+    },
+    /// Anything else (e.g. a subcommand of another layer).
+    #[error("{0}")]
+    Other(String),
+}
+
+fn read(path: &Path) -> Result<String, CliError> {
+    std::fs::read_to_string(path).map_err(|source| CliError::Io {
+        path: path.into(),
+        source,
+    })
+}
+
+fn core<T>(path: &Path, r: crate::Result<T>) -> Result<T, CliError> {
+    r.map_err(|source| CliError::Core {
+        path: path.into(),
+        source,
+    })
+}
+
+/// drawcal: robot calibration from drawstring sensors (or trackers).
+#[derive(Debug, Parser)]
+#[command(name = "drawcal", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Identify the kinematic parameters from recorded poses.
+    Identify(IdentifyArgs),
+    /// Compensate targets with a calibration.
+    Compensate(CompensateArgs),
+    /// Locate the tool point from string readings.
+    Locate(LocateArgs),
+}
+
+/// Identification method on the command line.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum MethodArg {
+    /// Levenberg-Marquardt on the raw readings (default).
+    Lm,
+    /// The paper's linearised one-step method.
+    Paper,
+}
+
+/// On or off.
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum Switch {
+    /// Enabled.
+    On,
+    /// Disabled.
+    Off,
+}
+
+/// `drawcal identify`.
+#[derive(Debug, Args)]
+pub struct IdentifyArgs {
+    /// Nominal robot model (robot.json).
+    #[arg(long)]
+    pub robot: PathBuf,
+    /// Measuring rig (rig.json).
+    #[arg(long)]
+    pub rig: PathBuf,
+    /// Recorded poses (poses.csv).
+    #[arg(long)]
+    pub poses: PathBuf,
+    /// Identification method.
+    #[arg(long, value_enum, default_value = "lm")]
+    pub method: MethodArg,
+    /// Where to write the JSON report.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Robust loss: down-weight and flag outlier poses.
+    #[arg(long)]
+    pub robust: bool,
+    /// The physics analysis after the geometric identification.
+    #[arg(long, value_enum, default_value = "on")]
+    pub physics: Switch,
+    /// Fraction of poses held out when the file has no split column.
+    #[arg(long, default_value_t = 0.3)]
+    pub holdout: f64,
+    /// Seed of the hold-out choice.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Also identify each string's zero offset.
+    #[arg(long)]
+    pub string_offsets: bool,
+}
+
+/// `drawcal compensate`.
+#[derive(Debug, Args)]
+pub struct CompensateArgs {
+    /// A report written by `drawcal identify`.
+    #[arg(long)]
+    pub calibration: PathBuf,
+    /// Targets (targets.csv).
+    #[arg(long)]
+    pub targets: PathBuf,
+    /// Where to write compensated.csv (stdout if absent).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Also hold the flange orientation (nominal for joint targets).
+    #[arg(long)]
+    pub orientation: bool,
+}
+
+/// `drawcal locate`.
+#[derive(Debug, Args)]
+pub struct LocateArgs {
+    /// Measuring rig (rig.json).
+    #[arg(long)]
+    pub rig: PathBuf,
+    /// Poses with string readings (poses.csv; joint columns are ignored).
+    #[arg(long)]
+    pub poses: PathBuf,
+    /// Where to write the located points CSV (stdout if absent).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// A progress bar on stderr (hidden when stderr is not a terminal).
+struct Bar(ProgressBar);
+
+impl Progress for Bar {
+    fn update(&self, stage: &str, fraction: f64) {
+        self.0.set_message(stage.to_string());
+        self.0.set_position((fraction * 100.0) as u64);
+    }
+}
+
+/// Run a parsed command line.
+pub fn run(cli: Cli) -> Result<(), CliError> {
+    match cli.command {
+        Command::Identify(a) => run_identify(a),
+        Command::Compensate(a) => run_compensate(a),
+        Command::Locate(a) => run_locate(a),
+    }
+}
+
+fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
+    let robot = core(&a.robot, Robot::from_json(&read(&a.robot)?))?;
+    let rig = core(&a.rig, Rig::from_json(&read(&a.rig)?))?;
+    let file = File::open(&a.poses).map_err(|source| CliError::Io {
+        path: a.poses.clone(),
+        source,
+    })?;
+    let data = core(&a.poses, Dataset::from_csv(file, &robot, &rig))?;
+    let opts = IdentifyOptions {
+        method: match a.method {
+            MethodArg::Lm => Method::Lm,
+            MethodArg::Paper => Method::Paper,
+        },
+        robust: a.robust,
+        physics: a.physics == Switch::On,
+        holdout_fraction: a.holdout,
+        seed: a.seed,
+        identify_string_offsets: a.string_offsets,
+        ..Default::default()
+    };
+    let bar = ProgressBar::new(100);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}%")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let report = core(
+        &a.poses,
+        identify::identify(&robot, &rig, &data, &opts, &Bar(bar.clone())),
+    )?;
+    bar.finish_and_clear();
+    print!(
+        "{}",
+        summary::render(&report, &robot, data.poses.len(), data.n_strings)
+    );
+    if let Some(out) = &a.out {
+        let text =
+            serde_json::to_string_pretty(&report).map_err(|e| CliError::Other(e.to_string()))?;
+        std::fs::write(out, text).map_err(|source| CliError::Io {
+            path: out.clone(),
+            source,
+        })?;
+        println!("report written to {}", out.display());
+    }
+    Ok(())
+}
+
+fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
+    let report: Report =
+        serde_json::from_str(&read(&a.calibration)?).map_err(|e| CliError::Core {
+            path: a.calibration.clone(),
+            source: crate::Error::field("report", e.to_string()),
+        })?;
+    let comp = core(&a.calibration, Compensator::from_report(&report))?;
+    let file = File::open(&a.targets).map_err(|source| CliError::Io {
+        path: a.targets.clone(),
+        source,
+    })?;
+    let targets = core(&a.targets, targets_from_csv(file, comp.dof()))?;
+    let rows = compensate::compensate_all(&comp, &targets, a.orientation);
+    let failed = rows
+        .iter()
+        .filter(|r| r.status != compensate::CompensationStatus::Ok)
+        .count();
+    match &a.out {
+        Some(out) => {
+            let f = File::create(out).map_err(|source| CliError::Io {
+                path: out.clone(),
+                source,
+            })?;
+            compensate::write_csv(f, comp.dof(), &rows).map_err(|source| CliError::Io {
+                path: out.clone(),
+                source,
+            })?;
+            eprintln!(
+                "{} targets compensated, {} failed; written to {}",
+                rows.len() - failed,
+                failed,
+                out.display()
+            );
+        }
+        None => compensate::write_csv(std::io::stdout(), comp.dof(), &rows).map_err(|source| {
+            CliError::Io {
+                path: "stdout".into(),
+                source,
+            }
+        })?,
+    }
+    Ok(())
+}
+
+fn run_locate(a: LocateArgs) -> Result<(), CliError> {
+    let rig = core(&a.rig, Rig::from_json(&read(&a.rig)?))?;
+    let file = File::open(&a.poses).map_err(|source| CliError::Io {
+        path: a.poses.clone(),
+        source,
+    })?;
+    let readings = core(
+        &a.poses,
+        crate::model::dataset::string_readings_from_csv(file, &rig),
+    )?;
+    let anchors: Vec<_> = (0..rig.n_strings()).map(|k| rig.anchor(k)).collect();
+    let mut located = Vec::with_capacity(readings.len());
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let _ = w.write_record([
+        "pose",
+        "x_mm",
+        "y_mm",
+        "z_mm",
+        "consistency_rms_mm",
+        "closed_form_distance_mm",
+    ]);
+    let mut cf = Vec::new();
+    for (id, l) in &readings {
+        let dist: Vec<f64> = l.iter().map(|v| v + rig.r_mm).collect();
+        let loc = core(&a.poses, measure::locate(&anchors, &dist, None))?;
+        let d_cf = if anchors.len() >= 4 {
+            measure::paper_closed_form(&anchors, l[0], l[2], l[3], rig.r_mm)
+                .ok()
+                .map(|p| (p - loc.point).norm())
+        } else {
+            None
+        };
+        if let Some(d) = d_cf {
+            cf.push(d);
+        }
+        let _ = w.write_record([
+            id.clone(),
+            format!("{:.4}", loc.point.x),
+            format!("{:.4}", loc.point.y),
+            format!("{:.4}", loc.point.z),
+            format!("{:.5}", loc.consistency_rms_mm()),
+            d_cf.map(|d| format!("{d:.5}")).unwrap_or_default(),
+        ]);
+        located.push(loc);
+    }
+    let bytes = w.into_inner().map_err(|e| CliError::Other(e.to_string()))?;
+    match &a.out {
+        Some(out) => std::fs::write(out, &bytes).map_err(|source| CliError::Io {
+            path: out.clone(),
+            source,
+        })?,
+        None => print!("{}", String::from_utf8_lossy(&bytes)),
+    }
+    eprintln!(
+        "{} poses located by least squares from {} strings",
+        located.len(),
+        anchors.len()
+    );
+    if let Some(s) = measure::string_sigma(&located) {
+        eprintln!("string noise from the redundancy: {s:.4} mm (1 sigma)");
+    }
+    if !cf.is_empty() {
+        let rms = (cf.iter().map(|v| v * v).sum::<f64>() / cf.len() as f64).sqrt();
+        let max = cf.iter().cloned().fold(0.0, f64::max);
+        let bad = cf.iter().filter(|d| **d > 1.0).count();
+        eprintln!(
+            "paper closed form vs least squares: RMS {rms:.4} mm, max {max:.4} mm, {bad} poses more than 1 mm apart"
+        );
+    }
+    Ok(())
+}

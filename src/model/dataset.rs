@@ -334,3 +334,55 @@ mod tests {
         );
     }
 }
+
+/// Only the pose ids and string readings of a poses.csv (for locating
+/// points without a robot model). Readings are checked as in
+/// [`Dataset::from_csv`].
+pub fn string_readings_from_csv<R: Read>(input: R, rig: &Rig) -> Result<Vec<(String, Vec<f64>)>> {
+    let m = rig.n_strings();
+    if m == 0 {
+        return Err(Error::field(
+            "anchors_mm",
+            "the rig has no strings to locate from",
+        ));
+    }
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .flexible(true)
+        .from_reader(input);
+    let headers = rdr
+        .headers()
+        .map_err(|e| Error::field("header", e.to_string()))?
+        .clone();
+    let idx = |name: &str| headers.iter().position(|h| h == name);
+    let pose_col = idx("pose").ok_or_else(|| Error::field("pose", "missing column 'pose'"))?;
+    let mut cols = Vec::with_capacity(m);
+    for k in 1..=m {
+        let name = format!("l{k}_mm");
+        cols.push(idx(&name).ok_or_else(|| {
+            Error::field(&name, format!("missing column (the rig has {m} strings)"))
+        })?);
+    }
+    let range = rig.sensor.and_then(|s| s.range_mm);
+    let mut out = Vec::new();
+    for (r, rec) in rdr.records().enumerate() {
+        let row = r + 1;
+        let rec = rec.map_err(|e| Error::cell(row, "row", e.to_string()))?;
+        let id = rec.get(pose_col).unwrap_or("").trim().to_string();
+        let mut ls = Vec::with_capacity(m);
+        for (k, &c) in cols.iter().enumerate() {
+            let name = format!("l{}_mm", k + 1);
+            let v = parse_num(row, &name, rec.get(c).unwrap_or(""))?;
+            if v < 0.0 || range.is_some_and(|rg| v > rg) {
+                return Err(Error::cell(
+                    row,
+                    &name,
+                    format!("{v} mm is outside the sensor's range"),
+                ));
+            }
+            ls.push(v);
+        }
+        out.push((id, ls));
+    }
+    Ok(out)
+}

@@ -1,0 +1,146 @@
+//! The human-readable summary `drawcal identify` prints: the paper's Tables
+//! 3 and 4 (train and test, before and after) and what was found.
+
+use std::fmt::Write;
+
+use crate::identify::report::{ErrorStats, Report};
+use crate::model::Robot;
+
+/// Render the summary of a report.
+pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> String {
+    let mut s = String::new();
+    let source = if n_strings > 0 {
+        format!("{n_strings} strings")
+    } else {
+        "measured points".to_string()
+    };
+    let _ = writeln!(
+        s,
+        "drawcal identify: {} ({} joints), {} poses from {}",
+        robot.name,
+        robot.dof(),
+        n_poses,
+        source
+    );
+    let _ = writeln!(
+        s,
+        "split: {} train, {} test ({})",
+        r.stats.train.n, r.stats.test.n, r.split_source
+    );
+    let id = &r.identifiability;
+    let _ = writeln!(
+        s,
+        "method {}: {} iterations ({}), {} of {} parameters identified, condition number {:.0}",
+        r.method,
+        r.convergence.iterations,
+        r.convergence.termination,
+        id.n_identified,
+        id.n_candidates,
+        id.condition_number
+    );
+    if !id.fixed.is_empty() {
+        let _ = writeln!(s, "held at nominal (this data cannot separate them):");
+        for f in &id.fixed {
+            let _ = writeln!(
+                s,
+                "  {:<11} aliased with {}",
+                f.name,
+                if f.aliased_with.is_empty() {
+                    "-".to_string()
+                } else {
+                    f.aliased_with.join(", ")
+                }
+            );
+        }
+    }
+    if let Some(sig) = r.string_sigma_mm {
+        let _ = writeln!(
+            s,
+            "string noise {:.4} mm (1 sigma); noise floor of the held-out 3-D RMS {}",
+            sig,
+            r.noise_floor_mm
+                .map(|f| format!("{f:.4} mm"))
+                .unwrap_or("-".into())
+        );
+    }
+    if let Some(c) = &r.closed_form_vs_lsq {
+        let _ = writeln!(
+            s,
+            "paper closed form vs least-squares points: RMS {:.4} mm, max {:.4} mm over {} poses",
+            c.rms_mm, c.max_mm, c.n
+        );
+    }
+    let _ = writeln!(s);
+    let cols: Vec<(&str, &ErrorStats)> = vec![
+        ("train before", &r.stats.train.before),
+        ("train after", &r.stats.train.after),
+        ("test before", &r.stats.test.before),
+        ("test after", &r.stats.test.after),
+    ];
+    let mut cols = cols;
+    if let Some(p) = &r.paper_stats {
+        cols.push(("paper test", &p.test.after));
+    }
+    let _ = write!(s, "{:<16}", "error (mm)");
+    for (name, _) in &cols {
+        let _ = write!(s, "{name:>13}");
+    }
+    let _ = writeln!(s);
+    let rows: [(&str, fn(&ErrorStats) -> f64); 9] = [
+        ("max |dx|", |e| e.x.max_abs_mm),
+        ("max |dy|", |e| e.y.max_abs_mm),
+        ("max |dz|", |e| e.z.max_abs_mm),
+        ("max 3-D", |e| e.max_mm),
+        ("mean |dx|", |e| e.x.mean_abs_mm),
+        ("mean |dy|", |e| e.y.mean_abs_mm),
+        ("mean |dz|", |e| e.z.mean_abs_mm),
+        ("mean 3-D", |e| e.mean_mm),
+        ("RMS 3-D", |e| e.rms_mm),
+    ];
+    for (label, f) in rows {
+        let _ = write!(s, "{label:<16}");
+        for (_, e) in &cols {
+            let _ = write!(s, "{:>13.4}", f(e));
+        }
+        let _ = writeln!(s);
+    }
+    if !r.outliers.is_empty() {
+        let ids: Vec<String> = r
+            .outliers
+            .iter()
+            .map(|o| format!("{} ({:.2} mm)", o.pose, o.residual_mm))
+            .collect();
+        let _ = writeln!(
+            s,
+            "\noutlier poses{}: {}",
+            if r.robust { " (down-weighted)" } else { "" },
+            ids.join(", ")
+        );
+    }
+    let _ = writeln!(s);
+    if r.findings.is_empty() {
+        let _ = writeln!(s, "physics: nothing found beyond the geometric model");
+    } else {
+        let _ = writeln!(s, "physics found beyond the geometric model:");
+        for f in &r.findings {
+            let place = match (f.joint, f.sensor) {
+                (Some(j), _) => format!(" joint {j}"),
+                (_, Some(k)) => format!(" sensor {k}"),
+                _ => String::new(),
+            };
+            let _ = writeln!(
+                s,
+                "- {}{}: {:.4} ± {:.4} {}",
+                f.effect, place, f.magnitude, f.sigma, f.unit
+            );
+            let _ = writeln!(s, "  {}", f.explanation);
+            let _ = writeln!(s, "  evidence: {}", f.evidence);
+            let _ = writeln!(
+                s,
+                "  held-out RMS {:.4} -> {:.4} mm",
+                f.test_rms_before_mm, f.test_rms_after_mm
+            );
+        }
+    }
+    s
+}
