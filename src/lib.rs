@@ -23,6 +23,7 @@ pub mod identify;
 pub mod kinematics;
 pub mod measure;
 pub mod model;
+pub mod physics;
 pub mod rng;
 
 pub use error::{Error, Result};

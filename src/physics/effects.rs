@@ -1,0 +1,547 @@
+//! The catalogue of physical effects a kinematic model leaves out.
+//!
+//! Every effect is linear in its own coefficients once the pose context is
+//! known (commanded angles, approach direction, time, temperature, string
+//! lengths, the point's position). At a pose, coefficient `c` of an effect
+//! contributes
+//! - a change of the joint angles `dq` (enters T through the analytic
+//!   Jacobian: dT/dq_j is the θ_j column),
+//! - a change of the link lengths (thermal expansion: a multiple of the
+//!   nominal a and d values),
+//! - a change of each string reading `dl`.
+//!
+//! The same [`Context::basis`] serves the simulator (evaluated with the true
+//! point and true lengths) and the identification (with the located point
+//! and the measured readings), so the model fitted is exactly the model
+//! simulated.
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::kinematics::chain::{Chain, OutputFrame};
+use crate::kinematics::{JointParam, Params};
+use crate::model::Robot;
+
+/// What drives thermal expansion.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ThermalDriver {
+    /// Ambient temperature minus the first pose's (K).
+    Temperature,
+    /// Hours since the session began (no usable temperature).
+    Time,
+}
+
+/// One effect of the catalogue. Joint and sensor indices are 0-based here
+/// (reports and files use 1-based numbers).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Kind {
+    /// Joint `joint_index` deflects in proportion to the gravity torque on
+    /// it. With link masses: one coefficient (rad/(N·m)). Without: one
+    /// coefficient per regressor, a unit mass at the origin of link frame
+    /// `regressors[r]` (index n = the tool point), coefficient in rad/m.
+    JointCompliance {
+        /// 0-based joint.
+        joint_index: usize,
+        /// Empty when the robot's link masses are used; else the link
+        /// frames (0-based, n = tool point) carrying the unit masses.
+        #[serde(default)]
+        regressors: Vec<usize>,
+    },
+    /// Half the dead band of joint `joint_index`: `dq = b · sign(last move)`.
+    Backlash {
+        /// 0-based joint.
+        joint_index: usize,
+    },
+    /// `dq = s sin(h q) + c cos(h q)` of joint `joint_index`.
+    JointPeriodic {
+        /// 0-based joint.
+        joint_index: usize,
+        /// Harmonic h (1 = once per revolution).
+        harmonic: u32,
+    },
+    /// Every nominal a and d scales by `1 + k · driver`.
+    ThermalExpansion {
+        /// Temperature or time.
+        driver: ThermalDriver,
+    },
+    /// String `sensor_index` reads `s · l` too long.
+    SensorScale {
+        /// 0-based sensor.
+        sensor_index: usize,
+    },
+    /// String `sensor_index` reads `o` too long.
+    SensorOffset {
+        /// 0-based sensor.
+        sensor_index: usize,
+    },
+    /// Every string hangs under its own weight and reads longer than the
+    /// chord by `c · h² · d` (h horizontal span, d length, in m; c in mm/m³).
+    CableSag,
+    /// Anchor `sensor_index` moved by a vector (mm, rig frame) at `t0_s`.
+    AnchorStep {
+        /// 0-based sensor.
+        sensor_index: usize,
+        /// Time of the move (s); poses with `time_s > t0_s` see it.
+        t0_s: f64,
+    },
+}
+
+impl Kind {
+    /// Catalogue name as in reports and truth.json.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Kind::JointCompliance { .. } => "joint_compliance",
+            Kind::Backlash { .. } => "backlash",
+            Kind::JointPeriodic { .. } => "joint_periodic",
+            Kind::ThermalExpansion { .. } => "thermal_expansion",
+            Kind::SensorScale { .. } => "sensor_scale",
+            Kind::SensorOffset { .. } => "sensor_offset",
+            Kind::CableSag => "cable_sag",
+            Kind::AnchorStep { .. } => "anchor_step",
+        }
+    }
+
+    /// 0-based joint, where it applies.
+    pub fn joint(&self) -> Option<usize> {
+        match self {
+            Kind::JointCompliance { joint_index, .. }
+            | Kind::Backlash { joint_index }
+            | Kind::JointPeriodic { joint_index, .. } => Some(*joint_index),
+            _ => None,
+        }
+    }
+
+    /// 0-based sensor, where it applies.
+    pub fn sensor(&self) -> Option<usize> {
+        match self {
+            Kind::SensorScale { sensor_index }
+            | Kind::SensorOffset { sensor_index }
+            | Kind::AnchorStep { sensor_index, .. } => Some(*sensor_index),
+            _ => None,
+        }
+    }
+
+    /// True when the effect moves the robot (T), false when it changes
+    /// what a string reads.
+    pub fn robot_side(&self) -> bool {
+        matches!(
+            self,
+            Kind::JointCompliance { .. }
+                | Kind::Backlash { .. }
+                | Kind::JointPeriodic { .. }
+                | Kind::ThermalExpansion { .. }
+        )
+    }
+
+    /// Number of coefficients.
+    pub fn n_coef(&self) -> usize {
+        match self {
+            Kind::JointCompliance { regressors, .. } => regressors.len().max(1),
+            Kind::JointPeriodic { .. } => 2,
+            Kind::AnchorStep { .. } => 3,
+            _ => 1,
+        }
+    }
+
+    /// The physics in one sentence.
+    pub fn explanation(&self) -> String {
+        match self {
+            Kind::JointCompliance { joint_index, .. } => format!(
+                "joint {} deflects in proportion to the gravity torque on it, like an elastic gearbox carrying the arm's own weight",
+                joint_index + 1
+            ),
+            Kind::Backlash { joint_index } => format!(
+                "joint {} stops short or long by a fixed amount depending on the direction it last moved (gear backlash / dead band)",
+                joint_index + 1
+            ),
+            Kind::JointPeriodic {
+                joint_index,
+                harmonic,
+            } => format!(
+                "the angle of joint {} is off by a sinusoid repeating {} time(s) per revolution (gear or encoder eccentricity)",
+                joint_index + 1,
+                harmonic
+            ),
+            Kind::ThermalExpansion { driver } => match driver {
+                ThermalDriver::Temperature => {
+                    "the links grow with the ambient temperature (thermal expansion of the arm)".into()
+                }
+                ThermalDriver::Time => {
+                    "the links grow steadily during the session (warm-up; no temperature recorded, time used instead)".into()
+                }
+            },
+            Kind::SensorScale { sensor_index } => format!(
+                "string {} reads long or short in proportion to its length (scale error of the encoder drum)",
+                sensor_index + 1
+            ),
+            Kind::SensorOffset { sensor_index } => format!(
+                "string {} reads long or short by a constant (zero offset of the sensor)",
+                sensor_index + 1
+            ),
+            Kind::CableSag => {
+                "the strings hang under their own weight and read longer than the straight distance, more so the longer their horizontal span (catenary)".into()
+            }
+            Kind::AnchorStep { sensor_index, t0_s } => format!(
+                "the anchor of string {} moved during the session, at about {:.0} s",
+                sensor_index + 1,
+                t0_s
+            ),
+        }
+    }
+}
+
+/// An effect with its coefficients (internal units: rad, mm, dimensionless).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EffectModel {
+    /// Which effect.
+    #[serde(flatten)]
+    pub kind: Kind,
+    /// Coefficients, `kind.n_coef()` of them.
+    pub coef: Vec<f64>,
+}
+
+/// What the effects need to know about one pose.
+#[derive(Debug, Clone)]
+pub struct PoseContext {
+    /// Commanded joint angles (rad).
+    pub q_rad: Vec<f64>,
+    /// Direction each joint last moved (+1, -1; 0 before any motion).
+    pub direction: Vec<f64>,
+    /// Seconds since the session began.
+    pub time_s: f64,
+    /// Thermal driver value (K or h).
+    pub thermal: f64,
+    /// The point T in the rig frame used by sensor-side effects (true point
+    /// in the simulator, located point in the analysis).
+    pub point_rig: Vector3<f64>,
+    /// Per joint: gravity torque (N·m, from masses) or the unit-mass
+    /// regressors (m) of every link frame origin 0..n and the tool (n).
+    torque: Vec<Vec<f64>>,
+}
+
+/// The pose contexts of a whole session and the fixed quantities effects use.
+#[derive(Debug, Clone)]
+pub struct Context {
+    /// Number of joints.
+    pub n_joints: usize,
+    /// Anchors in the rig frame (empty for point data).
+    pub anchors: Vec<Vector3<f64>>,
+    /// Common string constant r (mm).
+    pub r_mm: f64,
+    /// Unit vector of gravity in the rig frame.
+    pub gravity_rig: Vector3<f64>,
+    /// True when the robot has link masses (one compliance coefficient).
+    pub has_masses: bool,
+    /// Thermal driver used.
+    pub thermal_driver: ThermalDriver,
+    /// `(parameter index, nominal value)` of every a and d.
+    pub lengths: Vec<(usize, f64)>,
+    /// Per pose, in visiting order.
+    pub poses: Vec<PoseContext>,
+}
+
+/// Input for building a [`Context`]: one pose in visiting order.
+pub struct PoseInput<'a> {
+    /// Commanded angles (rad).
+    pub q_rad: &'a [f64],
+    /// Time (s), if recorded.
+    pub time_s: Option<f64>,
+    /// Temperature (°C), if recorded.
+    pub temp_c: Option<f64>,
+    /// T in the rig frame (true or located).
+    pub point_rig: Vector3<f64>,
+}
+
+/// Direction each joint last moved, from the row order: the sign of the
+/// change from the previous pose, carried over when a joint did not move.
+/// The first pose has no known approach and gets 0.
+pub fn approach_directions(q: &[&[f64]]) -> Vec<Vec<f64>> {
+    let n = q.first().map_or(0, |v| v.len());
+    let mut dir = vec![0.0; n];
+    let mut out = Vec::with_capacity(q.len());
+    for (i, qi) in q.iter().enumerate() {
+        if i > 0 {
+            for j in 0..n {
+                let d = qi[j] - q[i - 1][j];
+                if d.abs() > 1e-7 {
+                    dir[j] = d.signum();
+                }
+            }
+        }
+        out.push(dir.clone());
+    }
+    out
+}
+
+impl Context {
+    /// Build the contexts. `base_rotation` is the rotation of the robot base
+    /// in the rig frame (for the direction of gravity in the rig); the
+    /// nominal geometry and masses come from `robot`. Without
+    /// `gravity_in_base` gravity is taken as -z of the base (upright arm).
+    pub fn new(
+        robot: &Robot,
+        anchors: Vec<Vector3<f64>>,
+        r_mm: f64,
+        base_rotation: &nalgebra::Matrix3<f64>,
+        poses: &[PoseInput],
+    ) -> Self {
+        let n = robot.dof();
+        let nominal = Params::of_robot(robot);
+        let chain = Chain::new(robot.convention, n, 0);
+        let g_base = robot
+            .gravity_in_base
+            .map(|g| Vector3::new(g[0], g[1], g[2]))
+            .unwrap_or(Vector3::new(0.0, 0.0, -9.81));
+        let g_unit = g_base.normalize();
+        let gravity_rig = base_rotation * g_unit;
+        let masses = robot.links.as_ref().filter(|l| l.len() == n);
+        let temps: Vec<f64> = poses.iter().filter_map(|p| p.temp_c).collect();
+        let temp_range = temps.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+            - temps.iter().cloned().fold(f64::INFINITY, f64::min);
+        // A temperature that never changes cannot drive anything; then the
+        // session clock stands in for warm-up.
+        let use_temp = temps.len() == poses.len() && temp_range > 0.05;
+        let thermal_driver = if use_temp {
+            ThermalDriver::Temperature
+        } else {
+            ThermalDriver::Time
+        };
+        let temp_ref = poses.first().and_then(|p| p.temp_c).unwrap_or(0.0);
+        let t_ref = poses.first().and_then(|p| p.time_s).unwrap_or(0.0);
+        let qs: Vec<&[f64]> = poses.iter().map(|p| p.q_rad).collect();
+        let dirs = approach_directions(&qs);
+        let l = nominal.layout;
+        let mut lengths = Vec::new();
+        for j in 0..n {
+            for jp in [JointParam::A, JointParam::D] {
+                let i = l.joint(j, jp);
+                if nominal.values[i] != 0.0 {
+                    lengths.push((i, nominal.values[i]));
+                }
+            }
+        }
+        let ctx_poses = poses
+            .iter()
+            .zip(dirs)
+            .enumerate()
+            .map(|(i, (p, direction))| {
+                let frames = chain.link_frames(&nominal.values, p.q_rad, OutputFrame::Base);
+                let axes = chain.joint_axes(&nominal.values, p.q_rad, OutputFrame::Base);
+                let (_, tool) = chain.point(&nominal.values, p.q_rad, OutputFrame::Base);
+                let torque = (0..n)
+                    .map(|j| {
+                        let (z, o) = axes[j];
+                        let lever = |x: &Vector3<f64>| z.dot(&((x - o) * 1e-3).cross(&g_unit));
+                        match masses {
+                            Some(ms) => {
+                                let mut tau = 0.0;
+                                for (k, lm) in ms.iter().enumerate().skip(j) {
+                                    let c = Vector3::new(lm.com_mm[0], lm.com_mm[1], lm.com_mm[2]);
+                                    let x = frames[k].apply(&c);
+                                    tau += lm.mass_kg * g_base.norm() * lever(&x);
+                                }
+                                vec![tau]
+                            }
+                            None => (0..=n)
+                                .map(|k| {
+                                    if k < j {
+                                        0.0
+                                    } else if k == n {
+                                        lever(&tool)
+                                    } else {
+                                        lever(&frames[k].o)
+                                    }
+                                })
+                                .collect(),
+                        }
+                    })
+                    .collect();
+                let thermal = if use_temp {
+                    p.temp_c.unwrap_or(temp_ref) - temp_ref
+                } else {
+                    (p.time_s.unwrap_or(i as f64) - t_ref) / 3600.0
+                };
+                PoseContext {
+                    q_rad: p.q_rad.to_vec(),
+                    direction,
+                    time_s: p.time_s.unwrap_or(i as f64),
+                    thermal,
+                    point_rig: p.point_rig,
+                    torque,
+                }
+            })
+            .collect();
+        Context {
+            n_joints: n,
+            anchors,
+            r_mm,
+            gravity_rig,
+            has_masses: masses.is_some(),
+            thermal_driver,
+            lengths,
+            poses: ctx_poses,
+        }
+    }
+
+    /// Independent unit-mass regressors for the compliance of joint `j`
+    /// without link masses: frames whose torque columns over the given
+    /// poses are not (nearly) combinations of the ones already kept, at
+    /// most three (more would alias the geometry).
+    pub fn compliance_regressors(&self, j: usize, poses: &[usize]) -> Vec<usize> {
+        let n = self.n_joints;
+        let mut kept: Vec<Vec<f64>> = Vec::new();
+        let mut idx = Vec::new();
+        // Farthest first: the tool and the distal frames carry the lever.
+        for k in (j..=n).rev() {
+            let mut v: Vec<f64> = poses.iter().map(|&i| self.poses[i].torque[j][k]).collect();
+            let norm0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if norm0 < 1e-6 * (poses.len() as f64).sqrt() {
+                continue;
+            }
+            for u in &kept {
+                let d: f64 = v.iter().zip(u).map(|(a, b)| a * b).sum();
+                v.iter_mut().zip(u).for_each(|(a, b)| *a -= d * b);
+            }
+            let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if norm > 0.1 * norm0 {
+                v.iter_mut().for_each(|x| *x /= norm);
+                kept.push(v);
+                idx.push(k);
+            }
+            if idx.len() == 3 {
+                break;
+            }
+        }
+        idx
+    }
+
+    /// The basis of `kind` at pose `i`: per coefficient, `n_joints` joint
+    /// angle changes (rad), one thermal multiplier of the nominal lengths,
+    /// and one reading change per string (mm), written into `out`.
+    pub fn basis(&self, kind: &Kind, i: usize, out: &mut Basis) {
+        let n = self.n_joints;
+        let m = self.anchors.len();
+        let nc = kind.n_coef();
+        out.reset(nc, n, m);
+        let pc = &self.poses[i];
+        match kind {
+            Kind::JointCompliance {
+                joint_index,
+                regressors,
+            } => {
+                let j = *joint_index;
+                if regressors.is_empty() {
+                    out.dq[j] = pc.torque[j][0];
+                } else {
+                    for (c, &k) in regressors.iter().enumerate() {
+                        out.dq[c * n + j] = pc.torque[j].get(k).copied().unwrap_or(0.0);
+                    }
+                }
+            }
+            Kind::Backlash { joint_index } => {
+                out.dq[*joint_index] = pc.direction[*joint_index];
+            }
+            Kind::JointPeriodic {
+                joint_index,
+                harmonic,
+            } => {
+                let j = *joint_index;
+                let (s, c) = (*harmonic as f64 * pc.q_rad[j]).sin_cos();
+                out.dq[j] = s;
+                out.dq[n + j] = c;
+            }
+            Kind::ThermalExpansion { .. } => out.thermal[0] = pc.thermal,
+            Kind::SensorScale { sensor_index } => {
+                let k = *sensor_index;
+                out.dl[k] = (pc.point_rig - self.anchors[k]).norm() - self.r_mm;
+            }
+            Kind::SensorOffset { sensor_index } => out.dl[*sensor_index] = 1.0,
+            Kind::CableSag => {
+                for k in 0..m {
+                    let v = pc.point_rig - self.anchors[k];
+                    let vert = v.dot(&self.gravity_rig);
+                    let h2 = (v.norm_squared() - vert * vert).max(0.0) * 1e-6;
+                    out.dl[k] = h2 * v.norm() * 1e-3;
+                }
+            }
+            Kind::AnchorStep { sensor_index, t0_s } => {
+                let k = *sensor_index;
+                if pc.time_s > *t0_s {
+                    let u = (pc.point_rig - self.anchors[k]).normalize();
+                    for c in 0..3 {
+                        out.dl[c * m + k] = -u[c];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Sum of the effects at pose `i`: joint angle changes (rad), thermal
+    /// multiplier, reading changes (mm).
+    pub fn apply(&self, effects: &[EffectModel], i: usize, buf: &mut Basis) -> Delta {
+        let n = self.n_joints;
+        let m = self.anchors.len();
+        let mut d = Delta {
+            dq: vec![0.0; n],
+            thermal: 0.0,
+            dl: vec![0.0; m],
+        };
+        for e in effects {
+            self.basis(&e.kind, i, buf);
+            for (c, &v) in e.coef.iter().enumerate() {
+                for j in 0..n {
+                    d.dq[j] += v * buf.dq[c * n + j];
+                }
+                d.thermal += v * buf.thermal[c];
+                for k in 0..m {
+                    d.dl[k] += v * buf.dl[c * m + k];
+                }
+            }
+        }
+        d
+    }
+
+    /// Parameters with the thermal multiplier applied to the nominal lengths.
+    pub fn apply_thermal(&self, p: &mut [f64], thermal: f64) {
+        if thermal != 0.0 {
+            for &(i, v) in &self.lengths {
+                p[i] += thermal * v;
+            }
+        }
+    }
+}
+
+/// Per-coefficient basis at one pose (see [`Context::basis`]).
+#[derive(Debug, Clone, Default)]
+pub struct Basis {
+    /// `n_coef × n_joints`, row-major.
+    pub dq: Vec<f64>,
+    /// One per coefficient.
+    pub thermal: Vec<f64>,
+    /// `n_coef × n_strings`, row-major.
+    pub dl: Vec<f64>,
+}
+
+impl Basis {
+    fn reset(&mut self, nc: usize, n: usize, m: usize) {
+        self.dq.clear();
+        self.dq.resize(nc * n, 0.0);
+        self.thermal.clear();
+        self.thermal.resize(nc, 0.0);
+        self.dl.clear();
+        self.dl.resize(nc * m, 0.0);
+    }
+}
+
+/// The summed effect at a pose.
+#[derive(Debug, Clone)]
+pub struct Delta {
+    /// Joint angle changes (rad): the joint sits at commanded + dq.
+    pub dq: Vec<f64>,
+    /// Thermal multiplier of the nominal lengths.
+    pub thermal: f64,
+    /// Reading changes (mm): the string reads this much more.
+    pub dl: Vec<f64>,
+}

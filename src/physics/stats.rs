@@ -1,0 +1,85 @@
+//! Distribution quantiles for the significance tests (no statistics crate:
+//! the approximations below are accurate to well under 1% in the tails
+//! used, far finer than the thresholds need).
+
+/// Standard normal quantile (Acklam's rational approximation, relative error
+/// below 1.2e-9).
+pub fn normal_quantile(p: f64) -> f64 {
+    let p = p.clamp(1e-300, 1.0 - 1e-16);
+    const A: [f64; 6] = [
+        -3.969683028665376e+01,
+        2.209460984245205e+02,
+        -2.759285104469687e+02,
+        1.383577518672690e+02,
+        -3.066479806614716e+01,
+        2.506628277459239e+00,
+    ];
+    const B: [f64; 5] = [
+        -5.447609879822406e+01,
+        1.615858368580409e+02,
+        -1.556989798598866e+02,
+        6.680131188771972e+01,
+        -1.328068155288572e+01,
+    ];
+    const C: [f64; 6] = [
+        -7.784894002430293e-03,
+        -3.223964580411365e-01,
+        -2.400758277161838e+00,
+        -2.549732539343734e+00,
+        4.374664141464968e+00,
+        2.938163982698783e+00,
+    ];
+    const D: [f64; 4] = [
+        7.784695709041462e-03,
+        3.224671290700398e-01,
+        2.445134137142996e+00,
+        3.754408661907416e+00,
+    ];
+    let plow = 0.02425;
+    if p < plow {
+        let q = (-2.0 * p.ln()).sqrt();
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    } else if p <= 1.0 - plow {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    } else {
+        -normal_quantile(1.0 - p)
+    }
+}
+
+/// Chi-square statistic `x` with `k` degrees of freedom as a standard normal
+/// score (Wilson-Hilferty cube-root transform).
+pub fn chi2_z(x: f64, k: usize) -> f64 {
+    let k = k.max(1) as f64;
+    let v = 2.0 / (9.0 * k);
+    ((x.max(0.0) / k).cbrt() - (1.0 - v)) / v.sqrt()
+}
+
+/// Upper `alpha` quantile of chi-square with `k` degrees of freedom
+/// (Wilson-Hilferty).
+pub fn chi2_quantile_upper(alpha: f64, k: usize) -> f64 {
+    let kf = k.max(1) as f64;
+    let v = 2.0 / (9.0 * kf);
+    let z = normal_quantile(1.0 - alpha);
+    kf * (1.0 - v + z * v.sqrt()).powi(3)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantiles_match_tables() {
+        assert!((normal_quantile(0.975) - 1.959964).abs() < 1e-5);
+        assert!((normal_quantile(0.001) + 3.090232).abs() < 1e-5);
+        // chi2(1) upper 1e-3: 10.83; chi2(3) upper 0.01: 11.34
+        assert!((chi2_quantile_upper(1e-3, 1) - 10.83).abs() < 0.4);
+        assert!((chi2_quantile_upper(0.01, 3) - 11.34).abs() < 0.1);
+        assert!(
+            (chi2_z(chi2_quantile_upper(1e-4, 2), 2) - normal_quantile(1.0 - 1e-4)).abs() < 1e-9
+        );
+    }
+}
