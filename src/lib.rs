@@ -25,5 +25,11 @@ pub mod measure;
 pub mod model;
 pub mod physics;
 pub mod rng;
+/// Persistence for the HTTP service (SQLite and PostgreSQL): the only code that speaks SQL.
+pub mod store;
+/// Identification jobs: the persistent queue's worker pool.
+pub mod jobs;
+/// The HTTP service (axum): routes, errors, OpenAPI, startup and shutdown.
+pub mod http;
 
 pub use error::{Error, Result};

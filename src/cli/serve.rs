@@ -1,0 +1,118 @@
+//! `drawcal serve`: the HTTP service.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use crate::http::{Service, ServiceConfig, shutdown_signal};
+use crate::jobs::{JobConfig, engine_job_fn};
+
+/// Flags of `drawcal serve`; each also reads an environment variable.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ServeArgs {
+    /// Address to listen on.
+    #[arg(long, env = "DRAWCAL_LISTEN", default_value = "127.0.0.1:8080")]
+    pub listen: SocketAddr,
+    /// Database: `sqlite://PATH` (created and migrated at start) or
+    /// `postgres://USER@HOST/DB`.
+    #[arg(long, env = "DATABASE_URL", default_value = "sqlite://./drawcal.db")]
+    pub database: String,
+    /// Identification jobs run at once by this process.
+    #[arg(long, env = "DRAWCAL_WORKERS", default_value_t = 1)]
+    pub workers: usize,
+    /// Largest request body accepted (bytes): pose uploads, compensation
+    /// batches.
+    #[arg(long, env = "DRAWCAL_MAX_UPLOAD_BYTES", default_value_t = 16 * 1024 * 1024)]
+    pub max_upload_bytes: usize,
+    /// Job lease (seconds): a job whose process died runs again this long
+    /// after its last heartbeat.
+    #[arg(long, env = "DRAWCAL_JOB_LEASE_SECS", default_value_t = 15)]
+    pub job_lease_secs: u64,
+    /// How long a running job may continue after a shutdown signal before
+    /// it is handed back to the queue (seconds).
+    #[arg(long, env = "DRAWCAL_SHUTDOWN_GRACE_SECS", default_value_t = 10)]
+    pub shutdown_grace_secs: u64,
+}
+
+fn redact(url: &str) -> String {
+    // postgres://user:password@host/db -> postgres://user:***@host/db
+    match (url.find("://"), url.rfind('@')) {
+        (Some(s), Some(at)) if at > s => {
+            let cred = &url[s + 3..at];
+            match cred.find(':') {
+                Some(c) => format!("{}{}:***{}", &url[..s + 3], &cred[..c], &url[at..]),
+                None => url.to_string(),
+            }
+        }
+        _ => url.to_string(),
+    }
+}
+
+/// Run the service until Ctrl-C or SIGTERM.
+pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
+    if args.workers == 0 {
+        return Err("--workers must be at least 1".into());
+    }
+    if args.job_lease_secs == 0 {
+        return Err("--job-lease-secs must be at least 1".into());
+    }
+    init_tracing();
+    eprintln!(
+        "drawcal serve: listen={} database={} workers={} max_upload_bytes={} job_lease_secs={} shutdown_grace_secs={}",
+        args.listen,
+        redact(&args.database),
+        args.workers,
+        args.max_upload_bytes,
+        args.job_lease_secs,
+        args.shutdown_grace_secs
+    );
+    let cfg = ServiceConfig {
+        listen: args.listen,
+        database_url: args.database.clone(),
+        max_upload_bytes: args.max_upload_bytes,
+        jobs: JobConfig {
+            workers: args.workers,
+            lease: Duration::from_secs(args.job_lease_secs),
+            shutdown_grace: Duration::from_secs(args.shutdown_grace_secs),
+            ..JobConfig::default()
+        },
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .thread_name("drawcal-http")
+        .build()?;
+    rt.block_on(async move {
+        let service = Service::start(&cfg, engine_job_fn())
+            .await
+            .map_err(|e| e.to_string())?;
+        eprintln!("drawcal serve: listening on http://{}", service.addr);
+        service
+            .run(shutdown_signal())
+            .await
+            .map_err(|e| e.to_string())
+    })?;
+    Ok(())
+}
+
+/// Structured logs (key=value, with request and job spans) to stderr;
+/// `RUST_LOG` filters (default `info`).
+fn init_tracing() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx=warn"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::redact;
+
+    #[test]
+    fn redacts_passwords() {
+        assert_eq!(redact("postgres://u:secret@h/db"), "postgres://u:***@h/db");
+        assert_eq!(redact("postgres://u@h/db"), "postgres://u@h/db");
+        assert_eq!(redact("sqlite://./drawcal.db"), "sqlite://./drawcal.db");
+    }
+}

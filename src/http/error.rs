@@ -1,0 +1,174 @@
+//! The HTTP layer's one error type and its one mapping to responses.
+//!
+//! Every failure a handler can have becomes an [`ApiError`]; its
+//! [`IntoResponse`] is the only place statuses are chosen. The body is always
+//! `{ "error": code, "message": ..., "field"?: ..., "row"?: ... }`. Server-side
+//! failures (database down, engine panic) are logged with their detail and
+//! answered with a generic message.
+
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use thiserror::Error;
+use utoipa::ToSchema;
+
+use crate::store::StoreError;
+
+/// The error body of every 4xx and 5xx answer.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ErrorBody {
+    /// Machine-readable code: `bad_request`, `malformed_json`,
+    /// `invalid_input`, `not_found`, `conflict`, `payload_too_large`,
+    /// `unsupported_media_type`, `method_not_allowed`, `unavailable`,
+    /// `internal`.
+    pub error: String,
+    /// What went wrong, for a human.
+    pub message: String,
+    /// The offending field or CSV column, where there is one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+    /// The offending row (1-based, header excluded; for JSON arrays the
+    /// 1-based element), where there is one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub row: Option<usize>,
+}
+
+/// Everything a request can fail with.
+#[derive(Debug, Error)]
+pub enum ApiError {
+    /// A query string or path that cannot be parsed.
+    #[error("{0}")]
+    BadRequest(String),
+    /// A body that is not JSON at all.
+    #[error("{0}")]
+    MalformedJson(String),
+    /// Well-formed input that breaks a rule (wrong type, out of range, bad
+    /// CSV cell...).
+    #[error("{message}")]
+    Invalid {
+        /// What is wrong.
+        message: String,
+        /// Field or column.
+        field: Option<String>,
+        /// 1-based row.
+        row: Option<usize>,
+    },
+    /// No such resource.
+    #[error("{0}")]
+    NotFound(String),
+    /// The request contradicts the current state.
+    #[error("{0}")]
+    Conflict(String),
+    /// Body over the limit.
+    #[error("{0}")]
+    PayloadTooLarge(String),
+    /// Wrong or missing `Content-Type`.
+    #[error("{0}")]
+    UnsupportedMediaType(String),
+    /// Method not allowed on this path.
+    #[error("method not allowed")]
+    MethodNotAllowed,
+    /// A dependency (the database) is not answering.
+    #[error("{0}")]
+    Unavailable(String),
+    /// A bug or an unexpected failure; the detail is logged, not returned.
+    #[error("{0}")]
+    Internal(String),
+}
+
+impl ApiError {
+    /// An invalid field without a row.
+    pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Self {
+        ApiError::Invalid {
+            message: message.into(),
+            field: Some(field.into()),
+            row: None,
+        }
+    }
+
+    /// Status and code, in one place.
+    pub fn status_code(&self) -> (StatusCode, &'static str) {
+        match self {
+            ApiError::BadRequest(_) => (StatusCode::BAD_REQUEST, "bad_request"),
+            ApiError::MalformedJson(_) => (StatusCode::BAD_REQUEST, "malformed_json"),
+            ApiError::Invalid { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "invalid_input"),
+            ApiError::NotFound(_) => (StatusCode::NOT_FOUND, "not_found"),
+            ApiError::Conflict(_) => (StatusCode::CONFLICT, "conflict"),
+            ApiError::PayloadTooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "payload_too_large"),
+            ApiError::UnsupportedMediaType(_) => {
+                (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type")
+            }
+            ApiError::MethodNotAllowed => (StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed"),
+            ApiError::Unavailable(_) => (StatusCode::SERVICE_UNAVAILABLE, "unavailable"),
+            ApiError::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal"),
+        }
+    }
+}
+
+impl From<StoreError> for ApiError {
+    fn from(e: StoreError) -> Self {
+        match e {
+            StoreError::NotFound { .. } => ApiError::NotFound(e.to_string()),
+            StoreError::Conflict(m) => ApiError::Conflict(m),
+            StoreError::Db(
+                sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed | sqlx::Error::Io(_),
+            ) => ApiError::Unavailable("the database is not answering".into()),
+            other => ApiError::Internal(other.to_string()),
+        }
+    }
+}
+
+impl From<crate::Error> for ApiError {
+    fn from(e: crate::Error) -> Self {
+        match e {
+            crate::Error::Input {
+                field,
+                row,
+                message,
+            } => ApiError::Invalid {
+                message,
+                field: Some(field),
+                row,
+            },
+            crate::Error::InsufficientData(m) => ApiError::Invalid {
+                message: format!("insufficient data: {m}"),
+                field: None,
+                row: None,
+            },
+            crate::Error::Numerical(m) => ApiError::Invalid {
+                message: format!("numerical failure: {m}"),
+                field: None,
+                row: None,
+            },
+            crate::Error::Cancelled => ApiError::Conflict("cancelled".into()),
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let (status, code) = self.status_code();
+        let message = match &self {
+            ApiError::Internal(detail) => {
+                tracing::error!(error = %detail, "internal error");
+                "internal error; see the server log".to_string()
+            }
+            ApiError::Unavailable(detail) => {
+                tracing::warn!(error = %detail, "unavailable");
+                detail.clone()
+            }
+            other => other.to_string(),
+        };
+        let (field, row) = match &self {
+            ApiError::Invalid { field, row, .. } => (field.clone(), *row),
+            _ => (None, None),
+        };
+        let body = ErrorBody {
+            error: code.to_string(),
+            message,
+            field,
+            row,
+        };
+        (status, axum::Json(body)).into_response()
+    }
+}

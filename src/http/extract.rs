@@ -1,0 +1,131 @@
+//! Extractors whose rejections are [`ApiError`]s, so every malformed
+//! request is answered in the one error shape.
+
+use axum::body::Bytes;
+use axum::extract::{FromRequest, FromRequestParts, Request};
+use axum::http::StatusCode;
+use axum::http::header::CONTENT_TYPE;
+use axum::http::request::Parts;
+use serde::de::DeserializeOwned;
+
+use super::error::ApiError;
+
+/// The request body as bytes, with the body limit answered as 413.
+pub struct RawBody {
+    /// `Content-Type` (lower case, parameters dropped), if any.
+    pub content_type: Option<String>,
+    /// The body.
+    pub bytes: Bytes,
+}
+
+impl<S: Send + Sync> FromRequest<S> for RawBody {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
+        let content_type = req
+            .headers()
+            .get(CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .map(|v| {
+                v.split(';')
+                    .next()
+                    .unwrap_or("")
+                    .trim()
+                    .to_ascii_lowercase()
+            });
+        let bytes = Bytes::from_request(req, state).await.map_err(|r| {
+            if r.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::PayloadTooLarge(format!("request body too large: {}", r.body_text()))
+            } else {
+                ApiError::BadRequest(r.body_text())
+            }
+        })?;
+        Ok(RawBody {
+            content_type,
+            bytes,
+        })
+    }
+}
+
+/// Is this a JSON media type?
+pub fn is_json(ct: Option<&str>) -> bool {
+    matches!(ct, Some(c) if c == "application/json" || c.ends_with("+json"))
+}
+
+/// Parse JSON bytes: syntax errors are 400 `malformed_json`, type and
+/// shape errors 422 `invalid_input` naming the field path.
+pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    // Syntax first, so that a truncated document is always "malformed" even
+    // when its beginning already has the wrong shape.
+    if let Err(e) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
+        return Err(ApiError::MalformedJson(format!("malformed JSON: {e}")));
+    }
+    let de = &mut serde_json::Deserializer::from_slice(bytes);
+    match serde_path_to_error::deserialize::<_, T>(de) {
+        Ok(v) => Ok(v),
+        Err(e) => {
+            let path = e.path().to_string();
+            let inner = e.into_inner();
+            use serde_json::error::Category;
+            match inner.classify() {
+                Category::Syntax | Category::Eof | Category::Io => {
+                    Err(ApiError::MalformedJson(format!("malformed JSON: {inner}")))
+                }
+                Category::Data => Err(ApiError::Invalid {
+                    message: inner.to_string(),
+                    field: (path != "." && !path.is_empty()).then_some(path),
+                    row: None,
+                }),
+            }
+        }
+    }
+}
+
+/// A JSON body (`Content-Type: application/json` required).
+pub struct ApiJson<T>(pub T);
+
+impl<S: Send + Sync, T: DeserializeOwned> FromRequest<S> for ApiJson<T> {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
+        let body = RawBody::from_request(req, state).await?;
+        if !is_json(body.content_type.as_deref()) {
+            return Err(ApiError::UnsupportedMediaType(format!(
+                "expected Content-Type: application/json, got {}",
+                body.content_type.as_deref().unwrap_or("none")
+            )));
+        }
+        parse_json(&body.bytes).map(ApiJson)
+    }
+}
+
+/// The numeric id in the path.
+pub struct Id(pub i64);
+
+impl<S: Send + Sync> FromRequestParts<S> for Id {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
+        let axum::extract::Path(raw) =
+            axum::extract::Path::<String>::from_request_parts(parts, state)
+                .await
+                .map_err(|r| ApiError::BadRequest(r.body_text()))?;
+        raw.parse::<i64>()
+            .map(Id)
+            .map_err(|_| ApiError::BadRequest(format!("'{raw}' is not a valid id (an integer)")))
+    }
+}
+
+/// A query string.
+pub struct ApiQuery<T>(pub T);
+
+impl<S: Send + Sync, T: DeserializeOwned> FromRequestParts<S> for ApiQuery<T> {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
+        axum::extract::Query::<T>::from_request_parts(parts, state)
+            .await
+            .map(|q| ApiQuery(q.0))
+            .map_err(|r| ApiError::BadRequest(r.body_text()))
+    }
+}

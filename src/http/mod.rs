@@ -1,0 +1,309 @@
+//! The HTTP service: an axum router around the store, the job pool and the
+//! engine.
+//!
+//! - [`router`] builds the application for a [`AppState`]; [`openapi`] gives
+//!   the OpenAPI document generated from the same handlers (utoipa), which is
+//!   committed as `openapi.yaml` and checked by a test;
+//! - [`Service::start`] connects the store, starts the job workers and binds
+//!   the listener (port 0 works, for tests); [`Service::run`] serves until a
+//!   shutdown future resolves, then drains requests and jobs.
+//!
+//! Error policy: handlers return [`error::ApiError`], mapped to a status and
+//! the JSON error body in one place. Store errors convert into it; engine
+//! input errors become 422 with `field` and `row`.
+
+pub mod calibrations;
+pub mod compensate;
+pub mod error;
+pub mod extract;
+pub mod ops;
+pub mod resources;
+pub mod sessions;
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, RwLock};
+use std::time::Duration;
+
+use axum::Router;
+use axum::extract::DefaultBodyLimit;
+use axum::http::{HeaderValue, Request};
+use serde::{Deserialize, Serialize};
+use tower_http::request_id::{
+    MakeRequestId, PropagateRequestIdLayer, RequestId, SetRequestIdLayer,
+};
+use tower_http::trace::TraceLayer;
+use utoipa::{IntoParams, OpenApi, ToSchema};
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+use crate::jobs::{JobConfig, JobFn, Jobs};
+use crate::store::Store;
+pub use error::{ApiError, ErrorBody};
+
+/// Result alias for handlers.
+pub type ApiResult<T> = Result<T, ApiError>;
+
+/// Service settings (the `serve` flags).
+#[derive(Debug, Clone)]
+pub struct ServiceConfig {
+    /// Address to listen on.
+    pub listen: SocketAddr,
+    /// `sqlite://PATH` or `postgres://...`.
+    pub database_url: String,
+    /// Largest accepted request body (bytes).
+    pub max_upload_bytes: usize,
+    /// Job pool settings.
+    pub jobs: JobConfig,
+}
+
+/// Largest batch `/compensate` accepts.
+pub const MAX_COMPENSATE_TARGETS: usize = 10_000;
+
+/// Shared state of the handlers.
+pub struct App {
+    /// The database.
+    pub store: Store,
+    /// The job pool (to wake it on enqueue).
+    pub jobs: Jobs,
+    /// Built compensators by calibration id (calibrations are immutable).
+    pub compensators: RwLock<HashMap<i64, Arc<compensate::Cached>>>,
+}
+
+/// Handle to [`App`], cheap to clone.
+#[derive(Clone)]
+pub struct AppState(pub Arc<App>);
+
+impl std::ops::Deref for AppState {
+    type Target = App;
+    fn deref(&self) -> &App {
+        &self.0
+    }
+}
+
+/// Pagination query parameters.
+#[derive(Debug, Clone, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct PageParams {
+    /// Items per page, 1..=1000 (default 50).
+    pub limit: Option<i64>,
+    /// Items to skip (default 0).
+    pub offset: Option<i64>,
+}
+
+impl PageParams {
+    /// Checked page.
+    pub fn page(&self) -> ApiResult<crate::store::Page> {
+        let limit = self.limit.unwrap_or(50);
+        let offset = self.offset.unwrap_or(0);
+        if !(1..=1000).contains(&limit) {
+            return Err(ApiError::invalid("limit", "must be between 1 and 1000"));
+        }
+        if offset < 0 {
+            return Err(ApiError::invalid("offset", "must not be negative"));
+        }
+        Ok(crate::store::Page { limit, offset })
+    }
+}
+
+/// A page of a list.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct Paged<T: ToSchema> {
+    /// The items.
+    pub items: Vec<T>,
+    /// Items matching in all.
+    pub total: i64,
+    /// Page size used.
+    pub limit: i64,
+    /// Offset used.
+    pub offset: i64,
+}
+
+impl<T: ToSchema> Paged<T> {
+    fn new(items: Vec<T>, total: i64, page: crate::store::Page) -> Self {
+        Paged {
+            items,
+            total,
+            limit: page.limit,
+            offset: page.offset,
+        }
+    }
+}
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "drawcal service",
+        description = "Robot kinematic calibration: sessions, identification jobs, calibrations, activation, compensation and fleet history. Lengths in mm, angles in degrees. Every error answers `{error, message, field?, row?}`.",
+        license(name = "MIT OR Apache-2.0")
+    ),
+    components(schemas(ErrorBody))
+)]
+struct ApiDoc;
+
+/// Routes and their documentation, from the same handler annotations.
+fn api() -> OpenApiRouter<AppState> {
+    OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .routes(routes!(ops::health))
+        .routes(routes!(ops::ready))
+        .routes(routes!(resources::create_model, resources::list_models))
+        .routes(routes!(resources::get_model))
+        .routes(routes!(resources::create_robot, resources::list_robots))
+        .routes(routes!(resources::get_robot))
+        .routes(routes!(resources::create_rig, resources::list_rigs))
+        .routes(routes!(resources::get_rig))
+        .routes(routes!(sessions::create_session, sessions::list_sessions))
+        .routes(routes!(sessions::get_session))
+        .routes(routes!(sessions::upload_poses, sessions::get_poses))
+        .routes(routes!(sessions::enqueue_job))
+        .routes(routes!(sessions::list_jobs))
+        .routes(routes!(sessions::get_job))
+        .routes(routes!(sessions::cancel_job))
+        .routes(routes!(calibrations::list_calibrations))
+        .routes(routes!(calibrations::get_calibration))
+        .routes(routes!(calibrations::robot_accuracy))
+        .routes(routes!(calibrations::activate))
+        .routes(routes!(calibrations::rollback))
+        .routes(routes!(calibrations::list_activations))
+        .routes(routes!(compensate::compensate))
+}
+
+/// The OpenAPI document of the service.
+pub fn openapi() -> utoipa::openapi::OpenApi {
+    api().split_for_parts().1
+}
+
+/// The OpenAPI document as committed in `openapi.yaml`.
+pub fn openapi_yaml() -> String {
+    openapi()
+        .to_yaml()
+        .expect("the OpenAPI document serialises to YAML")
+}
+
+/// Request ids: a per-process counter with a process prefix.
+#[derive(Clone)]
+struct CounterId {
+    prefix: Arc<str>,
+    next: Arc<AtomicU64>,
+}
+
+impl MakeRequestId for CounterId {
+    fn make_request_id<B>(&mut self, _: &Request<B>) -> Option<RequestId> {
+        let n = self.next.fetch_add(1, Ordering::Relaxed);
+        HeaderValue::from_str(&format!("{}-{n}", self.prefix))
+            .ok()
+            .map(RequestId::new)
+    }
+}
+
+/// The application, ready to serve.
+pub fn router(state: AppState, max_upload_bytes: usize) -> Router {
+    let (router, _) = api().split_for_parts();
+    let ids = CounterId {
+        prefix: format!("{:x}", crate::store::now_ms() & 0xff_ffff).into(),
+        next: Arc::new(AtomicU64::new(1)),
+    };
+    router
+        .fallback(|| async { ApiError::NotFound("no such route".into()) })
+        .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
+        .layer(DefaultBodyLimit::max(max_upload_bytes))
+        .layer(PropagateRequestIdLayer::x_request_id())
+        .layer(
+            TraceLayer::new_for_http().make_span_with(|req: &Request<_>| {
+                let id = req
+                    .headers()
+                    .get("x-request-id")
+                    .and_then(|v| v.to_str().ok())
+                    .unwrap_or("-");
+                tracing::info_span!("request", request_id = %id, method = %req.method(), uri = %req.uri())
+            }),
+        )
+        .layer(SetRequestIdLayer::x_request_id(ids))
+        .with_state(state)
+}
+
+/// A started service: store connected and migrated, workers running,
+/// listener bound.
+pub struct Service {
+    /// The bound address (with the real port when 0 was asked).
+    pub addr: SocketAddr,
+    listener: tokio::net::TcpListener,
+    state: AppState,
+    max_upload_bytes: usize,
+}
+
+impl Service {
+    /// Connect, migrate, start `cfg.jobs.workers` workers running `job_fn`,
+    /// bind.
+    pub async fn start(
+        cfg: &ServiceConfig,
+        job_fn: JobFn,
+    ) -> Result<Service, Box<dyn std::error::Error + Send + Sync>> {
+        let store = Store::connect(&cfg.database_url).await?;
+        let jobs = Jobs::start(store.clone(), cfg.jobs.clone(), job_fn);
+        let listener = tokio::net::TcpListener::bind(cfg.listen).await?;
+        let addr = listener.local_addr()?;
+        let state = AppState(Arc::new(App {
+            store,
+            jobs,
+            compensators: RwLock::new(HashMap::new()),
+        }));
+        Ok(Service {
+            addr,
+            listener,
+            state,
+            max_upload_bytes: cfg.max_upload_bytes,
+        })
+    }
+
+    /// The handlers' state (tests use it to reach the store).
+    pub fn state(&self) -> AppState {
+        self.state.clone()
+    }
+
+    /// Serve until `shutdown` resolves; then finish in-flight requests, let
+    /// running jobs finish within their grace period (or hand them back to
+    /// the queue), and close the database.
+    pub async fn run(
+        self,
+        shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+    ) -> std::io::Result<()> {
+        let app = router(self.state.clone(), self.max_upload_bytes);
+        tracing::info!(addr = %self.addr, "listening");
+        let served = axum::serve(self.listener, app)
+            .with_graceful_shutdown(shutdown)
+            .await;
+        tracing::info!("HTTP server stopped; stopping job workers");
+        self.state.jobs.shutdown().await;
+        self.state.store.close().await;
+        tracing::info!("shutdown complete");
+        served
+    }
+}
+
+/// Resolves on Ctrl-C or SIGTERM.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {}
+        _ = term => {}
+    }
+    tracing::info!("shutdown signal received");
+}
+
+/// Default lease if not configured.
+pub const DEFAULT_LEASE: Duration = Duration::from_secs(15);

@@ -1,0 +1,516 @@
+//! Calibration sessions, pose uploads and identification jobs.
+//!
+//! Poses arrive as the DATA_FORMAT CSV (`Content-Type: text/csv`) or as a
+//! JSON array of objects keyed like the CSV columns. Both are turned into
+//! one table and validated by the engine's own `Dataset::from_csv`, together
+//! with the poses already stored, before anything is written: one
+//! validation path, and a bad upload stores nothing.
+
+use std::collections::HashMap;
+
+use axum::Json;
+use axum::extract::State;
+use axum::http::header::{CONTENT_TYPE, LOCATION};
+use axum::http::{HeaderMap, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
+
+use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json};
+use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
+use crate::jobs::{JobOptions, session_csv};
+use crate::model::{Dataset, Rig, Robot};
+use crate::store::{JobRec, SessionRec, StoreError};
+
+/// A session to open.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreateSession {
+    /// Robot measured.
+    pub robot_id: i64,
+    /// Rig used.
+    pub rig_id: i64,
+    /// Free-form name.
+    #[serde(default)]
+    pub name: Option<String>,
+}
+
+/// Open a calibration session for a robot and a rig.
+#[utoipa::path(post, path = "/sessions", tag = "sessions", request_body = CreateSession,
+    responses(
+        (status = 201, description = "Opened", body = SessionRec),
+        (status = 400, description = "Malformed JSON", body = ErrorBody),
+        (status = 415, description = "Not JSON", body = ErrorBody),
+        (status = 422, description = "Invalid field, unknown robot or rig", body = ErrorBody)))]
+pub async fn create_session(
+    State(app): State<AppState>,
+    ApiJson(s): ApiJson<CreateSession>,
+) -> ApiResult<(StatusCode, Json<SessionRec>)> {
+    if s.name.as_ref().is_some_and(|n| n.len() > 200) {
+        return Err(ApiError::invalid("name", "at most 200 characters"));
+    }
+    if let Err(StoreError::NotFound { .. }) = app.store.get_robot(s.robot_id).await {
+        return Err(ApiError::invalid(
+            "robot_id",
+            format!("no robot {}", s.robot_id),
+        ));
+    }
+    if let Err(StoreError::NotFound { .. }) = app.store.get_rig(s.rig_id).await {
+        return Err(ApiError::invalid("rig_id", format!("no rig {}", s.rig_id)));
+    }
+    let rec = app
+        .store
+        .create_session(s.robot_id, s.rig_id, s.name.as_deref())
+        .await?;
+    Ok((StatusCode::CREATED, Json(rec)))
+}
+
+/// Session list filter.
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct SessionFilter {
+    /// Only this robot's sessions.
+    pub robot_id: Option<i64>,
+}
+
+/// List sessions.
+#[utoipa::path(get, path = "/sessions", tag = "sessions", params(SessionFilter, PageParams),
+    responses(
+        (status = 200, description = "A page", body = Paged<SessionRec>),
+        (status = 400, description = "Bad query", body = ErrorBody),
+        (status = 422, description = "Bad page", body = ErrorBody)))]
+pub async fn list_sessions(
+    State(app): State<AppState>,
+    ApiQuery(f): ApiQuery<SessionFilter>,
+    ApiQuery(p): ApiQuery<PageParams>,
+) -> ApiResult<Json<Paged<SessionRec>>> {
+    let page = p.page()?;
+    let (items, total) = app.store.list_sessions(f.robot_id, page).await?;
+    Ok(Json(Paged::new(items, total, page)))
+}
+
+/// One session.
+#[utoipa::path(get, path = "/sessions/{id}", tag = "sessions",
+    params(("id" = i64, Path, description = "Session id")),
+    responses(
+        (status = 200, description = "The session", body = SessionRec),
+        (status = 400, description = "Bad id", body = ErrorBody),
+        (status = 404, description = "No such session", body = ErrorBody)))]
+pub async fn get_session(State(app): State<AppState>, Id(id): Id) -> ApiResult<Json<SessionRec>> {
+    Ok(Json(app.store.get_session(id).await?))
+}
+
+/// One pose as JSON: keys are the CSV columns, values numbers or strings.
+#[derive(Debug, Serialize, Deserialize, ToSchema)]
+#[schema(example = json!({"pose": "1", "q1_deg": 10.0, "q2_deg": -20.0, "q3_deg": 5.0, "q4_deg": 0.0, "q5_deg": 30.0, "q6_deg": 0.0, "l1_mm": 812.4, "l2_mm": 790.1, "l3_mm": 905.7, "l4_mm": 880.2, "split": "train"}))]
+#[schema(value_type = Object)]
+pub struct PoseRow(pub serde_json::Map<String, serde_json::Value>);
+
+/// Result of an upload.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct UploadResult {
+    /// Poses added by this upload.
+    pub added: i64,
+    /// The session after the upload.
+    pub session: SessionRec,
+}
+
+/// Uploaded poses as a table of strings.
+struct Table {
+    header: Vec<String>,
+    rows: Vec<Vec<String>>,
+}
+
+fn table_from_csv(bytes: &[u8]) -> ApiResult<Table> {
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .flexible(true)
+        .from_reader(bytes);
+    let header: Vec<String> = rdr
+        .headers()
+        .map_err(|e| ApiError::invalid("header", format!("unreadable CSV header: {e}")))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    let mut rows = Vec::new();
+    for (i, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|e| ApiError::Invalid {
+            message: format!("unreadable CSV row: {e}"),
+            field: None,
+            row: Some(i + 1),
+        })?;
+        rows.push(rec.iter().map(str::to_string).collect());
+    }
+    Ok(Table { header, rows })
+}
+
+fn table_from_json(bytes: &[u8]) -> ApiResult<Table> {
+    let value: serde_json::Value = parse_json(bytes)?;
+    let serde_json::Value::Array(items) = value else {
+        return Err(ApiError::Invalid {
+            message: "expected a JSON array of pose objects".into(),
+            field: None,
+            row: None,
+        });
+    };
+    let mut header: Vec<String> = Vec::new();
+    let mut index: HashMap<String, usize> = HashMap::new();
+    let mut cells: Vec<Vec<(usize, String)>> = Vec::with_capacity(items.len());
+    for (i, item) in items.into_iter().enumerate() {
+        let row = i + 1;
+        let serde_json::Value::Object(map) = item else {
+            return Err(ApiError::Invalid {
+                message: "expected an object keyed by column name".into(),
+                field: None,
+                row: Some(row),
+            });
+        };
+        let mut out = Vec::with_capacity(map.len());
+        for (k, v) in map {
+            let text = match v {
+                serde_json::Value::Number(n) => n.to_string(),
+                serde_json::Value::String(s) => s,
+                serde_json::Value::Null => String::new(),
+                other => {
+                    return Err(ApiError::Invalid {
+                        message: format!("expected a number or a string, got {other}"),
+                        field: Some(k),
+                        row: Some(row),
+                    });
+                }
+            };
+            let col = *index.entry(k.clone()).or_insert_with(|| {
+                header.push(k);
+                header.len() - 1
+            });
+            out.push((col, text));
+        }
+        cells.push(out);
+    }
+    let rows = cells
+        .into_iter()
+        .map(|cs| {
+            let mut r = vec![String::new(); header.len()];
+            for (c, t) in cs {
+                r[c] = t;
+            }
+            r
+        })
+        .collect();
+    Ok(Table { header, rows })
+}
+
+fn csv_line(fields: &[String]) -> ApiResult<String> {
+    let mut w = csv::WriterBuilder::new().from_writer(Vec::new());
+    w.write_record(fields)
+        .map_err(|e| ApiError::Internal(e.to_string()))?;
+    let bytes = w
+        .into_inner()
+        .map_err(|e| ApiError::Internal(e.to_string()))?;
+    let mut s = String::from_utf8(bytes).map_err(|e| ApiError::Internal(e.to_string()))?;
+    while s.ends_with('\n') || s.ends_with('\r') {
+        s.pop();
+    }
+    Ok(s)
+}
+
+fn csv_body(rows: &[Vec<String>]) -> ApiResult<String> {
+    let mut w = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(Vec::new());
+    for r in rows {
+        w.write_record(r)
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+    }
+    let bytes = w
+        .into_inner()
+        .map_err(|e| ApiError::Internal(e.to_string()))?;
+    String::from_utf8(bytes).map_err(|e| ApiError::Internal(e.to_string()))
+}
+
+/// Load a session's robot model and rig.
+async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot, Rig)> {
+    let robot_rec = app.store.get_robot(session.robot_id).await?;
+    let model = app.store.get_model(robot_rec.model_id).await?;
+    let robot = Robot::from_json(&model.robot_json)
+        .map_err(|e| ApiError::Internal(format!("stored model: {e}")))?;
+    let rig_rec = app.store.get_rig(session.rig_id).await?;
+    let rig = Rig::from_json(&rig_rec.rig_json)
+        .map_err(|e| ApiError::Internal(format!("stored rig: {e}")))?;
+    Ok((robot, rig))
+}
+
+/// Add poses to a session, all at once or in batches. Every row (with the
+/// rows stored before) is validated first; a bad upload stores nothing and
+/// the answer names the row (1-based in this upload) and the column.
+#[utoipa::path(post, path = "/sessions/{id}/poses", tag = "sessions",
+    params(("id" = i64, Path, description = "Session id")),
+    request_body(
+        description = "Poses: DATA_FORMAT.md poses.csv, or a JSON array of objects keyed like its columns. Batches after the first must have the same columns.",
+        content(
+            (String = "text/csv"),
+            (Vec<PoseRow> = "application/json"))),
+    responses(
+        (status = 200, description = "Stored", body = UploadResult),
+        (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
+        (status = 404, description = "No such session", body = ErrorBody),
+        (status = 409, description = "Another upload was stored meanwhile", body = ErrorBody),
+        (status = 413, description = "Body too large", body = ErrorBody),
+        (status = 415, description = "Neither text/csv nor application/json", body = ErrorBody),
+        (status = 422, description = "A bad row or column (named)", body = ErrorBody)))]
+pub async fn upload_poses(
+    State(app): State<AppState>,
+    Id(id): Id,
+    body: RawBody,
+) -> ApiResult<Json<UploadResult>> {
+    let session = app.store.get_session(id).await?;
+    let table = match body.content_type.as_deref() {
+        Some("text/csv") => table_from_csv(&body.bytes)?,
+        ct if is_json(ct) => table_from_json(&body.bytes)?,
+        other => {
+            return Err(ApiError::UnsupportedMediaType(format!(
+                "poses are uploaded as text/csv or application/json, got {}",
+                other.unwrap_or("none")
+            )));
+        }
+    };
+    if table.rows.is_empty() {
+        return Err(ApiError::Invalid {
+            message: "the upload holds no poses".into(),
+            field: None,
+            row: None,
+        });
+    }
+    let mut seen = std::collections::HashSet::new();
+    for h in &table.header {
+        if h.is_empty() {
+            return Err(ApiError::invalid("header", "empty column name"));
+        }
+        if !seen.insert(h.as_str()) {
+            return Err(ApiError::invalid(h.clone(), "column appears twice"));
+        }
+    }
+    // Columns: the first batch fixes them; later batches must match (in any order).
+    let (header, rows) = match &session.columns {
+        None => (table.header, table.rows),
+        Some(cols) => {
+            let existing = table_from_csv(format!("{cols}\n").as_bytes())?.header;
+            let pos: HashMap<&str, usize> = table
+                .header
+                .iter()
+                .enumerate()
+                .map(|(i, h)| (h.as_str(), i))
+                .collect();
+            let missing: Vec<&str> = existing
+                .iter()
+                .map(String::as_str)
+                .filter(|c| !pos.contains_key(c))
+                .collect();
+            let extra: Vec<&str> = table
+                .header
+                .iter()
+                .map(String::as_str)
+                .filter(|c| !existing.iter().any(|e| e == c))
+                .collect();
+            if !missing.is_empty() || !extra.is_empty() {
+                return Err(ApiError::invalid(
+                    "header",
+                    format!(
+                        "a batch must have the session's columns ({cols}); missing: [{}], extra: [{}]",
+                        missing.join(", "),
+                        extra.join(", ")
+                    ),
+                ));
+            }
+            let order: Vec<usize> = existing.iter().map(|c| pos[c.as_str()]).collect();
+            let rows = table
+                .rows
+                .into_iter()
+                .map(|r| {
+                    order
+                        .iter()
+                        .map(|&i| r.get(i).cloned().unwrap_or_default())
+                        .collect()
+                })
+                .collect();
+            (existing, rows)
+        }
+    };
+    let columns = csv_line(&header)?;
+    let body_csv = csv_body(&rows)?;
+    let n_new = rows.len() as i64;
+
+    // Validate the stored poses and the new ones together, off the runtime.
+    let (robot, rig) = robot_and_rig(&app, &session).await?;
+    let mut batches = app.store.pose_batches(id).await?;
+    batches.push(body_csv.clone());
+    let full = session_csv(&columns, &batches);
+    let existing_rows = session.n_poses as usize;
+    let checked = tokio::task::spawn_blocking(move || {
+        Dataset::from_csv(full.as_bytes(), &robot, &rig).map(|_| ())
+    })
+    .await
+    .map_err(|e| ApiError::Internal(format!("validation task: {e}")))?;
+    if let Err(e) = checked {
+        return Err(match e {
+            crate::Error::Input {
+                field,
+                row: Some(r),
+                message,
+            } if r > existing_rows => ApiError::Invalid {
+                message,
+                field: Some(field),
+                row: Some(r - existing_rows),
+            },
+            crate::Error::Input {
+                row: Some(_),
+                message,
+                ..
+            } => ApiError::Conflict(format!(
+                "the poses already stored no longer validate with this robot and rig: {message}"
+            )),
+            other => other.into(),
+        });
+    }
+    let session = app
+        .store
+        .append_poses(id, session.n_batches, &columns, &body_csv, n_new)
+        .await?;
+    tracing::info!(
+        session_id = id,
+        added = n_new,
+        total = session.n_poses,
+        "poses stored"
+    );
+    Ok(Json(UploadResult {
+        added: n_new,
+        session,
+    }))
+}
+
+/// The session's poses as one CSV (DATA_FORMAT.md poses.csv).
+#[utoipa::path(get, path = "/sessions/{id}/poses", tag = "sessions",
+    params(("id" = i64, Path, description = "Session id")),
+    responses(
+        (status = 200, description = "poses.csv", body = String, content_type = "text/csv"),
+        (status = 400, description = "Bad id", body = ErrorBody),
+        (status = 404, description = "No such session", body = ErrorBody)))]
+pub async fn get_poses(State(app): State<AppState>, Id(id): Id) -> ApiResult<Response> {
+    let session = app.store.get_session(id).await?;
+    let batches = app.store.pose_batches(id).await?;
+    let text = match &session.columns {
+        Some(c) => session_csv(c, &batches),
+        None => String::new(),
+    };
+    Ok(([(CONTENT_TYPE, "text/csv")], text).into_response())
+}
+
+/// Queue an identification of the session's poses. Answers at once with
+/// the job; poll `GET /jobs/{id}`.
+#[utoipa::path(post, path = "/sessions/{id}/jobs", tag = "jobs",
+    params(("id" = i64, Path, description = "Session id")),
+    request_body(content = Option<JobOptions>, content_type = "application/json", description = "Options (optional; an empty body takes the defaults)"),
+    responses(
+        (status = 202, description = "Queued", body = JobRec, headers(("Location" = String, description = "The job's URL"))),
+        (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
+        (status = 404, description = "No such session", body = ErrorBody),
+        (status = 415, description = "Body not JSON", body = ErrorBody),
+        (status = 422, description = "Bad options, or the session has no poses", body = ErrorBody)))]
+pub async fn enqueue_job(
+    State(app): State<AppState>,
+    Id(id): Id,
+    body: RawBody,
+) -> ApiResult<Response> {
+    let options: JobOptions = if body.bytes.iter().all(u8::is_ascii_whitespace) {
+        JobOptions::default()
+    } else if is_json(body.content_type.as_deref()) {
+        parse_json(&body.bytes)?
+    } else {
+        return Err(ApiError::UnsupportedMediaType(
+            "job options are JSON (application/json)".into(),
+        ));
+    };
+    options
+        .validate()
+        .map_err(|(f, m)| ApiError::invalid(f, m))?;
+    let session = app.store.get_session(id).await?;
+    if session.n_poses == 0 {
+        return Err(ApiError::Invalid {
+            message: format!("session {id} has no poses: upload some first"),
+            field: None,
+            row: None,
+        });
+    }
+    let opts = serde_json::to_string(&options).map_err(|e| ApiError::Internal(e.to_string()))?;
+    let job = app.store.create_job(id, session.robot_id, &opts, 3).await?;
+    app.jobs.wake();
+    let mut headers = HeaderMap::new();
+    if let Ok(v) = HeaderValue::from_str(&format!("/jobs/{}", job.id)) {
+        headers.insert(LOCATION, v);
+    }
+    Ok((StatusCode::ACCEPTED, headers, Json(job)).into_response())
+}
+
+/// Job list filters.
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct JobFilter {
+    /// Only this session's jobs.
+    pub session_id: Option<i64>,
+    /// Only jobs in this state (`queued`, `running`, `succeeded`, `failed`, `cancelled`).
+    pub state: Option<String>,
+}
+
+/// List jobs.
+#[utoipa::path(get, path = "/jobs", tag = "jobs", params(JobFilter, PageParams),
+    responses(
+        (status = 200, description = "A page", body = Paged<JobRec>),
+        (status = 400, description = "Bad query", body = ErrorBody),
+        (status = 422, description = "Bad page or state", body = ErrorBody)))]
+pub async fn list_jobs(
+    State(app): State<AppState>,
+    ApiQuery(f): ApiQuery<JobFilter>,
+    ApiQuery(p): ApiQuery<PageParams>,
+) -> ApiResult<Json<Paged<JobRec>>> {
+    let page = p.page()?;
+    if let Some(s) = &f.state {
+        if !["queued", "running", "succeeded", "failed", "cancelled"].contains(&s.as_str()) {
+            return Err(ApiError::invalid("state", format!("unknown state '{s}'")));
+        }
+    }
+    let (items, total) = app
+        .store
+        .list_jobs(f.session_id, f.state.as_deref(), page)
+        .await?;
+    Ok(Json(Paged::new(items, total, page)))
+}
+
+/// One job: state, stage, progress, error, and the calibration it made.
+#[utoipa::path(get, path = "/jobs/{id}", tag = "jobs",
+    params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job", body = JobRec),
+        (status = 400, description = "Bad id", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody)))]
+pub async fn get_job(State(app): State<AppState>, Id(id): Id) -> ApiResult<Json<JobRec>> {
+    Ok(Json(app.store.get_job(id).await?))
+}
+
+/// Cancel a job: a queued one at once, a running one at the engine's next
+/// check.
+#[utoipa::path(post, path = "/jobs/{id}/cancel", tag = "jobs",
+    params(("id" = i64, Path, description = "Job id")),
+    responses(
+        (status = 202, description = "Cancelled or cancellation requested", body = JobRec),
+        (status = 400, description = "Bad id", body = ErrorBody),
+        (status = 404, description = "No such job", body = ErrorBody),
+        (status = 409, description = "The job has already ended", body = ErrorBody)))]
+pub async fn cancel_job(
+    State(app): State<AppState>,
+    Id(id): Id,
+) -> ApiResult<(StatusCode, Json<JobRec>)> {
+    Ok((
+        StatusCode::ACCEPTED,
+        Json(app.store.request_cancel(id).await?),
+    ))
+}

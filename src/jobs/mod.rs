@@ -1,0 +1,437 @@
+//! Identification jobs: a persistent queue in the store's `jobs` table and a
+//! pool of workers that run the engine off the async runtime.
+//!
+//! A worker *claims* a job by taking a lease (`locked_by`, `locked_until_ms`)
+//! and keeps it alive with a heartbeat that also records progress and reads
+//! the cancel flag. The engine itself runs on `tokio::task::spawn_blocking`
+//! and polls the flag through [`drawcal::identify::Progress`]. If the process
+//! dies, the heartbeat stops, the lease expires, and the next claim (by this
+//! process after a restart, or by another replica) runs the job again; the
+//! result is written together with the job's success in one transaction.
+//!
+//! At graceful shutdown a running job gets a grace period to finish; after
+//! that it is cancelled and handed back to the queue (the claim does not
+//! count as an attempt).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use tokio::sync::{Notify, watch};
+use utoipa::ToSchema;
+
+use crate::identify::report::Report;
+use crate::identify::{IdentifyOptions, Method, Progress};
+use crate::model::{Dataset, Rig, Robot};
+use crate::store::{JobRec, NewCalibration, Store, now_ms};
+
+/// Options of an identification job, as a client sends them (all optional).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct JobOptions {
+    /// `lm` (default) or `paper`.
+    #[serde(default)]
+    pub method: Option<JobMethod>,
+    /// Robust (Huber) loss with outlier flagging.
+    #[serde(default)]
+    pub robust: Option<bool>,
+    /// Run the physics analysis (default true).
+    #[serde(default)]
+    pub physics: Option<bool>,
+    /// Fraction held out when the poses carry no split, in (0, 0.9].
+    #[serde(default)]
+    pub holdout_fraction: Option<f64>,
+    /// Seed of the hold-out choice.
+    #[serde(default)]
+    pub seed: Option<u64>,
+}
+
+/// Identification method.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, ToSchema, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum JobMethod {
+    /// Levenberg-Marquardt to convergence.
+    Lm,
+    /// The paper's one-step linearised method.
+    Paper,
+}
+
+impl JobOptions {
+    /// Check ranges; `Err((field, message))`.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        if let Some(h) = self.holdout_fraction {
+            if !(h.is_finite() && h > 0.0 && h <= 0.9) {
+                return Err((
+                    "holdout_fraction".into(),
+                    format!("must be in (0, 0.9], got {h}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The engine's options.
+    pub fn to_identify(&self) -> IdentifyOptions {
+        let mut o = IdentifyOptions::default();
+        if let Some(m) = self.method {
+            o.method = match m {
+                JobMethod::Lm => Method::Lm,
+                JobMethod::Paper => Method::Paper,
+            };
+        }
+        if let Some(r) = self.robust {
+            o.robust = r;
+        }
+        if let Some(p) = self.physics {
+            o.physics = p;
+        }
+        if let Some(h) = self.holdout_fraction {
+            o.holdout_fraction = h;
+        }
+        if let Some(s) = self.seed {
+            o.seed = s;
+        }
+        o
+    }
+}
+
+/// Everything a job needs, loaded from the store.
+pub struct JobInput {
+    /// Nominal robot.
+    pub robot: Robot,
+    /// Rig.
+    pub rig: Rig,
+    /// The session's poses, validated.
+    pub data: Dataset,
+    /// Engine options.
+    pub options: IdentifyOptions,
+}
+
+/// The numerical work of a job (the engine's `identify`, or a stand-in in
+/// tests). Runs on a blocking thread.
+pub type JobFn =
+    Arc<dyn Fn(&JobInput, &dyn Progress) -> crate::Result<Report> + Send + Sync + 'static>;
+
+/// The engine's identification as a [`JobFn`].
+pub fn engine_job_fn() -> JobFn {
+    Arc::new(|input: &JobInput, progress: &dyn Progress| {
+        crate::identify::identify(
+            &input.robot,
+            &input.rig,
+            &input.data,
+            &input.options,
+            progress,
+        )
+    })
+}
+
+/// Worker pool settings.
+#[derive(Debug, Clone)]
+pub struct JobConfig {
+    /// Concurrent jobs in this process.
+    pub workers: usize,
+    /// Lease length; a job whose worker stopped is re-run this long after its
+    /// last heartbeat.
+    pub lease: Duration,
+    /// How often an idle worker looks for work (it is also woken on enqueue).
+    pub poll: Duration,
+    /// How long a running job may go on after shutdown is asked before it is
+    /// cancelled and handed back to the queue.
+    pub shutdown_grace: Duration,
+    /// Claims allowed per job before it is given up.
+    pub max_attempts: i64,
+}
+
+impl Default for JobConfig {
+    fn default() -> Self {
+        JobConfig {
+            workers: 1,
+            lease: Duration::from_secs(15),
+            poll: Duration::from_millis(500),
+            shutdown_grace: Duration::from_secs(10),
+            max_attempts: 3,
+        }
+    }
+}
+
+/// Progress shared between the engine thread and the heartbeat.
+struct JobProgress {
+    cancel: AtomicBool,
+    latest: Mutex<(String, f64)>,
+}
+
+impl Progress for JobProgress {
+    fn update(&self, stage: &str, fraction: f64) {
+        if let Ok(mut l) = self.latest.lock() {
+            l.0.clear();
+            l.0.push_str(stage);
+            l.1 = if fraction.is_finite() {
+                fraction.clamp(0.0, 1.0)
+            } else {
+                l.1
+            };
+        }
+    }
+    fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+}
+
+/// Load a job's robot, rig and poses. `Err` is the reason the job fails.
+pub async fn load_input(store: &Store, job: &JobRec) -> Result<JobInput, String> {
+    let fail = |e: crate::store::StoreError| format!("loading inputs: {e}");
+    let session = store.get_session(job.session_id).await.map_err(fail)?;
+    let robot_rec = store.get_robot(session.robot_id).await.map_err(fail)?;
+    let model = store.get_model(robot_rec.model_id).await.map_err(fail)?;
+    let rig_rec = store.get_rig(session.rig_id).await.map_err(fail)?;
+    let batches = store.pose_batches(session.id).await.map_err(fail)?;
+    let options: JobOptions =
+        serde_json::from_str(&job.options).map_err(|e| format!("bad job options: {e}"))?;
+    let robot = Robot::from_json(&model.robot_json).map_err(|e| format!("robot model: {e}"))?;
+    let rig = Rig::from_json(&rig_rec.rig_json).map_err(|e| format!("rig: {e}"))?;
+    let columns = session.columns.unwrap_or_default();
+    let csv = session_csv(&columns, &batches);
+    let data =
+        Dataset::from_csv(csv.as_bytes(), &robot, &rig).map_err(|e| format!("poses: {e}"))?;
+    Ok(JobInput {
+        robot,
+        rig,
+        data,
+        options: options.to_identify(),
+    })
+}
+
+/// A session's poses as one CSV text: the header, then every batch in order.
+pub fn session_csv(columns: &str, batches: &[String]) -> String {
+    let mut csv =
+        String::with_capacity(columns.len() + 1 + batches.iter().map(String::len).sum::<usize>());
+    csv.push_str(columns);
+    csv.push('\n');
+    for b in batches {
+        csv.push_str(b);
+    }
+    csv
+}
+
+/// Figures for the calibration's summary row, from the report.
+pub fn summarize(report: &Report, report_json: String) -> NewCalibration {
+    let finite = |x: f64| x.is_finite().then_some(x);
+    let stats = &report.stats;
+    let mut effects: Vec<&str> = report.findings.iter().map(|f| f.effect.as_str()).collect();
+    effects.dedup();
+    NewCalibration {
+        method: report.method.clone(),
+        n_poses: (stats.train.n + stats.test.n) as i64,
+        n_test: stats.test.n as i64,
+        test_rms_before_mm: finite(stats.test.before.rms_mm),
+        test_rms_after_mm: finite(stats.test.after.rms_mm),
+        train_rms_after_mm: finite(stats.train.after.rms_mm),
+        effects: effects.join(","),
+        report_json,
+    }
+}
+
+/// The running pool: wake it on enqueue, stop it at shutdown.
+#[derive(Clone)]
+pub struct Jobs {
+    notify: Arc<Notify>,
+    shutdown: watch::Sender<bool>,
+    handles: Arc<Mutex<Vec<tokio::task::JoinHandle<()>>>>,
+}
+
+impl Jobs {
+    /// Start `cfg.workers` workers on the current runtime.
+    pub fn start(store: Store, cfg: JobConfig, job_fn: JobFn) -> Jobs {
+        let notify = Arc::new(Notify::new());
+        let (shutdown, rx) = watch::channel(false);
+        let prefix = worker_prefix();
+        let mut handles = Vec::new();
+        for i in 0..cfg.workers {
+            let w = Worker {
+                name: format!("{prefix}-w{i}"),
+                store: store.clone(),
+                cfg: cfg.clone(),
+                job_fn: job_fn.clone(),
+                notify: notify.clone(),
+                shutdown: rx.clone(),
+            };
+            handles.push(tokio::spawn(w.run()));
+        }
+        Jobs {
+            notify,
+            shutdown,
+            handles: Arc::new(Mutex::new(handles)),
+        }
+    }
+
+    /// A job was queued: wake an idle worker.
+    pub fn wake(&self) {
+        self.notify.notify_one();
+    }
+
+    /// Stop claiming, let running jobs finish within the grace period (then
+    /// hand them back to the queue), and wait for the workers.
+    pub async fn shutdown(&self) {
+        let _ = self.shutdown.send(true);
+        let handles = std::mem::take(&mut *self.handles.lock().expect("jobs handles lock"));
+        for h in handles {
+            let _ = h.await;
+        }
+    }
+}
+
+/// Host and process id plus a random-ish suffix: unique per process.
+fn worker_prefix() -> String {
+    let host = std::env::var("HOSTNAME").unwrap_or_else(|_| "host".into());
+    let nonce = now_ms() % 1_000_000;
+    format!("{host}-{}-{nonce}", std::process::id())
+}
+
+struct Worker {
+    name: String,
+    store: Store,
+    cfg: JobConfig,
+    job_fn: JobFn,
+    notify: Arc<Notify>,
+    shutdown: watch::Receiver<bool>,
+}
+
+impl Worker {
+    async fn run(mut self) {
+        tracing::info!(worker = %self.name, "job worker started");
+        loop {
+            if *self.shutdown.borrow() {
+                break;
+            }
+            let lease_ms = self.cfg.lease.as_millis() as i64;
+            match self.store.claim_job(&self.name, now_ms(), lease_ms).await {
+                Ok(Some(job)) => {
+                    let id = job.id;
+                    let span = tracing::info_span!("job", job_id = id, worker = %self.name);
+                    let _ = tracing::Instrument::instrument(self.run_job(job), span).await;
+                }
+                Ok(None) => {
+                    tokio::select! {
+                        _ = self.notify.notified() => {}
+                        _ = tokio::time::sleep(self.cfg.poll) => {}
+                        _ = self.shutdown.changed() => {}
+                    }
+                }
+                Err(e) => {
+                    tracing::error!(worker = %self.name, error = %e, "claiming a job failed");
+                    tokio::select! {
+                        _ = tokio::time::sleep(Duration::from_secs(1)) => {}
+                        _ = self.shutdown.changed() => {}
+                    }
+                }
+            }
+        }
+        tracing::info!(worker = %self.name, "job worker stopped");
+    }
+
+    async fn run_job(&mut self, job: JobRec) {
+        let id = job.id;
+        tracing::info!(attempt = job.attempts, "job claimed");
+        if job.cancel_requested {
+            self.finish(id, "cancelled", None).await;
+            return;
+        }
+        let input = match load_input(&self.store, &job).await {
+            Ok(i) => i,
+            Err(reason) => {
+                self.finish(id, "failed", Some(&reason)).await;
+                return;
+            }
+        };
+        let progress = Arc::new(JobProgress {
+            cancel: AtomicBool::new(false),
+            latest: Mutex::new(("starting".into(), 0.0)),
+        });
+        let job_fn = self.job_fn.clone();
+        let p = progress.clone();
+        // The engine runs on a blocking thread, never on the runtime.
+        let mut handle = tokio::task::spawn_blocking(move || job_fn(&input, &*p));
+
+        let beat = (self.cfg.lease / 3).max(Duration::from_millis(50));
+        let mut lost_lease = false;
+        let mut handed_back = false;
+        let mut grace_deadline: Option<tokio::time::Instant> = None;
+        let result = loop {
+            let grace = async {
+                match grace_deadline {
+                    Some(d) => tokio::time::sleep_until(d).await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                r = &mut handle => break r,
+                _ = tokio::time::sleep(beat) => {
+                    let (stage, frac) = progress.latest.lock().map(|l| l.clone()).unwrap_or_default();
+                    let until = now_ms() + self.cfg.lease.as_millis() as i64;
+                    match self.store.heartbeat(id, &self.name, until, Some(&stage), frac).await {
+                        Ok(Some(cancel)) => if cancel { progress.cancel.store(true, Ordering::Relaxed) },
+                        Ok(None) => {
+                            tracing::warn!("lease lost; abandoning the job");
+                            lost_lease = true;
+                            progress.cancel.store(true, Ordering::Relaxed);
+                        }
+                        Err(e) => tracing::warn!(error = %e, "heartbeat failed"),
+                    }
+                }
+                _ = self.shutdown.changed(), if grace_deadline.is_none() => {
+                    tracing::info!(grace_s = self.cfg.shutdown_grace.as_secs_f64(), "shutdown: letting the job finish");
+                    grace_deadline = Some(tokio::time::Instant::now() + self.cfg.shutdown_grace);
+                }
+                _ = grace => {
+                    tracing::warn!("shutdown grace over: cancelling the job and handing it back");
+                    handed_back = true;
+                    progress.cancel.store(true, Ordering::Relaxed);
+                    grace_deadline = Some(tokio::time::Instant::now() + Duration::from_secs(3600));
+                }
+            }
+        };
+        if lost_lease {
+            return;
+        }
+        match result {
+            Ok(Ok(report)) => {
+                let json = match serde_json::to_string(&report) {
+                    Ok(j) => j,
+                    Err(e) => {
+                        self.finish(id, "failed", Some(&format!("report not serialisable: {e}")))
+                            .await;
+                        return;
+                    }
+                };
+                let cal = summarize(&report, json);
+                match self.store.complete_job(id, &self.name, &cal).await {
+                    Ok(c) => {
+                        tracing::info!(calibration_id = c.id, version = c.version, "job succeeded")
+                    }
+                    Err(e) => tracing::error!(error = %e, "storing the calibration failed"),
+                }
+            }
+            Ok(Err(crate::Error::Cancelled)) if handed_back => {
+                match self.store.requeue_job(id, &self.name).await {
+                    Ok(_) => tracing::info!("job handed back to the queue"),
+                    Err(e) => tracing::error!(error = %e, "requeue failed"),
+                }
+            }
+            Ok(Err(crate::Error::Cancelled)) => self.finish(id, "cancelled", None).await,
+            Ok(Err(e)) => self.finish(id, "failed", Some(&e.to_string())).await,
+            Err(join) => {
+                tracing::error!(error = %join, "the engine panicked");
+                self.finish(id, "failed", Some("internal error: the engine panicked"))
+                    .await
+            }
+        }
+    }
+
+    async fn finish(&self, id: i64, state: &str, error: Option<&str>) {
+        match self.store.finish_job(id, &self.name, state, error).await {
+            Ok(_) => tracing::info!(state, error, "job ended"),
+            Err(e) => tracing::error!(error = %e, "recording the job's end failed"),
+        }
+    }
+}

@@ -1,0 +1,46 @@
+//! The PostgreSQL backend, for fleets: several replicas share one database
+//! and claim jobs with `FOR UPDATE SKIP LOCKED`.
+
+use sqlx::postgres::PgPoolOptions;
+
+// The shared queries (and the column-list macros the dialect strings use).
+include!("queries.rs");
+
+type Db = sqlx::Postgres;
+
+/// A PostgreSQL database.
+#[derive(Clone, Debug)]
+pub struct Backend {
+    pub(super) pool: sqlx::Pool<Db>,
+}
+
+/// Claim the oldest runnable job; concurrent claimers skip rows another
+/// transaction has locked, so no two workers get the same job.
+const CLAIM_SQL: &str = concat!(
+    "UPDATE jobs SET state = 'running', locked_by = $1, locked_until_ms = $2, attempts = attempts + 1, \
+     started_at = $3, updated_at = $3 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' \
+     OR (state = 'running' AND locked_until_ms < $4 AND attempts < max_attempts) ORDER BY id LIMIT 1 \
+     FOR UPDATE SKIP LOCKED) RETURNING ",
+    job_cols!()
+);
+
+/// Lock the robot's row for the rest of the transaction (serialises version
+/// numbering and activation per robot across replicas).
+const LOCK_ROBOT_SQL: &str = "SELECT model_id FROM robots WHERE id = $1 FOR UPDATE";
+
+impl Backend {
+    /// Connect and migrate.
+    pub async fn connect(url: &str) -> super::Result<Self> {
+        let pool = PgPoolOptions::new()
+            .max_connections(16)
+            .connect(url)
+            .await
+            .map_err(super::StoreError::Db)?;
+        sqlx::migrate!("migrations/postgres").run(&pool).await?;
+        Ok(Backend { pool })
+    }
+
+    async fn begin_write(&self) -> sqlx::Result<sqlx::Transaction<'static, Db>> {
+        self.pool.begin().await
+    }
+}

@@ -1,0 +1,760 @@
+// The store's queries, written once and compiled for each backend: this file
+// is `include!`d by `sqlite.rs` and `postgres.rs`, which define `Db`,
+// `Backend { pool }`, `begin_write`, and the dialect strings `CLAIM_SQL` and
+// `LOCK_ROBOT_SQL`. Nothing else differs between the backends.
+
+use super::{
+    ActivationRec, CalibrationFilter, CalibrationRec, JobRec, ModelRec, NewCalibration, NewRobot,
+    Page, Result, RigRec, RobotRec, SessionRec, StoreError, now_rfc3339,
+};
+
+macro_rules! model_cols {
+    () => {
+        "id, name, dof, robot_json, created_at"
+    };
+}
+macro_rules! robot_cols {
+    () => {
+        "id, serial_number, model_id, site, line, cell, active_calibration_id, created_at, updated_at"
+    };
+}
+macro_rules! rig_cols {
+    () => {
+        "id, name, n_strings, rig_json, created_at"
+    };
+}
+macro_rules! session_cols {
+    () => {
+        "id, robot_id, rig_id, name, n_poses, n_batches, columns, created_at, updated_at"
+    };
+}
+macro_rules! job_cols {
+    () => {
+        "id, session_id, robot_id, options, state, stage, progress, attempts, max_attempts, \
+         locked_by, locked_until_ms, cancel_requested, error, calibration_id, created_at, \
+         updated_at, started_at, finished_at"
+    };
+}
+macro_rules! calibration_select {
+    () => {
+        "SELECT c.id, c.robot_id, r.serial_number, c.model_id, r.site, r.line, r.cell, \
+         c.session_id, c.job_id, c.version, c.method, c.n_poses, c.n_test, \
+         c.test_rms_before_mm, c.test_rms_after_mm, c.train_rms_after_mm, c.effects, \
+         CASE WHEN r.active_calibration_id = c.id THEN TRUE ELSE FALSE END AS active, \
+         c.created_at FROM calibrations c JOIN robots r ON r.id = c.robot_id "
+    };
+}
+macro_rules! calibration_where {
+    () => {
+        "WHERE ($1 IS NULL OR c.robot_id = $1) AND ($2 IS NULL OR c.model_id = $2) \
+         AND ($3 IS NULL OR r.site = $3) AND ($4 IS NULL OR r.line = $4) \
+         AND ($5 IS NULL OR c.created_at >= $5) AND ($6 IS NULL OR c.created_at <= $6) \
+         AND ($7 IS NULL OR c.test_rms_after_mm <= $7) AND ($8 IS NULL OR c.test_rms_after_mm >= $8) "
+    };
+}
+
+impl Backend {
+    /// Is the database answering?
+    pub async fn ping(&self) -> Result<()> {
+        sqlx::query_scalar::<_, i64>("SELECT CAST(1 AS BIGINT)")
+            .fetch_one(&self.pool)
+            .await?;
+        Ok(())
+    }
+
+    // ---- robot models -------------------------------------------------
+
+    pub async fn create_model(&self, name: &str, dof: i64, robot_json: &str) -> Result<ModelRec> {
+        Ok(sqlx::query_as::<_, ModelRec>(concat!(
+            "INSERT INTO robot_models (name, dof, robot_json, created_at) VALUES ($1, $2, $3, $4) RETURNING ",
+            model_cols!()
+        ))
+        .bind(name)
+        .bind(dof)
+        .bind(robot_json)
+        .bind(now_rfc3339())
+        .fetch_one(&self.pool)
+        .await?)
+    }
+
+    pub async fn get_model(&self, id: i64) -> Result<ModelRec> {
+        sqlx::query_as::<_, ModelRec>(concat!(
+            "SELECT ",
+            model_cols!(),
+            " FROM robot_models WHERE id = $1"
+        ))
+        .bind(id)
+        .fetch_optional(&self.pool)
+        .await?
+        .ok_or(StoreError::NotFound {
+            what: "robot model",
+            id,
+        })
+    }
+
+    pub async fn list_models(&self, page: Page) -> Result<(Vec<ModelRec>, i64)> {
+        let items = sqlx::query_as::<_, ModelRec>(concat!(
+            "SELECT ",
+            model_cols!(),
+            " FROM robot_models ORDER BY id LIMIT $1 OFFSET $2"
+        ))
+        .bind(page.limit)
+        .bind(page.offset)
+        .fetch_all(&self.pool)
+        .await?;
+        let total = sqlx::query_scalar::<_, i64>("SELECT COUNT(*) FROM robot_models")
+            .fetch_one(&self.pool)
+            .await?;
+        Ok((items, total))
+    }
+
+    // ---- robots -------------------------------------------------------
+
+    pub async fn create_robot(&self, r: &NewRobot) -> Result<RobotRec> {
+        let now = now_rfc3339();
+        Ok(sqlx::query_as::<_, RobotRec>(concat!(
+            "INSERT INTO robots (serial_number, model_id, site, line, cell, created_at, updated_at) \
+             VALUES ($1, $2, $3, $4, $5, $6, $6) RETURNING ",
+            robot_cols!()
+        ))
+        .bind(&r.serial_number)
+        .bind(r.model_id)
+        .bind(&r.site)
+        .bind(&r.line)
+        .bind(&r.cell)
+        .bind(now)
+        .fetch_one(&self.pool)
+        .await?)
+    }
+
+    pub async fn get_robot(&self, id: i64) -> Result<RobotRec> {
+        sqlx::query_as::<_, RobotRec>(concat!(
+            "SELECT ",
+            robot_cols!(),
+            " FROM robots WHERE id = $1"
+        ))
+        .bind(id)
+        .fetch_optional(&self.pool)
+        .await?
+        .ok_or(StoreError::NotFound { what: "robot", id })
+    }
+
+    pub async fn list_robots(
+        &self,
+        model_id: Option<i64>,
+        site: Option<&str>,
+        line: Option<&str>,
+        page: Page,
+    ) -> Result<(Vec<RobotRec>, i64)> {
+        let items = sqlx::query_as::<_, RobotRec>(concat!(
+            "SELECT ",
+            robot_cols!(),
+            " FROM robots WHERE ($1 IS NULL OR model_id = $1) AND ($2 IS NULL OR site = $2) \
+             AND ($3 IS NULL OR line = $3) ORDER BY id LIMIT $4 OFFSET $5"
+        ))
+        .bind(model_id)
+        .bind(site)
+        .bind(line)
+        .bind(page.limit)
+        .bind(page.offset)
+        .fetch_all(&self.pool)
+        .await?;
+        let total = sqlx::query_scalar::<_, i64>(
+            "SELECT COUNT(*) FROM robots WHERE ($1 IS NULL OR model_id = $1) \
+             AND ($2 IS NULL OR site = $2) AND ($3 IS NULL OR line = $3)",
+        )
+        .bind(model_id)
+        .bind(site)
+        .bind(line)
+        .fetch_one(&self.pool)
+        .await?;
+        Ok((items, total))
+    }
+
+    // ---- rigs -----------------------------------------------------------
+
+    pub async fn create_rig(&self, name: &str, n_strings: i64, rig_json: &str) -> Result<RigRec> {
+        Ok(sqlx::query_as::<_, RigRec>(concat!(
+            "INSERT INTO rigs (name, n_strings, rig_json, created_at) VALUES ($1, $2, $3, $4) RETURNING ",
+            rig_cols!()
+        ))
+        .bind(name)
+        .bind(n_strings)
+        .bind(rig_json)
+        .bind(now_rfc3339())
+        .fetch_one(&self.pool)
+        .await?)
+    }
+
+    pub async fn get_rig(&self, id: i64) -> Result<RigRec> {
+        sqlx::query_as::<_, RigRec>(concat!("SELECT ", rig_cols!(), " FROM rigs WHERE id = $1"))
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?
+            .ok_or(StoreError::NotFound { what: "rig", id })
+    }
+
+    pub async fn list_rigs(&self, page: Page) -> Result<(Vec<RigRec>, i64)> {
+        let items = sqlx::query_as::<_, RigRec>(concat!(
+            "SELECT ",
+            rig_cols!(),
+            " FROM rigs ORDER BY id LIMIT $1 OFFSET $2"
+        ))
+        .bind(page.limit)
+        .bind(page.offset)
+        .fetch_all(&self.pool)
+        .await?;
+        let total = sqlx::query_scalar::<_, i64>("SELECT COUNT(*) FROM rigs")
+            .fetch_one(&self.pool)
+            .await?;
+        Ok((items, total))
+    }
+
+    // ---- sessions and poses ---------------------------------------------
+
+    pub async fn create_session(
+        &self,
+        robot_id: i64,
+        rig_id: i64,
+        name: Option<&str>,
+    ) -> Result<SessionRec> {
+        let now = now_rfc3339();
+        Ok(sqlx::query_as::<_, SessionRec>(concat!(
+            "INSERT INTO sessions (robot_id, rig_id, name, created_at, updated_at) \
+             VALUES ($1, $2, $3, $4, $4) RETURNING ",
+            session_cols!()
+        ))
+        .bind(robot_id)
+        .bind(rig_id)
+        .bind(name)
+        .bind(now)
+        .fetch_one(&self.pool)
+        .await?)
+    }
+
+    pub async fn get_session(&self, id: i64) -> Result<SessionRec> {
+        sqlx::query_as::<_, SessionRec>(concat!(
+            "SELECT ",
+            session_cols!(),
+            " FROM sessions WHERE id = $1"
+        ))
+        .bind(id)
+        .fetch_optional(&self.pool)
+        .await?
+        .ok_or(StoreError::NotFound {
+            what: "session",
+            id,
+        })
+    }
+
+    pub async fn list_sessions(
+        &self,
+        robot_id: Option<i64>,
+        page: Page,
+    ) -> Result<(Vec<SessionRec>, i64)> {
+        let items = sqlx::query_as::<_, SessionRec>(concat!(
+            "SELECT ",
+            session_cols!(),
+            " FROM sessions WHERE ($1 IS NULL OR robot_id = $1) ORDER BY id LIMIT $2 OFFSET $3"
+        ))
+        .bind(robot_id)
+        .bind(page.limit)
+        .bind(page.offset)
+        .fetch_all(&self.pool)
+        .await?;
+        let total = sqlx::query_scalar::<_, i64>(
+            "SELECT COUNT(*) FROM sessions WHERE ($1 IS NULL OR robot_id = $1)",
+        )
+        .bind(robot_id)
+        .fetch_one(&self.pool)
+        .await?;
+        Ok((items, total))
+    }
+
+    pub async fn append_poses(
+        &self,
+        session_id: i64,
+        expected_batches: i64,
+        columns: &str,
+        body: &str,
+        n_rows: i64,
+    ) -> Result<SessionRec> {
+        let now = now_rfc3339();
+        let mut tx = self.begin_write().await?;
+        let updated = sqlx::query_as::<_, SessionRec>(concat!(
+            "UPDATE sessions SET columns = $2, n_poses = n_poses + $3, n_batches = n_batches + 1, \
+             updated_at = $4 WHERE id = $1 AND n_batches = $5 RETURNING ",
+            session_cols!()
+        ))
+        .bind(session_id)
+        .bind(columns)
+        .bind(n_rows)
+        .bind(&now)
+        .bind(expected_batches)
+        .fetch_optional(&mut *tx)
+        .await?;
+        let Some(session) = updated else {
+            drop(tx);
+            // Either the session is gone or another batch got in first.
+            self.get_session(session_id).await?;
+            return Err(StoreError::Conflict(
+                "another upload to this session was stored meanwhile; retry".into(),
+            ));
+        };
+        sqlx::query(
+            "INSERT INTO pose_batches (session_id, seq, n_rows, body, created_at) \
+             VALUES ($1, $2, $3, $4, $5)",
+        )
+        .bind(session_id)
+        .bind(session.n_batches)
+        .bind(n_rows)
+        .bind(body)
+        .bind(&now)
+        .execute(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        Ok(session)
+    }
+
+    pub async fn pose_batches(&self, session_id: i64) -> Result<Vec<String>> {
+        Ok(sqlx::query_scalar::<_, String>(
+            "SELECT body FROM pose_batches WHERE session_id = $1 ORDER BY seq",
+        )
+        .bind(session_id)
+        .fetch_all(&self.pool)
+        .await?)
+    }
+
+    // ---- jobs -------------------------------------------------------------
+
+    pub async fn create_job(
+        &self,
+        session_id: i64,
+        robot_id: i64,
+        options_json: &str,
+        max_attempts: i64,
+    ) -> Result<JobRec> {
+        let now = now_rfc3339();
+        Ok(sqlx::query_as::<_, JobRec>(concat!(
+            "INSERT INTO jobs (session_id, robot_id, options, state, max_attempts, created_at, updated_at) \
+             VALUES ($1, $2, $3, 'queued', $4, $5, $5) RETURNING ",
+            job_cols!()
+        ))
+        .bind(session_id)
+        .bind(robot_id)
+        .bind(options_json)
+        .bind(max_attempts)
+        .bind(now)
+        .fetch_one(&self.pool)
+        .await?)
+    }
+
+    pub async fn get_job(&self, id: i64) -> Result<JobRec> {
+        sqlx::query_as::<_, JobRec>(concat!("SELECT ", job_cols!(), " FROM jobs WHERE id = $1"))
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?
+            .ok_or(StoreError::NotFound { what: "job", id })
+    }
+
+    pub async fn list_jobs(
+        &self,
+        session_id: Option<i64>,
+        state: Option<&str>,
+        page: Page,
+    ) -> Result<(Vec<JobRec>, i64)> {
+        let items = sqlx::query_as::<_, JobRec>(concat!(
+            "SELECT ",
+            job_cols!(),
+            " FROM jobs WHERE ($1 IS NULL OR session_id = $1) AND ($2 IS NULL OR state = $2) \
+             ORDER BY id LIMIT $3 OFFSET $4"
+        ))
+        .bind(session_id)
+        .bind(state)
+        .bind(page.limit)
+        .bind(page.offset)
+        .fetch_all(&self.pool)
+        .await?;
+        let total = sqlx::query_scalar::<_, i64>(
+            "SELECT COUNT(*) FROM jobs WHERE ($1 IS NULL OR session_id = $1) AND ($2 IS NULL OR state = $2)",
+        )
+        .bind(session_id)
+        .bind(state)
+        .fetch_one(&self.pool)
+        .await?;
+        Ok((items, total))
+    }
+
+    pub async fn request_cancel(&self, id: i64) -> Result<JobRec> {
+        let now = now_rfc3339();
+        let done = sqlx::query_as::<_, JobRec>(concat!(
+            "UPDATE jobs SET state = 'cancelled', cancel_requested = TRUE, finished_at = $2, updated_at = $2 \
+             WHERE id = $1 AND state = 'queued' RETURNING ",
+            job_cols!()
+        ))
+        .bind(id)
+        .bind(&now)
+        .fetch_optional(&self.pool)
+        .await?;
+        if let Some(job) = done {
+            return Ok(job);
+        }
+        let flagged = sqlx::query_as::<_, JobRec>(concat!(
+            "UPDATE jobs SET cancel_requested = TRUE, updated_at = $2 \
+             WHERE id = $1 AND state = 'running' RETURNING ",
+            job_cols!()
+        ))
+        .bind(id)
+        .bind(&now)
+        .fetch_optional(&self.pool)
+        .await?;
+        if let Some(job) = flagged {
+            return Ok(job);
+        }
+        let job = self.get_job(id).await?;
+        Err(StoreError::Conflict(format!(
+            "job {id} has already ended ({})",
+            job.state
+        )))
+    }
+
+    pub async fn claim_job(
+        &self,
+        worker: &str,
+        now_ms: i64,
+        lease_ms: i64,
+    ) -> Result<Option<JobRec>> {
+        let now = now_rfc3339();
+        // Give up on jobs whose workers died too often (a job that crashes
+        // its process must not crash every restart forever).
+        sqlx::query(
+            "UPDATE jobs SET state = 'failed', \
+             error = 'abandoned: the worker running it stopped before finishing too many times', \
+             locked_by = NULL, locked_until_ms = NULL, finished_at = $2, updated_at = $2 \
+             WHERE state = 'running' AND locked_until_ms < $1 AND attempts >= max_attempts",
+        )
+        .bind(now_ms)
+        .bind(&now)
+        .execute(&self.pool)
+        .await?;
+        Ok(sqlx::query_as::<_, JobRec>(CLAIM_SQL)
+            .bind(worker)
+            .bind(now_ms + lease_ms)
+            .bind(&now)
+            .bind(now_ms)
+            .fetch_optional(&self.pool)
+            .await?)
+    }
+
+    pub async fn heartbeat(
+        &self,
+        id: i64,
+        worker: &str,
+        until_ms: i64,
+        stage: Option<&str>,
+        progress: f64,
+    ) -> Result<Option<bool>> {
+        Ok(sqlx::query_scalar::<_, bool>(
+            "UPDATE jobs SET locked_until_ms = $3, stage = COALESCE($4, stage), progress = $5, \
+             updated_at = $6 WHERE id = $1 AND locked_by = $2 AND state = 'running' \
+             RETURNING cancel_requested",
+        )
+        .bind(id)
+        .bind(worker)
+        .bind(until_ms)
+        .bind(stage)
+        .bind(progress)
+        .bind(now_rfc3339())
+        .fetch_optional(&self.pool)
+        .await?)
+    }
+
+    pub async fn complete_job(
+        &self,
+        id: i64,
+        worker: &str,
+        cal: &NewCalibration,
+    ) -> Result<CalibrationRec> {
+        let now = now_rfc3339();
+        let mut tx = self.begin_write().await?;
+        let held = sqlx::query_as::<_, (i64, i64)>(
+            "SELECT robot_id, session_id FROM jobs WHERE id = $1 AND locked_by = $2 AND state = 'running'",
+        )
+        .bind(id)
+        .bind(worker)
+        .fetch_optional(&mut *tx)
+        .await?;
+        let Some((robot_id, session_id)) = held else {
+            return Err(StoreError::Conflict(format!(
+                "job {id} is no longer held by this worker"
+            )));
+        };
+        let model_id = sqlx::query_scalar::<_, i64>(LOCK_ROBOT_SQL)
+            .bind(robot_id)
+            .fetch_one(&mut *tx)
+            .await?;
+        let version = sqlx::query_scalar::<_, i64>(
+            "SELECT COALESCE(MAX(version), 0) + 1 FROM calibrations WHERE robot_id = $1",
+        )
+        .bind(robot_id)
+        .fetch_one(&mut *tx)
+        .await?;
+        let cal_id = sqlx::query_scalar::<_, i64>(
+            "INSERT INTO calibrations (robot_id, model_id, session_id, job_id, version, method, n_poses, \
+             n_test, test_rms_before_mm, test_rms_after_mm, train_rms_after_mm, effects, report, created_at) \
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14) RETURNING id",
+        )
+        .bind(robot_id)
+        .bind(model_id)
+        .bind(session_id)
+        .bind(id)
+        .bind(version)
+        .bind(&cal.method)
+        .bind(cal.n_poses)
+        .bind(cal.n_test)
+        .bind(cal.test_rms_before_mm)
+        .bind(cal.test_rms_after_mm)
+        .bind(cal.train_rms_after_mm)
+        .bind(&cal.effects)
+        .bind(&cal.report_json)
+        .bind(&now)
+        .fetch_one(&mut *tx)
+        .await?;
+        sqlx::query(
+            "UPDATE jobs SET state = 'succeeded', progress = 1, stage = 'done', calibration_id = $2, \
+             locked_by = NULL, locked_until_ms = NULL, finished_at = $3, updated_at = $3 WHERE id = $1",
+        )
+        .bind(id)
+        .bind(cal_id)
+        .bind(&now)
+        .execute(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        self.get_calibration(cal_id).await
+    }
+
+    pub async fn finish_job(
+        &self,
+        id: i64,
+        worker: &str,
+        state: &str,
+        error: Option<&str>,
+    ) -> Result<bool> {
+        let r = sqlx::query(
+            "UPDATE jobs SET state = $3, error = $4, locked_by = NULL, locked_until_ms = NULL, \
+             finished_at = $5, updated_at = $5 WHERE id = $1 AND locked_by = $2 AND state = 'running'",
+        )
+        .bind(id)
+        .bind(worker)
+        .bind(state)
+        .bind(error)
+        .bind(now_rfc3339())
+        .execute(&self.pool)
+        .await?;
+        Ok(r.rows_affected() == 1)
+    }
+
+    pub async fn requeue_job(&self, id: i64, worker: &str) -> Result<bool> {
+        let r = sqlx::query(
+            "UPDATE jobs SET state = 'queued', locked_by = NULL, locked_until_ms = NULL, \
+             attempts = attempts - 1, stage = 'requeued at shutdown', updated_at = $3 \
+             WHERE id = $1 AND locked_by = $2 AND state = 'running'",
+        )
+        .bind(id)
+        .bind(worker)
+        .bind(now_rfc3339())
+        .execute(&self.pool)
+        .await?;
+        Ok(r.rows_affected() == 1)
+    }
+
+    // ---- calibrations and activation --------------------------------------
+
+    pub async fn get_calibration(&self, id: i64) -> Result<CalibrationRec> {
+        sqlx::query_as::<_, CalibrationRec>(concat!(calibration_select!(), "WHERE c.id = $1"))
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?
+            .ok_or(StoreError::NotFound {
+                what: "calibration",
+                id,
+            })
+    }
+
+    pub async fn calibration_report(&self, id: i64) -> Result<String> {
+        sqlx::query_scalar::<_, String>("SELECT report FROM calibrations WHERE id = $1")
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?
+            .ok_or(StoreError::NotFound {
+                what: "calibration",
+                id,
+            })
+    }
+
+    pub async fn list_calibrations(
+        &self,
+        f: &CalibrationFilter,
+        page: Page,
+    ) -> Result<(Vec<CalibrationRec>, i64)> {
+        let items = sqlx::query_as::<_, CalibrationRec>(concat!(
+            calibration_select!(),
+            calibration_where!(),
+            "ORDER BY c.id LIMIT $9 OFFSET $10"
+        ))
+        .bind(f.robot_id)
+        .bind(f.model_id)
+        .bind(&f.site)
+        .bind(&f.line)
+        .bind(&f.from)
+        .bind(&f.to)
+        .bind(f.max_test_rms_mm)
+        .bind(f.min_test_rms_mm)
+        .bind(page.limit)
+        .bind(page.offset)
+        .fetch_all(&self.pool)
+        .await?;
+        let total = sqlx::query_scalar::<_, i64>(concat!(
+            "SELECT COUNT(*) FROM calibrations c JOIN robots r ON r.id = c.robot_id ",
+            calibration_where!()
+        ))
+        .bind(f.robot_id)
+        .bind(f.model_id)
+        .bind(&f.site)
+        .bind(&f.line)
+        .bind(&f.from)
+        .bind(&f.to)
+        .bind(f.max_test_rms_mm)
+        .bind(f.min_test_rms_mm)
+        .fetch_one(&self.pool)
+        .await?;
+        Ok((items, total))
+    }
+
+    pub async fn set_active(
+        &self,
+        robot_id: i64,
+        calibration_id: Option<i64>,
+        action: &str,
+        actor: &str,
+        reason: &str,
+    ) -> Result<ActivationRec> {
+        let now = now_rfc3339();
+        let mut tx = self.begin_write().await?;
+        let exists = sqlx::query_scalar::<_, i64>(LOCK_ROBOT_SQL)
+            .bind(robot_id)
+            .fetch_optional(&mut *tx)
+            .await?;
+        if exists.is_none() {
+            return Err(StoreError::NotFound {
+                what: "robot",
+                id: robot_id,
+            });
+        }
+        let previous = sqlx::query_scalar::<_, Option<i64>>(
+            "SELECT active_calibration_id FROM robots WHERE id = $1",
+        )
+        .bind(robot_id)
+        .fetch_one(&mut *tx)
+        .await?;
+        if let Some(cid) = calibration_id {
+            let owner =
+                sqlx::query_scalar::<_, i64>("SELECT robot_id FROM calibrations WHERE id = $1")
+                    .bind(cid)
+                    .fetch_optional(&mut *tx)
+                    .await?;
+            match owner {
+                None => {
+                    return Err(StoreError::NotFound {
+                        what: "calibration",
+                        id: cid,
+                    });
+                }
+                Some(o) if o != robot_id => {
+                    return Err(StoreError::Conflict(format!(
+                        "calibration {cid} belongs to robot {o}, not robot {robot_id}"
+                    )));
+                }
+                Some(_) => {}
+            }
+        }
+        if action == "activate" && previous == calibration_id {
+            return Err(StoreError::Conflict(format!(
+                "calibration {} is already active",
+                calibration_id
+                    .map(|c| c.to_string())
+                    .unwrap_or_else(|| "none".into())
+            )));
+        }
+        sqlx::query("UPDATE robots SET active_calibration_id = $2, updated_at = $3 WHERE id = $1")
+            .bind(robot_id)
+            .bind(calibration_id)
+            .bind(&now)
+            .execute(&mut *tx)
+            .await?;
+        let rec = sqlx::query_as::<_, ActivationRec>(
+            "INSERT INTO activations (robot_id, action, calibration_id, previous_calibration_id, actor, reason, created_at) \
+             VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id, robot_id, action, calibration_id, \
+             previous_calibration_id, actor, reason, created_at",
+        )
+        .bind(robot_id)
+        .bind(action)
+        .bind(calibration_id)
+        .bind(previous)
+        .bind(actor)
+        .bind(reason)
+        .bind(&now)
+        .fetch_one(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        Ok(rec)
+    }
+
+    pub async fn previous_active(&self, robot_id: i64) -> Result<Option<i64>> {
+        self.get_robot(robot_id).await?;
+        let history = sqlx::query_as::<_, (String, Option<i64>)>(
+            "SELECT action, calibration_id FROM activations WHERE robot_id = $1 ORDER BY id",
+        )
+        .bind(robot_id)
+        .fetch_all(&self.pool)
+        .await?;
+        // Activations push, rollbacks pop: the stack's top is what is active.
+        let mut stack: Vec<Option<i64>> = Vec::new();
+        for (action, cal) in history {
+            if action == "rollback" {
+                stack.pop();
+            } else {
+                stack.push(cal);
+            }
+        }
+        match stack.len() {
+            0 => Err(StoreError::Conflict(format!(
+                "robot {robot_id} has no activation to roll back"
+            ))),
+            n => Ok(if n >= 2 { stack[n - 2] } else { None }),
+        }
+    }
+
+    pub async fn list_activations(
+        &self,
+        robot_id: i64,
+        page: Page,
+    ) -> Result<(Vec<ActivationRec>, i64)> {
+        self.get_robot(robot_id).await?;
+        let items = sqlx::query_as::<_, ActivationRec>(
+            "SELECT id, robot_id, action, calibration_id, previous_calibration_id, actor, reason, created_at \
+             FROM activations WHERE robot_id = $1 ORDER BY id DESC LIMIT $2 OFFSET $3",
+        )
+        .bind(robot_id)
+        .bind(page.limit)
+        .bind(page.offset)
+        .fetch_all(&self.pool)
+        .await?;
+        let total =
+            sqlx::query_scalar::<_, i64>("SELECT COUNT(*) FROM activations WHERE robot_id = $1")
+                .bind(robot_id)
+                .fetch_one(&self.pool)
+                .await?;
+        Ok((items, total))
+    }
+}

@@ -1,0 +1,57 @@
+//! The SQLite backend: one file, WAL mode, foreign keys on, a busy timeout.
+//! Writes that read first run in `BEGIN IMMEDIATE` transactions so that two
+//! writers never deadlock on a lock upgrade.
+
+use std::str::FromStr;
+use std::time::Duration;
+
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+
+// The shared queries (and the column-list macros the dialect strings use).
+include!("queries.rs");
+
+type Db = sqlx::Sqlite;
+
+/// A SQLite database.
+#[derive(Clone, Debug)]
+pub struct Backend {
+    pub(super) pool: sqlx::Pool<Db>,
+}
+
+/// Claim the oldest runnable job. SQLite has one writer at a time, so a
+/// single `UPDATE ... WHERE id = (SELECT ...)` is atomic.
+const CLAIM_SQL: &str = concat!(
+    "UPDATE jobs SET state = 'running', locked_by = $1, locked_until_ms = $2, attempts = attempts + 1, \
+     started_at = $3, updated_at = $3 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' \
+     OR (state = 'running' AND locked_until_ms < $4 AND attempts < max_attempts) ORDER BY id LIMIT 1) \
+     RETURNING ",
+    job_cols!()
+);
+
+/// Read the robot's model inside a write transaction (IMMEDIATE already
+/// holds the database's write lock).
+const LOCK_ROBOT_SQL: &str = "SELECT model_id FROM robots WHERE id = $1";
+
+impl Backend {
+    /// Open (creating the file if needed) and migrate.
+    pub async fn connect(url: &str) -> super::Result<Self> {
+        let opts = SqliteConnectOptions::from_str(url)
+            .map_err(super::StoreError::Db)?
+            .create_if_missing(true)
+            .journal_mode(SqliteJournalMode::Wal)
+            .synchronous(SqliteSynchronous::Normal)
+            .foreign_keys(true)
+            .busy_timeout(Duration::from_secs(10));
+        let pool = SqlitePoolOptions::new()
+            .max_connections(8)
+            .connect_with(opts)
+            .await
+            .map_err(super::StoreError::Db)?;
+        sqlx::migrate!("migrations/sqlite").run(&pool).await?;
+        Ok(Backend { pool })
+    }
+
+    async fn begin_write(&self) -> sqlx::Result<sqlx::Transaction<'static, Db>> {
+        self.pool.begin_with("BEGIN IMMEDIATE").await
+    }
+}

@@ -1,0 +1,529 @@
+//! Every kind of bad request gets a clear 4xx in the error shape and leaves
+//! the stored data exactly as it was.
+
+use serde_json::{Value, json};
+
+use crate::helpers::{Options, TestApp, err_json, ok_json, read};
+
+const DS: &str = "er3a_paper_like";
+
+/// Send a bad request, check status, code and (optionally) field and row,
+/// and check nothing stored changed.
+async fn refused(
+    app: &TestApp,
+    req: reqwest::RequestBuilder,
+    status: u16,
+    code: &str,
+    field: Option<&str>,
+    row: Option<u64>,
+) -> Value {
+    let before = app.snapshot().await;
+    let e = err_json(req.send().await.unwrap(), status, code).await;
+    if let Some(f) = field {
+        assert_eq!(e["field"], f, "field in {e}");
+    }
+    if let Some(r) = row {
+        assert_eq!(e["row"], r, "row in {e}");
+    }
+    let after = app.snapshot().await;
+    assert_eq!(before, after, "a refused request changed stored data: {e}");
+    e
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_requests_are_refused_and_change_nothing() {
+    let app = TestApp::spawn_with(
+        "bad",
+        Options {
+            max_upload_bytes: 64 * 1024,
+            ..Options::default()
+        },
+    )
+    .await;
+    let (model_id, robot_id, rig_id, sid) = app.setup(DS, "BAD-1").await;
+    let c = &app.client;
+    let poses = read(DS, "poses.csv");
+    let lines: Vec<&str> = poses.lines().collect();
+    let upload = |body: String| {
+        c.post(app.url(&format!("/sessions/{sid}/poses")))
+            .header("content-type", "text/csv")
+            .body(body)
+    };
+
+    // A job on a session with no poses.
+    let e = refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/jobs"))),
+        422,
+        "invalid_input",
+        None,
+        None,
+    )
+    .await;
+    assert!(e["message"].as_str().unwrap().contains("no poses"));
+
+    // Store half the poses so later bad uploads have something to leave alone.
+    ok_json(upload(lines[..26].join("\n")).send().await.unwrap(), 200).await;
+
+    // Malformed JSON, wrong types, unknown fields, missing fields.
+    refused(
+        &app,
+        c.post(app.url("/robots"))
+            .header("content-type", "application/json")
+            .body("{\"serial_number\": "),
+        400,
+        "malformed_json",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/robots"))
+            .json(&json!({"serial_number": "X", "model_id": "one"})),
+        422,
+        "invalid_input",
+        Some("model_id"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/robots"))
+            .json(&json!({"serial_number": "X", "model_id": model_id, "colour": "red"})),
+        422,
+        "invalid_input",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/robots"))
+            .json(&json!({"model_id": model_id})),
+        422,
+        "invalid_input",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/robots"))
+            .header("content-type", "text/plain")
+            .body("{}"),
+        415,
+        "unsupported_media_type",
+        None,
+        None,
+    )
+    .await;
+    // A duplicate serial number; an unknown model.
+    refused(
+        &app,
+        c.post(app.url("/robots"))
+            .json(&json!({"serial_number": "BAD-1", "model_id": model_id})),
+        409,
+        "conflict",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/robots"))
+            .json(&json!({"serial_number": "NEW", "model_id": 4242})),
+        422,
+        "invalid_input",
+        Some("model_id"),
+        None,
+    )
+    .await;
+    // robot.json and rig.json with bad values.
+    let mut robot: Value = serde_json::from_str(&read(DS, "robot.json")).unwrap();
+    robot["joints"][2]["a_mm"] = json!("wide");
+    refused(
+        &app,
+        c.post(app.url("/models")).json(&robot),
+        422,
+        "invalid_input",
+        Some("joints[2].a_mm"),
+        None,
+    )
+    .await;
+    robot["joints"][2]["a_mm"] = json!(60.0);
+    robot["joints"][1]["q_min_deg"] = json!(500.0);
+    refused(
+        &app,
+        c.post(app.url("/models")).json(&robot),
+        422,
+        "invalid_input",
+        Some("joints[1].q_min_deg"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/rigs"))
+            .json(&json!({"anchors_mm": [[0, 0, 0]], "r_mm": 35})),
+        422,
+        "invalid_input",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/rigs"))
+            .header("content-type", "application/json")
+            .body("[1,2"),
+        400,
+        "malformed_json",
+        None,
+        None,
+    )
+    .await;
+    // Sessions with unknown robot or rig.
+    refused(
+        &app,
+        c.post(app.url("/sessions"))
+            .json(&json!({"robot_id": 999, "rig_id": rig_id})),
+        422,
+        "invalid_input",
+        Some("robot_id"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/sessions"))
+            .json(&json!({"robot_id": robot_id, "rig_id": 999})),
+        422,
+        "invalid_input",
+        Some("rig_id"),
+        None,
+    )
+    .await;
+
+    // Unknown ids in paths, and ids that are not ids.
+    for path in [
+        "/models/999",
+        "/robots/999",
+        "/rigs/999",
+        "/sessions/999",
+        "/jobs/999",
+        "/calibrations/999",
+        "/robots/999/accuracy",
+        "/robots/999/activations",
+        "/sessions/999/poses",
+    ] {
+        err_json(c.get(app.url(path)).send().await.unwrap(), 404, "not_found").await;
+    }
+    refused(
+        &app,
+        c.get(app.url("/robots/abc")),
+        400,
+        "bad_request",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        upload(poses.clone())
+            .try_clone()
+            .unwrap()
+            .url_replace(&app, "/sessions/999/poses"),
+        404,
+        "not_found",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/jobs/999/cancel")),
+        404,
+        "not_found",
+        None,
+        None,
+    )
+    .await;
+    // Bad queries.
+    refused(
+        &app,
+        c.get(app.url("/robots?limit=0")),
+        422,
+        "invalid_input",
+        Some("limit"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.get(app.url("/robots?limit=ten")),
+        400,
+        "bad_request",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.get(app.url("/calibrations?from=last-week")),
+        422,
+        "invalid_input",
+        Some("from"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.get(app.url("/jobs?state=sleeping")),
+        422,
+        "invalid_input",
+        Some("state"),
+        None,
+    )
+    .await;
+
+    // CSV uploads with a bad row: nothing of the upload is stored, and the
+    // answer names row (1-based in the upload) and column.
+    let header = lines[0];
+    let mut bad = vec![header.to_string()];
+    bad.extend(lines[26..30].iter().map(|s| s.to_string()));
+    bad.push(lines[30].replacen(',', ",abc", 2).replacen(",abc", ",", 1)); // q2_deg becomes "abc..."
+    refused(
+        &app,
+        upload(bad.join("\n")),
+        422,
+        "invalid_input",
+        Some("q2_deg"),
+        Some(5),
+    )
+    .await;
+    // A missing joint column.
+    let cut: Vec<String> = lines[26..28]
+        .iter()
+        .map(|l| {
+            l.split(',')
+                .enumerate()
+                .filter(|(i, _)| *i != 6)
+                .map(|(_, v)| v)
+                .collect::<Vec<_>>()
+                .join(",")
+        })
+        .collect();
+    let cut_header = header
+        .split(',')
+        .enumerate()
+        .filter(|(i, _)| *i != 6)
+        .map(|(_, v)| v)
+        .collect::<Vec<_>>()
+        .join(",");
+    refused(
+        &app,
+        upload(format!("{cut_header}\n{}", cut.join("\n"))),
+        422,
+        "invalid_input",
+        Some("header"),
+        None,
+    )
+    .await;
+    // A duplicate pose id already stored in an earlier batch.
+    refused(
+        &app,
+        upload(format!("{header}\n{}\n{}", lines[27], lines[5])),
+        422,
+        "invalid_input",
+        Some("pose"),
+        Some(2),
+    )
+    .await;
+    // Empty upload, wrong media type, JSON that is not an array, JSON with a nested value.
+    refused(
+        &app,
+        upload(header.to_string()),
+        422,
+        "invalid_input",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/poses")))
+            .header("content-type", "text/plain")
+            .body(poses.clone()),
+        415,
+        "unsupported_media_type",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/poses")))
+            .json(&json!({"pose": "x"})),
+        422,
+        "invalid_input",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/poses")))
+            .json(&json!([{"pose": "x", "q1_deg": [1, 2]}])),
+        422,
+        "invalid_input",
+        Some("q1_deg"),
+        Some(1),
+    )
+    .await;
+    // Oversized body (the limit here is 64 KiB).
+    let big = format!(
+        "{header}\n{}",
+        lines[26..]
+            .iter()
+            .cycle()
+            .take(2000)
+            .cloned()
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    assert!(big.len() > 64 * 1024);
+    refused(&app, upload(big), 413, "payload_too_large", None, None).await;
+
+    // Bad job options.
+    refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/jobs")))
+            .json(&json!({"holdout_fraction": 2.0})),
+        422,
+        "invalid_input",
+        Some("holdout_fraction"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/jobs")))
+            .json(&json!({"method": "magic"})),
+        422,
+        "invalid_input",
+        Some("method"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/jobs")))
+            .header("content-type", "application/json")
+            .body("{"),
+        400,
+        "malformed_json",
+        None,
+        None,
+    )
+    .await;
+
+    // Activation and compensation without a calibration.
+    refused(
+        &app,
+        c.post(app.url(&format!("/robots/{robot_id}/activate")))
+            .json(&json!({"calibration_id": 77, "by": "me", "reason": "why not"})),
+        422,
+        "invalid_input",
+        Some("calibration_id"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url(&format!("/robots/{robot_id}/activate")))
+            .json(&json!({"calibration_id": 77, "by": "", "reason": "r"})),
+        422,
+        "invalid_input",
+        Some("by"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url(&format!("/robots/{robot_id}/rollback")))
+            .json(&json!({"by": "me", "reason": "r"})),
+        409,
+        "conflict",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/compensate")).json(
+            &json!({"robot_id": robot_id, "target": {"target": "t", "q_deg": [0, 0, 0, 0, 0, 0]}}),
+        ),
+        409,
+        "conflict",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/compensate")).json(
+            &json!({"robot_id": 999, "target": {"target": "t", "q_deg": [0, 0, 0, 0, 0, 0]}}),
+        ),
+        404,
+        "not_found",
+        None,
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/compensate"))
+            .json(&json!({"robot_id": robot_id})),
+        422,
+        "invalid_input",
+        Some("targets"),
+        None,
+    )
+    .await;
+    let many: Vec<Value> = (0..10_001)
+        .map(|i| json!({"target": i.to_string(), "q_deg": [0, 0, 0, 0, 0, 0]}))
+        .collect();
+    let big_app_req = c
+        .post(app.url("/compensate"))
+        .json(&json!({"robot_id": robot_id, "targets": many}));
+    // (over 64 KiB: the body limit answers first)
+    refused(&app, big_app_req, 413, "payload_too_large", None, None).await;
+
+    // The session still holds exactly the first batch.
+    let s = ok_json(app.get(&format!("/sessions/{sid}")).await, 200).await;
+    assert_eq!(s["n_poses"], 25);
+    assert_eq!(s["n_batches"], 1);
+    app.stop().await;
+}
+
+trait UrlReplace {
+    fn url_replace(self, app: &TestApp, path: &str) -> reqwest::RequestBuilder;
+}
+
+impl UrlReplace for reqwest::RequestBuilder {
+    fn url_replace(self, app: &TestApp, path: &str) -> reqwest::RequestBuilder {
+        let req = self.build().unwrap();
+        let body = req
+            .body()
+            .and_then(|b| b.as_bytes())
+            .map(|b| b.to_vec())
+            .unwrap_or_default();
+        let ct = req.headers().get("content-type").cloned();
+        let mut r = app.client.post(app.url(path)).body(body);
+        if let Some(ct) = ct {
+            r = r.header("content-type", ct);
+        }
+        r
+    }
+}

@@ -1,0 +1,295 @@
+//! Test harness: the real service on port 0 over a fresh SQLite file per
+//! test, a reqwest client, and small helpers per endpoint.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use drawcal::http::{Service, ServiceConfig};
+use drawcal::jobs::{JobConfig, JobFn, engine_job_fn};
+use reqwest::{Client, Response, StatusCode};
+use serde_json::{Value, json};
+
+pub fn data_dir(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+pub fn read(name: &str, file: &str) -> String {
+    std::fs::read_to_string(data_dir(name).join(file)).expect("test data file")
+}
+
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// A fresh directory for one test's database.
+pub fn fresh_dir(tag: &str) -> PathBuf {
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!(
+        "api-{tag}-{}-{n}-{}",
+        std::process::id(),
+        drawcal::store::now_ms()
+    ));
+    std::fs::create_dir_all(&dir).expect("create test dir");
+    dir
+}
+
+pub struct TestApp {
+    pub base: String,
+    pub client: Client,
+    pub db_url: String,
+    shutdown: Option<tokio::sync::oneshot::Sender<()>>,
+    task: Option<tokio::task::JoinHandle<std::io::Result<()>>>,
+}
+
+pub struct Options {
+    pub job_fn: JobFn,
+    pub workers: usize,
+    pub max_upload_bytes: usize,
+    pub lease: Duration,
+    pub grace: Duration,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            job_fn: engine_job_fn(),
+            workers: 1,
+            max_upload_bytes: 2 * 1024 * 1024,
+            lease: Duration::from_secs(15),
+            grace: Duration::from_secs(10),
+        }
+    }
+}
+
+impl TestApp {
+    pub async fn spawn(tag: &str) -> TestApp {
+        Self::spawn_with(tag, Options::default()).await
+    }
+
+    pub async fn spawn_with(tag: &str, o: Options) -> TestApp {
+        let dir = fresh_dir(tag);
+        let db_url = format!("sqlite://{}", dir.join("drawcal.db").display());
+        Self::spawn_on(&db_url, o).await
+    }
+
+    pub async fn spawn_on(db_url: &str, o: Options) -> TestApp {
+        let cfg = ServiceConfig {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            database_url: db_url.to_string(),
+            max_upload_bytes: o.max_upload_bytes,
+            jobs: JobConfig {
+                workers: o.workers,
+                lease: o.lease,
+                poll: Duration::from_millis(100),
+                shutdown_grace: o.grace,
+                max_attempts: 3,
+            },
+        };
+        let service = Service::start(&cfg, o.job_fn)
+            .await
+            .expect("service starts");
+        let base = format!("http://{}", service.addr);
+        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+        let task = tokio::spawn(service.run(async move {
+            let _ = rx.await;
+        }));
+        TestApp {
+            base,
+            client: Client::new(),
+            db_url: db_url.to_string(),
+            shutdown: Some(tx),
+            task: Some(task),
+        }
+    }
+
+    /// Graceful shutdown, waiting for it to complete.
+    pub async fn stop(mut self) {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        if let Some(t) = self.task.take() {
+            t.await.expect("server task").expect("server ran");
+        }
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{}", self.base, path)
+    }
+
+    pub async fn get(&self, path: &str) -> Response {
+        self.client
+            .get(self.url(path))
+            .send()
+            .await
+            .expect("request")
+    }
+
+    pub async fn post_json(&self, path: &str, body: &Value) -> Response {
+        self.client
+            .post(self.url(path))
+            .json(body)
+            .send()
+            .await
+            .expect("request")
+    }
+
+    pub async fn post_raw(
+        &self,
+        path: &str,
+        content_type: Option<&str>,
+        body: impl Into<reqwest::Body>,
+    ) -> Response {
+        let mut r = self.client.post(self.url(path)).body(body);
+        if let Some(ct) = content_type {
+            r = r.header("content-type", ct);
+        }
+        r.send().await.expect("request")
+    }
+
+    /// Create model, robot, rig and session from a dataset; returns
+    /// (model_id, robot_id, rig_id, session_id).
+    pub async fn setup(&self, dataset: &str, serial: &str) -> (i64, i64, i64, i64) {
+        let model = ok_json(
+            self.post_raw(
+                "/models",
+                Some("application/json"),
+                read(dataset, "robot.json"),
+            )
+            .await,
+            201,
+        )
+        .await;
+        let robot = ok_json(
+            self.post_json(
+                "/robots",
+                &json!({"serial_number": serial, "model_id": model["id"], "site": "plant-1", "line": "L2", "cell": "C7"}),
+            )
+            .await,
+            201,
+        )
+        .await;
+        let rig = ok_json(
+            self.post_raw("/rigs", Some("application/json"), read(dataset, "rig.json"))
+                .await,
+            201,
+        )
+        .await;
+        let session = ok_json(
+            self.post_json(
+                "/sessions",
+                &json!({"robot_id": robot["id"], "rig_id": rig["id"], "name": "test"}),
+            )
+            .await,
+            201,
+        )
+        .await;
+        (
+            model["id"].as_i64().unwrap(),
+            robot["id"].as_i64().unwrap(),
+            rig["id"].as_i64().unwrap(),
+            session["id"].as_i64().unwrap(),
+        )
+    }
+
+    /// Poll a job until it ends (bounded by a generous number of polls).
+    pub async fn wait_job(&self, job_id: i64, max_wait: Duration) -> Value {
+        let polls = (max_wait.as_millis() / 100).max(1);
+        for _ in 0..polls {
+            let job = ok_json(self.get(&format!("/jobs/{job_id}")).await, 200).await;
+            let state = job["state"].as_str().unwrap().to_string();
+            if ["succeeded", "failed", "cancelled"].contains(&state.as_str()) {
+                return job;
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        panic!("job {job_id} did not end in time");
+    }
+
+    /// Everything stored, for before/after comparisons of bad requests.
+    pub async fn snapshot(&self) -> Value {
+        let mut all = serde_json::Map::new();
+        for path in [
+            "/models",
+            "/robots",
+            "/rigs",
+            "/sessions",
+            "/jobs",
+            "/calibrations",
+        ] {
+            all.insert(
+                path.into(),
+                ok_json(self.get(&format!("{path}?limit=1000")).await, 200).await,
+            );
+        }
+        let sessions = all["/sessions"]["items"].as_array().unwrap().clone();
+        for s in sessions {
+            let id = s["id"].as_i64().unwrap();
+            let r = self.get(&format!("/sessions/{id}/poses")).await;
+            all.insert(
+                format!("/sessions/{id}/poses"),
+                Value::String(r.text().await.unwrap()),
+            );
+        }
+        let robots = all["/robots"]["items"].as_array().unwrap().clone();
+        for r in robots {
+            let id = r["id"].as_i64().unwrap();
+            all.insert(
+                format!("/robots/{id}/activations"),
+                ok_json(self.get(&format!("/robots/{id}/activations")).await, 200).await,
+            );
+        }
+        Value::Object(all)
+    }
+}
+
+/// Assert the status and return the JSON body.
+pub async fn ok_json(r: Response, status: u16) -> Value {
+    let got = r.status();
+    let text = r.text().await.expect("body");
+    assert_eq!(
+        got,
+        StatusCode::from_u16(status).unwrap(),
+        "unexpected status; body: {text}"
+    );
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("not JSON ({e}): {text}"))
+}
+
+/// Assert an error answer: status, code, and the error body's shape.
+pub async fn err_json(r: Response, status: u16, code: &str) -> Value {
+    let v = ok_json(r, status).await;
+    assert_eq!(v["error"], code, "error code: {v}");
+    assert!(
+        v["message"].as_str().is_some_and(|m| !m.is_empty()),
+        "message: {v}"
+    );
+    for k in v.as_object().unwrap().keys() {
+        assert!(
+            ["error", "message", "field", "row"].contains(&k.as_str()),
+            "unexpected key {k} in {v}"
+        );
+    }
+    v
+}
+
+/// A stand-in engine for job-machinery tests: runs `steps` steps of
+/// `step` each, reporting progress and honouring cancellation, then fails
+/// with a recognisable message (it has no report to give).
+pub fn slow_job_fn(
+    steps: usize,
+    step: Duration,
+    started: Arc<std::sync::atomic::AtomicUsize>,
+) -> JobFn {
+    Arc::new(move |_input, progress| {
+        started.fetch_add(1, Ordering::SeqCst);
+        for i in 0..steps {
+            if progress.cancelled() {
+                return Err(drawcal::Error::Cancelled);
+            }
+            progress.update("stand-in", i as f64 / steps as f64);
+            std::thread::sleep(step);
+        }
+        Err(drawcal::Error::Numerical("stand-in engine finished".into()))
+    })
+}

@@ -1,0 +1,310 @@
+//! The job machinery with a stand-in engine: progress, cancel, failure
+//! reasons, and hand-back at graceful shutdown then pickup at restart.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+use serde_json::json;
+
+use crate::helpers::{Options, TestApp, err_json, ok_json, read, slow_job_fn};
+use crate::openapi::validate_response;
+
+const DS: &str = "er3a_paper_like";
+
+async fn session_with_poses(app: &TestApp, serial: &str) -> i64 {
+    let (_, _, _, sid) = app.setup(DS, serial).await;
+    ok_json(
+        app.post_raw(
+            &format!("/sessions/{sid}/poses"),
+            Some("text/csv"),
+            read(DS, "poses.csv"),
+        )
+        .await,
+        200,
+    )
+    .await;
+    sid
+}
+
+async fn enqueue(app: &TestApp, sid: i64) -> i64 {
+    let job = ok_json(
+        app.post_raw(&format!("/sessions/{sid}/jobs"), None, "")
+            .await,
+        202,
+    )
+    .await;
+    job["id"].as_i64().unwrap()
+}
+
+async fn wait_state(app: &TestApp, job: i64, state: &str) -> serde_json::Value {
+    for _ in 0..600 {
+        let j = ok_json(app.get(&format!("/jobs/{job}")).await, 200).await;
+        if j["state"] == state {
+            return j;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("job {job} never reached {state}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn progress_cancel_and_failure_reason() {
+    let started = Arc::new(AtomicUsize::new(0));
+    let app = TestApp::spawn_with(
+        "cancel",
+        Options {
+            job_fn: slow_job_fn(400, Duration::from_millis(25), started.clone()),
+            lease: Duration::from_millis(600),
+            ..Options::default()
+        },
+    )
+    .await;
+    let sid = session_with_poses(&app, "JOB-1").await;
+    let first = enqueue(&app, sid).await;
+    let second = enqueue(&app, sid).await;
+
+    // The first runs and reports progress; the second waits (one worker).
+    wait_state(&app, first, "running").await;
+    let mut progressed = false;
+    for _ in 0..100 {
+        let j = ok_json(app.get(&format!("/jobs/{first}")).await, 200).await;
+        if j["progress"].as_f64().unwrap() > 0.0 && j["stage"] == "stand-in" {
+            progressed = true;
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    assert!(
+        progressed,
+        "progress reaches the job row through the heartbeat"
+    );
+    let q = ok_json(app.get(&format!("/jobs/{second}")).await, 200).await;
+    assert_eq!(q["state"], "queued");
+
+    // Cancel the queued one: at once.
+    let c = validate_response(
+        "post",
+        "/jobs/{id}/cancel",
+        app.post_raw(&format!("/jobs/{second}/cancel"), None, "")
+            .await,
+    )
+    .await;
+    assert_eq!(c["state"], "cancelled");
+    // Cancel the running one: the engine sees the flag and stops.
+    let c = ok_json(
+        app.post_raw(&format!("/jobs/{first}/cancel"), None, "")
+            .await,
+        202,
+    )
+    .await;
+    assert_eq!(c["cancel_requested"], true);
+    let j = wait_state(&app, first, "cancelled").await;
+    assert!(j["finished_at"].is_string());
+    assert_eq!(j["calibration_id"], serde_json::Value::Null);
+    // An ended job cannot be cancelled again.
+    err_json(
+        app.post_raw(&format!("/jobs/{first}/cancel"), None, "")
+            .await,
+        409,
+        "conflict",
+    )
+    .await;
+    assert_eq!(
+        started.load(Ordering::SeqCst),
+        1,
+        "the cancelled queued job never ran"
+    );
+
+    // A job that fails says why.
+    let third = enqueue(&app, sid).await;
+    wait_state(&app, third, "running").await;
+    let failed = app.wait_job(third, Duration::from_secs(60)).await;
+    assert_eq!(failed["state"], "failed");
+    assert!(
+        failed["error"]
+            .as_str()
+            .unwrap()
+            .contains("stand-in engine finished"),
+        "{failed}"
+    );
+    let list = validate_response(
+        "get",
+        "/jobs",
+        app.get(&format!("/jobs?session_id={sid}&state=cancelled"))
+            .await,
+    )
+    .await;
+    assert_eq!(list["total"], 2);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn shutdown_hands_a_running_job_back_and_restart_runs_it() {
+    let started = Arc::new(AtomicUsize::new(0));
+    let app = TestApp::spawn_with(
+        "handback",
+        Options {
+            job_fn: slow_job_fn(100_000, Duration::from_millis(10), started.clone()),
+            grace: Duration::from_millis(300),
+            ..Options::default()
+        },
+    )
+    .await;
+    let sid = session_with_poses(&app, "JOB-2").await;
+    let job = enqueue(&app, sid).await;
+    wait_state(&app, job, "running").await;
+    let db = app.db_url.clone();
+    app.stop().await; // graceful: grace period over, job handed back
+
+    // Restart on the same database with a short stand-in: it is picked up.
+    let started2 = Arc::new(AtomicUsize::new(0));
+    let app = TestApp::spawn_on(
+        &db,
+        Options {
+            job_fn: slow_job_fn(5, Duration::from_millis(10), started2.clone()),
+            ..Options::default()
+        },
+    )
+    .await;
+    let j = app.wait_job(job, Duration::from_secs(60)).await;
+    assert_eq!(
+        started2.load(Ordering::SeqCst),
+        1,
+        "the restarted service ran the job"
+    );
+    assert_eq!(j["state"], "failed"); // the stand-in always ends in failure
+    assert_eq!(
+        j["attempts"], 1,
+        "the handed-back claim did not count as an attempt: {j}"
+    );
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn compensation_checks_targets_and_calibration_owner() {
+    let app = TestApp::spawn("comp").await;
+    let (_, robot_a, _, sid) = app.setup(DS, "COMP-A").await;
+    ok_json(
+        app.post_raw(
+            &format!("/sessions/{sid}/poses"),
+            Some("text/csv"),
+            read(DS, "poses.csv"),
+        )
+        .await,
+        200,
+    )
+    .await;
+    let job = enqueue(&app, sid).await;
+    let done = app.wait_job(job, Duration::from_secs(600)).await;
+    assert_eq!(done["state"], "succeeded", "{done}");
+    let cal = done["calibration_id"].as_i64().unwrap();
+    let robot_b = ok_json(
+        app.post_json(
+            "/robots",
+            &json!({"serial_number": "COMP-B", "model_id": 1}),
+        )
+        .await,
+        201,
+    )
+    .await["id"]
+        .as_i64()
+        .unwrap();
+    let before = app.snapshot().await;
+    // Another robot's calibration: neither activation nor compensation.
+    err_json(
+        app.post_json(
+            &format!("/robots/{robot_b}/activate"),
+            &json!({"calibration_id": cal, "by": "me", "reason": "r"}),
+        )
+        .await,
+        422,
+        "invalid_input",
+    )
+    .await;
+    let e = err_json(
+        app.post_json("/compensate", &json!({"robot_id": robot_b, "calibration_id": cal, "target": {"target": "t", "q_deg": [0, 0, 0, 0, 0, 0]}})).await,
+        422,
+        "invalid_input",
+    )
+    .await;
+    assert_eq!(e["field"], "calibration_id");
+    // Wrong number of joints, non-finite values, both kinds, duplicates: row named.
+    let bad = [
+        (
+            json!([{"target": "a", "q_deg": [0, 0, 0, 0, 0, 0]}, {"target": "b", "q_deg": [0, 0, 0]}]),
+            "targets[1].q_deg",
+            2,
+        ),
+        (
+            json!([{"target": "a", "xyz_mm": [1, 2, 3]}, {"target": "a", "xyz_mm": [1, 2, 3]}]),
+            "targets[1].target",
+            2,
+        ),
+        (
+            json!([{"target": "a", "xyz_mm": [1, 2, 3], "q_deg": [0, 0, 0, 0, 0, 0]}]),
+            "targets[0].q_deg",
+            1,
+        ),
+        (json!([{"target": "a"}]), "targets[0].q_deg", 1),
+        (json!([]), "targets", 0),
+    ];
+    for (targets, field, row) in bad {
+        let e = err_json(
+            app.post_json(
+                "/compensate",
+                &json!({"robot_id": robot_a, "calibration_id": cal, "targets": targets}),
+            )
+            .await,
+            422,
+            "invalid_input",
+        )
+        .await;
+        assert_eq!(e["field"], field, "{e}");
+        if row > 0 {
+            assert_eq!(e["row"], row, "{e}");
+        }
+    }
+    let many: Vec<serde_json::Value> = (0..10_001)
+        .map(|i| json!({"target": i.to_string(), "q_deg": [0, 0, 0, 0, 0, 0]}))
+        .collect();
+    let e = err_json(
+        app.post_json(
+            "/compensate",
+            &json!({"robot_id": robot_a, "calibration_id": cal, "targets": many}),
+        )
+        .await,
+        422,
+        "invalid_input",
+    )
+    .await;
+    assert_eq!(e["field"], "targets");
+    assert_eq!(before, app.snapshot().await);
+    // Joint-limit and unreachable targets are per-target results, never a failed batch.
+    let out = ok_json(
+        app.post_json(
+            "/compensate",
+            &json!({"robot_id": robot_a, "calibration_id": cal, "targets": [
+                {"target": "in", "q_deg": [10, -20, 30, 0, 40, 0]},
+                {"target": "limit", "q_deg": [169.99, -20, 30, 0, 40, 0]},
+                {"target": "far", "xyz_mm": [0, 0, 9000]}
+            ]}),
+        )
+        .await,
+        200,
+    )
+    .await;
+    let st: Vec<&str> = out["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(st[0], "ok");
+    assert_eq!(st[2], "unreachable");
+    assert_eq!(
+        out["n_ok"].as_u64().unwrap() as usize,
+        st.iter().filter(|s| **s == "ok").count()
+    );
+    app.stop().await;
+}

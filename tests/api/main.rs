@@ -1,0 +1,11 @@
+//! The service's integration tests: one binary (one link step) with a
+//! module per concern. Every test starts the real service on port 0 over a
+//! fresh SQLite file (the store conformance suite also runs on PostgreSQL).
+
+mod bad_requests;
+mod deploy;
+mod e2e;
+mod helpers;
+mod jobs;
+mod openapi;
+mod store;

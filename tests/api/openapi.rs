@@ -1,0 +1,213 @@
+//! openapi.yaml against the router and against real responses.
+
+use std::collections::BTreeSet;
+
+use serde_json::Value;
+
+use crate::helpers::TestApp;
+
+fn spec() -> Value {
+    serde_json::to_value(drawcal::http::openapi()).expect("spec to JSON")
+}
+
+/// The committed file is what the handlers generate. Regenerate with
+/// `UPDATE_OPENAPI=1 cargo test --test api openapi`.
+#[test]
+fn committed_openapi_yaml_matches_the_router() {
+    let generated = drawcal::http::openapi_yaml();
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/openapi.yaml");
+    if std::env::var_os("UPDATE_OPENAPI").is_some() {
+        std::fs::write(path, &generated).expect("write openapi.yaml");
+    }
+    let committed = std::fs::read_to_string(path).expect("openapi.yaml at the top level");
+    assert!(
+        committed == generated,
+        "openapi.yaml is stale: regenerate with UPDATE_OPENAPI=1 cargo test --test api openapi"
+    );
+}
+
+fn resolve<'a>(spec: &'a Value, schema: &'a Value) -> &'a Value {
+    match schema.get("$ref").and_then(Value::as_str) {
+        Some(r) => {
+            let name = r.trim_start_matches("#/components/schemas/");
+            resolve(spec, &spec["components"]["schemas"][name])
+        }
+        None => schema,
+    }
+}
+
+fn type_ok(t: &str, v: &Value) -> bool {
+    match t {
+        "null" => v.is_null(),
+        "boolean" => v.is_boolean(),
+        "integer" => v.is_i64() || v.is_u64(),
+        "number" => v.is_number(),
+        "string" => v.is_string(),
+        "array" => v.is_array(),
+        "object" => v.is_object(),
+        _ => true,
+    }
+}
+
+/// Validate `v` against an OpenAPI 3.1 schema (the subset utoipa emits:
+/// $ref, type (string or list), properties, required, items, enum, allOf,
+/// oneOf, anyOf, additionalProperties). Returns the first violation.
+pub fn check(spec: &Value, schema: &Value, v: &Value, at: &str) -> Result<(), String> {
+    let s = resolve(spec, schema);
+    if let Some(all) = s.get("allOf").and_then(Value::as_array) {
+        for sub in all {
+            check(spec, sub, v, at)?;
+        }
+    }
+    for key in ["oneOf", "anyOf"] {
+        if let Some(alts) = s.get(key).and_then(Value::as_array) {
+            let ok = alts
+                .iter()
+                .filter(|a| check(spec, a, v, at).is_ok())
+                .count();
+            if ok == 0 || (key == "oneOf" && ok > 1) {
+                return Err(format!("{at}: {ok} alternatives of {key} match {v}"));
+            }
+        }
+    }
+    match s.get("type") {
+        Some(Value::String(t)) if !type_ok(t, v) => {
+            return Err(format!("{at}: expected {t}, got {v}"));
+        }
+        Some(Value::Array(ts)) if !ts.iter().any(|t| type_ok(t.as_str().unwrap_or(""), v)) => {
+            return Err(format!("{at}: expected one of {ts:?}, got {v}"));
+        }
+        _ => {}
+    }
+    if let Some(e) = s.get("enum").and_then(Value::as_array) {
+        if !e.contains(v) {
+            return Err(format!("{at}: {v} not in {e:?}"));
+        }
+    }
+    if let Value::Object(map) = v {
+        let props = s.get("properties").and_then(Value::as_object);
+        if let Some(req) = s.get("required").and_then(Value::as_array) {
+            for r in req {
+                let r = r.as_str().unwrap();
+                if !map.contains_key(r) {
+                    return Err(format!("{at}: missing required '{r}'"));
+                }
+            }
+        }
+        if let Some(props) = props {
+            for (k, val) in map {
+                match props.get(k) {
+                    Some(ps) => check(spec, ps, val, &format!("{at}.{k}"))?,
+                    None if s.get("additionalProperties") == Some(&Value::Bool(false)) => {
+                        return Err(format!("{at}: undocumented property '{k}'"));
+                    }
+                    None if s.get("additionalProperties").is_none() && s.get("allOf").is_none() => {
+                        return Err(format!("{at}: undocumented property '{k}'"));
+                    }
+                    None => {}
+                }
+            }
+        }
+    }
+    if let (Value::Array(items), Some(is)) = (v, s.get("items")) {
+        for (i, it) in items.iter().enumerate() {
+            check(spec, is, it, &format!("{at}[{i}]"))?;
+        }
+    }
+    Ok(())
+}
+
+/// Check a live response against the spec's schema for its route and
+/// status, and return the JSON body.
+pub async fn validate_response(method: &str, path: &str, r: reqwest::Response) -> Value {
+    let status = r.status().as_u16().to_string();
+    let text = r.text().await.expect("body");
+    let body: Value = serde_json::from_str(&text)
+        .unwrap_or_else(|e| panic!("{method} {path}: not JSON ({e}): {text}"));
+    let spec = spec();
+    let op = &spec["paths"][path][method];
+    assert!(op.is_object(), "{method} {path} is not in the spec");
+    let resp = &op["responses"][&status];
+    assert!(
+        resp.is_object(),
+        "{method} {path}: status {status} is not documented; body {text}"
+    );
+    let schema = &resp["content"]["application/json"]["schema"];
+    assert!(
+        schema.is_object(),
+        "{method} {path} {status}: no JSON schema documented"
+    );
+    if let Err(e) = check(&spec, schema, &body, "$") {
+        panic!("{method} {path} {status}: response does not match its schema: {e}\nbody: {text}");
+    }
+    body
+}
+
+/// Every documented route answers (no 404 "no such route", no 405), and
+/// routes that are not documented do not exist.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_documented_route_exists_and_nothing_else() {
+    let app = TestApp::spawn("routes").await;
+    let spec = spec();
+    let mut documented = BTreeSet::new();
+    for (path, item) in spec["paths"].as_object().unwrap() {
+        for method in item.as_object().unwrap().keys() {
+            if !["get", "post", "put", "patch", "delete"].contains(&method.as_str()) {
+                continue;
+            }
+            documented.insert((method.clone(), path.clone()));
+            let url = app.url(&path.replace("{id}", "999999"));
+            let req = match method.as_str() {
+                "get" => app.client.get(url),
+                "post" => app
+                    .client
+                    .post(url)
+                    .header("content-type", "application/json")
+                    .body("{}"),
+                m => panic!("unexpected method {m}"),
+            };
+            let r = req.send().await.unwrap();
+            let st = r.status().as_u16();
+            let body: Value = r.json().await.unwrap_or(Value::Null);
+            assert_ne!(st, 405, "{method} {path}: 405");
+            assert!(
+                !(st == 404 && body["message"] == "no such route"),
+                "{method} {path}: documented but not routed"
+            );
+            // Every answer is documented, error or not.
+            let st_s = st.to_string();
+            assert!(
+                spec["paths"][path][method]["responses"][&st_s].is_object(),
+                "{method} {path}: answered {st} which is not documented ({body})"
+            );
+        }
+    }
+    assert!(
+        documented.len() >= 25,
+        "{} operations documented",
+        documented.len()
+    );
+    // Methods and paths outside the spec are refused in the error shape.
+    for (method, path, status) in [
+        ("delete", "/robots", 405),
+        ("put", "/compensate", 405),
+        ("get", "/compensate", 405),
+        ("get", "/nope", 404),
+        ("get", "/robots/1/nope", 404),
+    ] {
+        assert!(!documented.contains(&(method.to_string(), path.to_string())));
+        let r = app
+            .client
+            .request(
+                reqwest::Method::from_bytes(method.to_uppercase().as_bytes()).unwrap(),
+                app.url(path),
+            )
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), status, "{method} {path}");
+        let v: Value = r.json().await.unwrap();
+        assert!(v["error"].is_string(), "{v}");
+    }
+    app.stop().await;
+}

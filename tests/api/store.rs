@@ -1,0 +1,397 @@
+//! Store conformance: one suite, run against SQLite and PostgreSQL, each on
+//! a fresh database; and the two migration folders in lockstep.
+
+use std::collections::BTreeSet;
+
+use drawcal::store::{CalibrationFilter, NewCalibration, NewRobot, Page, Store, StoreError};
+use sqlx::Connection;
+
+use crate::helpers::{fresh_dir, read};
+
+const PAGE: Page = Page {
+    limit: 100,
+    offset: 0,
+};
+
+fn cal(rms: f64) -> NewCalibration {
+    NewCalibration {
+        method: "lm".into(),
+        n_poses: 50,
+        n_test: 15,
+        test_rms_before_mm: Some(rms * 10.0),
+        test_rms_after_mm: Some(rms),
+        train_rms_after_mm: Some(rms * 0.9),
+        effects: "joint_compliance".into(),
+        report_json: format!("{{\"rms\": {rms}}}"),
+    }
+}
+
+async fn suite(store: Store) {
+    store.ping().await.unwrap();
+    // Models, robots, rigs.
+    let robot_json = read("er3a_paper_like", "robot.json");
+    let m = store.create_model("ER3A", 6, &robot_json).await.unwrap();
+    assert_eq!(store.get_model(m.id).await.unwrap().robot_json, robot_json);
+    assert!(matches!(
+        store.get_model(m.id + 100).await,
+        Err(StoreError::NotFound { .. })
+    ));
+    let r1 = store
+        .create_robot(&NewRobot {
+            serial_number: "S1".into(),
+            model_id: m.id,
+            site: Some("A".into()),
+            line: Some("L1".into()),
+            cell: None,
+        })
+        .await
+        .unwrap();
+    let r2 = store
+        .create_robot(&NewRobot {
+            serial_number: "S2".into(),
+            model_id: m.id,
+            site: Some("B".into()),
+            line: Some("L1".into()),
+            cell: None,
+        })
+        .await
+        .unwrap();
+    let dup = store
+        .create_robot(&NewRobot {
+            serial_number: "S1".into(),
+            model_id: m.id,
+            site: None,
+            line: None,
+            cell: None,
+        })
+        .await;
+    assert!(matches!(dup, Err(StoreError::Conflict(_))), "{dup:?}");
+    let (robots, total) = store
+        .list_robots(None, Some("A"), None, PAGE)
+        .await
+        .unwrap();
+    assert_eq!((robots.len(), total), (1, 1));
+    let (page, total) = store
+        .list_robots(
+            None,
+            None,
+            None,
+            Page {
+                limit: 1,
+                offset: 1,
+            },
+        )
+        .await
+        .unwrap();
+    assert_eq!((page[0].id, total), (r2.id, 2));
+    let rig = store.create_rig("rig", 4, "{}").await.unwrap();
+    assert_eq!(store.list_rigs(PAGE).await.unwrap().1, 1);
+
+    // Sessions and pose batches with optimistic concurrency.
+    let s = store
+        .create_session(r1.id, rig.id, Some("s"))
+        .await
+        .unwrap();
+    let s1 = store
+        .append_poses(s.id, 0, "pose,q1_deg", "1,0\n2,1\n", 2)
+        .await
+        .unwrap();
+    assert_eq!((s1.n_poses, s1.n_batches), (2, 1));
+    let stale = store.append_poses(s.id, 0, "pose,q1_deg", "3,0\n", 1).await;
+    assert!(matches!(stale, Err(StoreError::Conflict(_))), "{stale:?}");
+    store
+        .append_poses(s.id, 1, "pose,q1_deg", "3,0\n", 1)
+        .await
+        .unwrap();
+    assert_eq!(
+        store.pose_batches(s.id).await.unwrap(),
+        vec!["1,0\n2,1\n".to_string(), "3,0\n".to_string()]
+    );
+    assert!(matches!(
+        store.append_poses(9999, 0, "a", "b", 1).await,
+        Err(StoreError::NotFound { .. })
+    ));
+
+    // Jobs: claim, heartbeat, lease expiry, completion, versions.
+    let j1 = store.create_job(s.id, r1.id, "{}", 2).await.unwrap();
+    let j2 = store.create_job(s.id, r1.id, "{}", 2).await.unwrap();
+    let t0 = drawcal::store::now_ms();
+    let c1 = store.claim_job("w1", t0, 1000).await.unwrap().unwrap();
+    assert_eq!(
+        (c1.id, c1.state.as_str(), c1.attempts),
+        (j1.id, "running", 1)
+    );
+    let c2 = store.claim_job("w2", t0, 1000).await.unwrap().unwrap();
+    assert_eq!(c2.id, j2.id, "a leased job is not claimed twice");
+    assert!(store.claim_job("w3", t0, 1000).await.unwrap().is_none());
+    assert_eq!(
+        store
+            .heartbeat(j1.id, "w1", t0 + 2000, Some("lm"), 0.5)
+            .await
+            .unwrap(),
+        Some(false)
+    );
+    assert_eq!(
+        store
+            .heartbeat(j1.id, "w9", t0 + 2000, None, 0.5)
+            .await
+            .unwrap(),
+        None
+    );
+    // w2's lease expires: w3 takes j2 over; w2 can no longer finish it.
+    let c3 = store
+        .claim_job("w3", t0 + 1500, 1000)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!((c3.id, c3.attempts), (j2.id, 2));
+    assert!(
+        !store
+            .finish_job(j2.id, "w2", "failed", Some("x"))
+            .await
+            .unwrap()
+    );
+    assert!(matches!(
+        store.complete_job(j2.id, "w2", &cal(1.0)).await,
+        Err(StoreError::Conflict(_))
+    ));
+    // Cancel: a running job is flagged and sees it at its heartbeat.
+    let flagged = store.request_cancel(j1.id).await.unwrap();
+    assert!(flagged.cancel_requested);
+    assert_eq!(
+        store
+            .heartbeat(j1.id, "w1", t0 + 3000, None, 0.6)
+            .await
+            .unwrap(),
+        Some(true)
+    );
+    let a = store.complete_job(j2.id, "w3", &cal(0.2)).await.unwrap();
+    assert_eq!((a.version, a.robot_id, a.active), (1, r1.id, false));
+    assert!(
+        store
+            .finish_job(j1.id, "w1", "cancelled", None)
+            .await
+            .unwrap()
+    );
+    assert!(matches!(
+        store.request_cancel(j1.id).await,
+        Err(StoreError::Conflict(_))
+    ));
+    // After max_attempts expired leases a job is given up.
+    let j3 = store.create_job(s.id, r1.id, "{}", 1).await.unwrap();
+    store.claim_job("w4", t0, 10).await.unwrap().unwrap();
+    assert!(store.claim_job("w5", t0 + 100, 10).await.unwrap().is_none());
+    let given_up = store.get_job(j3.id).await.unwrap();
+    assert_eq!(given_up.state, "failed");
+    assert!(given_up.error.unwrap().contains("abandoned"));
+    // Requeue at shutdown does not count the claim.
+    let j4 = store.create_job(s.id, r1.id, "{}", 3).await.unwrap();
+    store.claim_job("w6", t0, 1000).await.unwrap().unwrap();
+    assert!(store.requeue_job(j4.id, "w6").await.unwrap());
+    let back = store.get_job(j4.id).await.unwrap();
+    assert_eq!((back.state.as_str(), back.attempts), ("queued", 0));
+    let again = store.claim_job("w7", t0, 1000).await.unwrap().unwrap();
+    let b = store.complete_job(again.id, "w7", &cal(0.1)).await.unwrap();
+    assert_eq!(b.version, 2, "versions count per robot");
+    assert_eq!(
+        store.calibration_report(b.id).await.unwrap(),
+        "{\"rms\": 0.1}"
+    );
+    let (_, jobs_total) = store
+        .list_jobs(Some(s.id), Some("succeeded"), PAGE)
+        .await
+        .unwrap();
+    assert_eq!(jobs_total, 2);
+
+    // Activation history: activate a, activate b, roll back to a, roll back to none.
+    assert!(matches!(
+        store.previous_active(r1.id).await,
+        Err(StoreError::Conflict(_))
+    ));
+    store
+        .set_active(r1.id, Some(a.id), "activate", "ann", "first")
+        .await
+        .unwrap();
+    assert!(matches!(
+        store
+            .set_active(r1.id, Some(a.id), "activate", "ann", "again")
+            .await,
+        Err(StoreError::Conflict(_))
+    ));
+    assert!(matches!(
+        store
+            .set_active(r2.id, Some(a.id), "activate", "ann", "wrong robot")
+            .await,
+        Err(StoreError::Conflict(_))
+    ));
+    store
+        .set_active(r1.id, Some(b.id), "activate", "bob", "better")
+        .await
+        .unwrap();
+    assert_eq!(store.get_calibration(b.id).await.unwrap().active, true);
+    let prev = store.previous_active(r1.id).await.unwrap();
+    assert_eq!(prev, Some(a.id));
+    let rb = store
+        .set_active(r1.id, prev, "rollback", "cy", "b is off")
+        .await
+        .unwrap();
+    assert_eq!(
+        (rb.calibration_id, rb.previous_calibration_id),
+        (Some(a.id), Some(b.id))
+    );
+    assert_eq!(store.previous_active(r1.id).await.unwrap(), None);
+    store
+        .set_active(r1.id, None, "rollback", "cy", "back to nominal")
+        .await
+        .unwrap();
+    assert!(matches!(
+        store.previous_active(r1.id).await,
+        Err(StoreError::Conflict(_))
+    ));
+    let (acts, n) = store.list_activations(r1.id, PAGE).await.unwrap();
+    assert_eq!(n, 4);
+    assert_eq!(acts[0].reason, "back to nominal", "newest first");
+    assert_eq!(
+        store.get_robot(r1.id).await.unwrap().active_calibration_id,
+        None
+    );
+
+    // Fleet filters.
+    let f = |f: CalibrationFilter| {
+        let store = store.clone();
+        async move { store.list_calibrations(&f, PAGE).await.unwrap().1 }
+    };
+    assert_eq!(f(CalibrationFilter::default()).await, 2);
+    assert_eq!(
+        f(CalibrationFilter {
+            robot_id: Some(r2.id),
+            ..Default::default()
+        })
+        .await,
+        0
+    );
+    assert_eq!(
+        f(CalibrationFilter {
+            model_id: Some(m.id),
+            ..Default::default()
+        })
+        .await,
+        2
+    );
+    assert_eq!(
+        f(CalibrationFilter {
+            site: Some("A".into()),
+            line: Some("L1".into()),
+            ..Default::default()
+        })
+        .await,
+        2
+    );
+    assert_eq!(
+        f(CalibrationFilter {
+            site: Some("B".into()),
+            ..Default::default()
+        })
+        .await,
+        0
+    );
+    assert_eq!(
+        f(CalibrationFilter {
+            max_test_rms_mm: Some(0.15),
+            ..Default::default()
+        })
+        .await,
+        1
+    );
+    assert_eq!(
+        f(CalibrationFilter {
+            min_test_rms_mm: Some(0.15),
+            ..Default::default()
+        })
+        .await,
+        1
+    );
+    assert_eq!(
+        f(CalibrationFilter {
+            from: Some("2999-01-01T00:00:00.000Z".into()),
+            ..Default::default()
+        })
+        .await,
+        0
+    );
+    assert_eq!(
+        f(CalibrationFilter {
+            to: Some("2999-01-01T00:00:00.000Z".into()),
+            ..Default::default()
+        })
+        .await,
+        2
+    );
+    store.close().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn store_conformance_sqlite() {
+    let dir = fresh_dir("store");
+    let store = Store::connect(&format!("sqlite://{}", dir.join("s.db").display()))
+        .await
+        .unwrap();
+    assert_eq!(store.backend(), "sqlite");
+    suite(store).await;
+}
+
+/// PostgreSQL at `DATABASE_URL_POSTGRES` (as `.ci/run` sets it; default
+/// postgres://postgres@127.0.0.1:5432/test); a fresh database per run.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn store_conformance_postgres() {
+    let admin = std::env::var("DATABASE_URL_POSTGRES")
+        .or_else(|_| std::env::var("DRAWCAL_TEST_PG"))
+        .unwrap_or_else(|_| "postgres://postgres@127.0.0.1:5432/test".into());
+    let name = format!(
+        "drawcal_t_{}_{}",
+        std::process::id(),
+        drawcal::store::now_ms()
+    );
+    let mut conn = sqlx::PgConnection::connect(&admin)
+        .await
+        .expect("PostgreSQL reachable for the conformance suite");
+    sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}")))
+        .execute(&mut conn)
+        .await
+        .unwrap();
+    let base = admin.rsplit_once('/').unwrap().0;
+    let store = Store::connect(&format!("{base}/{name}")).await.unwrap();
+    assert_eq!(store.backend(), "postgres");
+    suite(store).await;
+    sqlx::query(sqlx::AssertSqlSafe(format!(
+        "DROP DATABASE {name} WITH (FORCE)"
+    )))
+    .execute(&mut conn)
+    .await
+    .unwrap();
+}
+
+fn versions(dir: &str) -> BTreeSet<String> {
+    std::fs::read_dir(format!("{}/migrations/{dir}", env!("CARGO_MANIFEST_DIR")))
+        .unwrap()
+        .map(|e| {
+            e.unwrap()
+                .file_name()
+                .to_string_lossy()
+                .split('_')
+                .next()
+                .unwrap()
+                .to_string()
+        })
+        .collect()
+}
+
+#[test]
+fn migrations_are_in_lockstep() {
+    let (s, p) = (versions("sqlite"), versions("postgres"));
+    assert!(!s.is_empty());
+    assert_eq!(
+        s, p,
+        "migrations/sqlite and migrations/postgres must have the same versions"
+    );
+}
