@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::lm::LeastSquares;
-use crate::kinematics::chain::{Chain, OutputFrame, PointJacobian};
+use crate::kinematics::chain::{Chain, OutputFrame, PointJacobian, Trig, joint_trig};
 use crate::model::{Measurement, PoseRecord};
 
 /// How a free parameter enters a residual row.
@@ -35,6 +35,8 @@ pub struct CalibrationProblem<'a> {
     /// Indices of the free parameters.
     free: Vec<usize>,
     columns: Vec<Column>,
+    /// Sines and cosines of each pose's joint angles, computed once.
+    q_trig: Vec<Vec<(f64, f64)>>,
 }
 
 impl<'a> CalibrationProblem<'a> {
@@ -60,6 +62,7 @@ impl<'a> CalibrationProblem<'a> {
             })
             .collect();
         let weights = vec![1.0; poses.len()];
+        let q_trig = poses.iter().map(|p| joint_trig(&p.q_rad)).collect();
         CalibrationProblem {
             chain,
             anchors,
@@ -68,6 +71,7 @@ impl<'a> CalibrationProblem<'a> {
             full,
             free,
             columns,
+            q_trig,
         }
     }
 
@@ -92,8 +96,12 @@ impl<'a> CalibrationProblem<'a> {
 
     /// Residuals of one pose (predicted minus measured, mm) into `out`.
     pub fn pose_residuals(&self, p: &[f64], pose: &PoseRecord, out: &mut Vec<f64>) {
-        out.clear();
         let (_, t) = self.chain.point(p, &pose.q_rad, OutputFrame::Rig);
+        self.residuals_at(p, &t, pose, out);
+    }
+
+    fn residuals_at(&self, p: &[f64], t: &Vector3<f64>, pose: &PoseRecord, out: &mut Vec<f64>) {
+        out.clear();
         match &pose.measurement {
             Measurement::Strings(l) => {
                 let g = self.chain.layout.n_geometric();
@@ -127,10 +135,12 @@ impl LeastSquares for CalibrationProblem<'_> {
 
     fn cost(&self, x: &[f64]) -> f64 {
         let p = self.expand(x);
+        let trig: Trig = self.chain.trig(&p);
         let mut r = Vec::new();
         let mut c = 0.0;
-        for (pose, w) in self.poses.iter().zip(&self.weights) {
-            self.pose_residuals(&p, pose, &mut r);
+        for ((pose, w), qsc) in self.poses.iter().zip(&self.weights).zip(&self.q_trig) {
+            let t = self.chain.point_trig(&p, &trig, qsc);
+            self.residuals_at(&p, &t, pose, &mut r);
             c += w * r.iter().map(|v| v * v).sum::<f64>();
         }
         0.5 * c
@@ -142,28 +152,32 @@ impl LeastSquares for CalibrationProblem<'_> {
         jtj.fill(0.0);
         jtr.fill(0.0);
         let mut jac: PointJacobian = self.chain.new_jacobian();
-        let mut row = vec![0.0; n];
         let mut cost = 0.0;
         let g = self.chain.layout.n_geometric();
-        // Accumulate the upper triangle in a flat buffer (cache friendly),
-        // mirror at the end.
-        let mut upper = vec![0.0; n * n];
-        let add = |row: &[f64], r: f64, w: f64, upper: &mut [f64], jtr: &mut DVector<f64>| {
-            for a in 0..n {
-                let wa = w * row[a];
-                if wa == 0.0 {
-                    continue;
-                }
-                jtr[a] += wa * r;
-                let base = a * n;
-                for b in a..n {
-                    upper[base + b] += wa * row[b];
-                }
+        // Rows (scaled by √w) are gathered in blocks and folded in with a
+        // matrix product, which is several times faster than rank-1 updates.
+        const BLOCK: usize = 256;
+        let mut rows = DMatrix::<f64>::zeros(BLOCK, n);
+        let mut res = DVector::<f64>::zeros(BLOCK);
+        let mut filled = 0;
+        let flush = |rows: &mut DMatrix<f64>,
+                     res: &mut DVector<f64>,
+                     filled: &mut usize,
+                     jtj: &mut DMatrix<f64>,
+                     jtr: &mut DVector<f64>| {
+            if *filled == 0 {
+                return;
             }
+            let b = rows.rows(0, *filled);
+            jtj.gemm_tr(1.0, &b, &b, 1.0);
+            jtr.gemv_tr(1.0, &b, &res.rows(0, *filled), 1.0);
+            *filled = 0;
         };
-        for (pose, &w) in self.poses.iter().zip(&self.weights) {
+        let trig = self.chain.trig(&p);
+        for ((pose, &w), qsc) in self.poses.iter().zip(&self.weights).zip(&self.q_trig) {
+            let sw = w.sqrt();
             self.chain
-                .point_jacobian(&p, &pose.q_rad, OutputFrame::Rig, &mut jac);
+                .point_jacobian_trig(&p, &trig, qsc, OutputFrame::Rig, &mut jac);
             let t = jac.point;
             match &pose.measurement {
                 Measurement::Strings(l) => {
@@ -175,19 +189,24 @@ impl LeastSquares for CalibrationProblem<'_> {
                         let r = dist - rr - p[g + k] - l[k];
                         cost += w * r * r;
                         for (f, col) in self.columns.iter().enumerate() {
-                            row[f] = match *col {
-                                Column::Geom(i) => u.dot(&jac.d_params[i]),
-                                Column::Offset(s) => {
-                                    if s == k {
-                                        -1.0
-                                    } else {
-                                        0.0
+                            rows[(filled, f)] = sw
+                                * match *col {
+                                    Column::Geom(i) => u.dot(&jac.d_params[i]),
+                                    Column::Offset(s) => {
+                                        if s == k {
+                                            -1.0
+                                        } else {
+                                            0.0
+                                        }
                                     }
-                                }
-                                Column::R => -1.0,
-                            };
+                                    Column::R => -1.0,
+                                };
                         }
-                        add(&row, r, w, &mut upper, jtr);
+                        res[filled] = sw * r;
+                        filled += 1;
+                        if filled == BLOCK {
+                            flush(&mut rows, &mut res, &mut filled, jtj, jtr);
+                        }
                     }
                 }
                 Measurement::Point(m) => {
@@ -195,22 +214,22 @@ impl LeastSquares for CalibrationProblem<'_> {
                         let r = t[c] - m[c];
                         cost += w * r * r;
                         for (f, col) in self.columns.iter().enumerate() {
-                            row[f] = match *col {
-                                Column::Geom(i) => jac.d_params[i][c],
-                                _ => 0.0,
-                            };
+                            rows[(filled, f)] = sw
+                                * match *col {
+                                    Column::Geom(i) => jac.d_params[i][c],
+                                    _ => 0.0,
+                                };
                         }
-                        add(&row, r, w, &mut upper, jtr);
+                        res[filled] = sw * r;
+                        filled += 1;
+                        if filled == BLOCK {
+                            flush(&mut rows, &mut res, &mut filled, jtj, jtr);
+                        }
                     }
                 }
             }
         }
-        for a in 0..n {
-            for b in a..n {
-                jtj[(a, b)] = upper[a * n + b];
-                jtj[(b, a)] = upper[a * n + b];
-            }
-        }
+        flush(&mut rows, &mut res, &mut filled, jtj, jtr);
         0.5 * cost
     }
 }

@@ -33,6 +33,11 @@ impl Frame {
     #[inline(always)]
     fn rot(&mut self, axis: usize, t: f64) {
         let (s, c) = t.sin_cos();
+        self.rot_sc(axis, s, c);
+    }
+
+    #[inline(always)]
+    fn rot_sc(&mut self, axis: usize, s: f64, c: f64) {
         let (i, j) = match axis {
             0 => (1, 2),
             1 => (2, 0),
@@ -62,6 +67,26 @@ impl Frame {
     pub fn apply(&self, p: &Vector3<f64>) -> Vector3<f64> {
         self.r * p + self.o
     }
+}
+
+/// Sines and cosines of the angles that do not change from pose to pose
+/// (base roll/pitch/yaw, each joint's α, β and θ offset), computed once per
+/// parameter vector: with the joint angles' own sines cached per pose, the
+/// hot loops of identification need no trigonometric calls at all.
+#[derive(Debug, Clone)]
+pub struct Trig {
+    base: [(f64, f64); 3],
+    joints: Vec<[(f64, f64); 3]>,
+}
+
+/// `(sin, cos)` of each joint angle of a pose.
+pub fn joint_trig(q: &[f64]) -> Vec<(f64, f64)> {
+    q.iter().map(|v| v.sin_cos()).collect()
+}
+
+#[inline(always)]
+fn add_angles((s1, c1): (f64, f64), (s2, c2): (f64, f64)) -> (f64, f64) {
+    (s1 * c2 + c1 * s2, c1 * c2 - s1 * s2)
 }
 
 /// T with its derivatives.
@@ -145,6 +170,23 @@ impl Chain {
         }
     }
 
+    /// The per-parameter-vector trigonometry for [`Chain::point_jacobian_trig`].
+    pub fn trig(&self, p: &[f64]) -> Trig {
+        let b = self.layout.base();
+        Trig {
+            base: [p[b + 5].sin_cos(), p[b + 4].sin_cos(), p[b + 3].sin_cos()],
+            joints: (0..self.layout.n_joints)
+                .map(|j| {
+                    [
+                        p[5 * j + 3].sin_cos(),
+                        p[5 * j + 1].sin_cos(),
+                        p[5 * j + 4].sin_cos(),
+                    ]
+                })
+                .collect(),
+        }
+    }
+
     /// T and its derivatives with respect to every geometric parameter.
     /// `dT/dq_j` equals the column of `θ_j`. Columns of the base pose are
     /// zero in the base frame. `out.d_params` is resized as needed, so a
@@ -153,6 +195,19 @@ impl Chain {
         &self,
         p: &[f64],
         q: &[f64],
+        frame: OutputFrame,
+        out: &mut PointJacobian,
+    ) {
+        self.point_jacobian_trig(p, &self.trig(p), &joint_trig(q), frame, out);
+    }
+
+    /// [`Chain::point_jacobian`] with precomputed trigonometry: `trig` from
+    /// [`Chain::trig`] of the same `p`, `qsc` from [`joint_trig`].
+    pub fn point_jacobian_trig(
+        &self,
+        p: &[f64],
+        trig: &Trig,
+        qsc: &[(f64, f64)],
         frame: OutputFrame,
         out: &mut PointJacobian,
     ) {
@@ -167,10 +222,11 @@ impl Chain {
         let mut nr = 0;
         let mut f = Frame::identity();
         macro_rules! rot {
-            ($axis:expr, $angle:expr, $idx:expr) => {{
+            ($axis:expr, $sc:expr, $idx:expr) => {{
                 rots[nr] = ($idx, f.axis($axis), f.o);
                 nr += 1;
-                f.rot($axis, $angle);
+                let (s, c) = $sc;
+                f.rot_sc($axis, s, c);
             }};
         }
         macro_rules! trans {
@@ -185,13 +241,14 @@ impl Chain {
             out.d_params[b] = Vector3::x();
             out.d_params[b + 1] = Vector3::y();
             out.d_params[b + 2] = Vector3::z();
-            rot!(Z, p[b + 5], b + 5);
-            rot!(Y, p[b + 4], b + 4);
-            rot!(X, p[b + 3], b + 3);
+            rot!(Z, trig.base[0], b + 5);
+            rot!(Y, trig.base[1], b + 4);
+            rot!(X, trig.base[2], b + 3);
         }
-        for (j, &qj) in q.iter().enumerate().take(l.n_joints) {
+        for (j, &qj) in qsc.iter().enumerate().take(l.n_joints) {
             let k = 5 * j;
-            let (a, al, d, th, be) = (p[k], p[k + 1], p[k + 2], p[k + 3], p[k + 4]);
+            let (a, d) = (p[k], p[k + 2]);
+            let [th, al, be] = trig.joints[j];
             let (ia, ial, id, ith, ibe) = (
                 k + JointParam::A as usize,
                 k + JointParam::Alpha as usize,
@@ -201,7 +258,7 @@ impl Chain {
             );
             match self.convention {
                 Convention::Dh => {
-                    rot!(Z, qj + th, ith);
+                    rot!(Z, add_angles(qj, th), ith);
                     trans!(Z, d, id);
                     trans!(X, a, ia);
                     rot!(X, al, ial);
@@ -211,7 +268,7 @@ impl Chain {
                     rot!(X, al, ial);
                     rot!(Y, be, ibe);
                     trans!(X, a, ia);
-                    rot!(Z, qj + th, ith);
+                    rot!(Z, add_angles(qj, th), ith);
                     trans!(Z, d, id);
                 }
             }
@@ -227,6 +284,41 @@ impl Chain {
         }
         out.point = point;
         out.flange = f;
+    }
+
+    /// T in the rig frame with precomputed trigonometry (see
+    /// [`Chain::point_jacobian_trig`]).
+    pub fn point_trig(&self, p: &[f64], trig: &Trig, qsc: &[(f64, f64)]) -> Vector3<f64> {
+        let b = self.layout.base();
+        let mut f = Frame::identity();
+        f.o = Vector3::new(p[b], p[b + 1], p[b + 2]);
+        f.rot_sc(Z, trig.base[0].0, trig.base[0].1);
+        f.rot_sc(Y, trig.base[1].0, trig.base[1].1);
+        f.rot_sc(X, trig.base[2].0, trig.base[2].1);
+        for (j, &qj) in qsc.iter().enumerate().take(self.layout.n_joints) {
+            let k = 5 * j;
+            let (a, d) = (p[k], p[k + 2]);
+            let [th, al, be] = trig.joints[j];
+            let (sz, cz) = add_angles(qj, th);
+            match self.convention {
+                Convention::Dh => {
+                    f.rot_sc(Z, sz, cz);
+                    f.trans(Z, d);
+                    f.trans(X, a);
+                    f.rot_sc(X, al.0, al.1);
+                    f.rot_sc(Y, be.0, be.1);
+                }
+                Convention::Mdh => {
+                    f.rot_sc(X, al.0, al.1);
+                    f.rot_sc(Y, be.0, be.1);
+                    f.trans(X, a);
+                    f.rot_sc(Z, sz, cz);
+                    f.trans(Z, d);
+                }
+            }
+        }
+        let t = self.layout.tool();
+        f.apply(&Vector3::new(p[t], p[t + 1], p[t + 2]))
     }
 
     /// A fresh output buffer.

@@ -1,0 +1,131 @@
+//! Engine benchmarks: one pose's point with its full Jacobian, an
+//! identification of 50 and of 2000 string poses, the 11,911-pose tracker
+//! grid, one compensation. Run: `cargo bench --bench engine`.
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use drawcal::compensate::Compensator;
+use drawcal::identify::{IdentifyOptions, NoProgress, identify};
+use drawcal::kinematics::Params;
+use drawcal::kinematics::chain::{Chain, OutputFrame};
+use drawcal::model::{Dataset, Measurement, PoseRecord, Rig, Robot, Split, Target, TargetKind};
+use drawcal::rng::Rng;
+
+fn load(name: &str) -> (Robot, Rig, Dataset) {
+    let d = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name);
+    let robot = Robot::from_json(&std::fs::read_to_string(d.join("robot.json")).unwrap()).unwrap();
+    let rig = Rig::from_json(&std::fs::read_to_string(d.join("rig.json")).unwrap()).unwrap();
+    let data = Dataset::from_csv(
+        std::fs::File::open(d.join("poses.csv")).unwrap(),
+        &robot,
+        &rig,
+    )
+    .unwrap();
+    (robot, rig, data)
+}
+
+/// `n` string poses of the true UR5 of `ur5_geometric` (its truth.json
+/// robot and base), 0.02 mm noise.
+pub fn ur5_strings(n: usize) -> (Robot, Rig, Dataset) {
+    let (robot, rig, _) = load("ur5_geometric");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/ur5_geometric");
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
+    let true_robot: Robot = serde_json::from_value(truth["true_robot"].clone()).unwrap();
+    let base = serde_json::from_value(truth["base_in_rig"].clone()).unwrap();
+    let p = Params::nominal(&true_robot, &base, &rig, 4);
+    let chain = Chain::new(robot.convention, 6, 4);
+    let mut rng = Rng::new(42);
+    let mut poses = Vec::with_capacity(n);
+    while poses.len() < n {
+        let q: Vec<f64> = (0..6).map(|_| rng.range(-3.0, 3.0)).collect();
+        let (_, t) = chain.point(&p.values, &q, OutputFrame::Rig);
+        let l: Vec<f64> = (0..4)
+            .map(|k| (t - rig.anchor(k)).norm() - rig.r_mm + 0.02 * rng.normal())
+            .collect();
+        if t.z < 100.0 || l.iter().any(|v| *v > 2000.0) {
+            continue;
+        }
+        let i = poses.len();
+        poses.push(PoseRecord {
+            id: i.to_string(),
+            q_rad: q,
+            measurement: Measurement::Strings(l),
+            time_s: None,
+            temp_c: None,
+            payload_kg: None,
+            split: Some(if i % 5 == 4 {
+                Split::Test
+            } else {
+                Split::Train
+            }),
+        });
+    }
+    (
+        robot,
+        rig,
+        Dataset {
+            poses,
+            n_strings: 4,
+        },
+    )
+}
+
+fn benches(c: &mut Criterion) {
+    let (robot, rig, data50) = load("er3a_paper_like");
+    let chain = Chain::new(robot.convention, 6, 4);
+    let p = Params::nominal(&robot, &rig.base_in_rig.unwrap(), &rig, 4);
+    let mut jac = chain.new_jacobian();
+    let q = [0.1, -0.4, 0.3, 0.8, -0.5, 1.2];
+    c.bench_function("point_with_full_jacobian", |b| {
+        b.iter(|| {
+            chain.point_jacobian(
+                black_box(&p.values),
+                black_box(&q),
+                OutputFrame::Rig,
+                &mut jac,
+            )
+        })
+    });
+
+    let opts = IdentifyOptions {
+        physics: false,
+        ..Default::default()
+    };
+    c.bench_function("identify_50_string_poses", |b| {
+        b.iter(|| identify(&robot, &rig, black_box(&data50), &opts, &NoProgress).unwrap())
+    });
+
+    let (r2, rig2, d2000) = ur5_strings(2000);
+    let mut g = c.benchmark_group("large");
+    g.sample_size(10);
+    g.bench_function("identify_2000_string_poses", |b| {
+        b.iter(|| identify(&r2, &rig2, black_box(&d2000), &opts, &NoProgress).unwrap())
+    });
+    let (rg, rigg, grid) = load("real_ur10_ipa_grid");
+    g.bench_function("identify_ur10_grid_11911_points", |b| {
+        b.iter(|| identify(&rg, &rigg, black_box(&grid), &opts, &NoProgress).unwrap())
+    });
+    g.finish();
+
+    let report = identify(&robot, &rig, &data50, &opts, &NoProgress).unwrap();
+    let comp = Compensator::from_report(&report).unwrap();
+    let t = Target {
+        target: "t".into(),
+        kind: TargetKind::Joints {
+            q_deg: vec![10.0, 20.0, 30.0, 40.0, 50.0, 60.0],
+        },
+    };
+    c.bench_function("compensate_one_joint_target", |b| {
+        b.iter(|| comp.compensate(black_box(&t), false))
+    });
+    c.bench_function("compensate_one_joint_target_with_orientation", |b| {
+        b.iter(|| comp.compensate(black_box(&t), true))
+    });
+}
+
+criterion_group!(engine, benches);
+criterion_main!(engine);
