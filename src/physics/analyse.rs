@@ -40,6 +40,9 @@ pub const ALPHA: f64 = 0.005;
 /// A coefficient whose column keeps less than this fraction (sine of the
 /// angle) outside the span of the geometric columns is aliased.
 pub const ALIAS_SINE: f64 = 0.03;
+/// The held-out gain must exceed this many standard errors (one-sided,
+/// about 2.3% by chance), so noise alone does not buy an effect.
+pub const HELD_OUT_Z: f64 = 2.0;
 /// Cross-validation folds.
 const FOLDS: usize = 5;
 /// At most this many effects are modelled.
@@ -69,6 +72,33 @@ pub struct Analysis {
     pub robot_side_share_noise: Option<f64>,
     /// Lines for the CLI summary: where the residual lives.
     pub notes: Vec<String>,
+}
+
+/// One-sided z that the held-out error dropped: Wilcoxon signed-rank test
+/// (normal approximation) on `|e_before|² - |e_after|²` per held-out pose.
+/// Rank-based because the squared errors of located points are
+/// heavy-tailed (poses with a poor string geometry dominate a mean).
+fn paired_gain_z(before: &[Vector3<f64>], after: &[Vector3<f64>]) -> f64 {
+    let mut d: Vec<f64> = before
+        .iter()
+        .zip(after)
+        .map(|(b, a)| b.norm_squared() - a.norm_squared())
+        .filter(|v| *v != 0.0)
+        .collect();
+    let n = d.len() as f64;
+    if n < 2.0 {
+        return f64::INFINITY;
+    }
+    d.sort_by(|a, b| a.abs().total_cmp(&b.abs()));
+    let w_plus: f64 = d
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| **v > 0.0)
+        .map(|(r, _)| (r + 1) as f64)
+        .sum();
+    let mean = n * (n + 1.0) / 4.0;
+    let var = n * (n + 1.0) * (2.0 * n + 1.0) / 24.0;
+    (w_plus - mean) / var.sqrt()
 }
 
 /// Build the effect context of a session (located or measured points).
@@ -425,10 +455,6 @@ pub fn analyse(
     let mut fold_of: Vec<usize> = (0..session.train.len()).map(|i| i % FOLDS).collect();
     Rng::new(7).shuffle(&mut fold_of);
 
-    let test_rms_of = |p: &[f64], eff: &[EffectModel]| {
-        rms(&errors_with_effects(session, &ctx, p, eff, &session.test))
-    };
-
     // Where the residual lives: robot side versus sensor side.
     let (share, share_noise) = robot_side_share(session, &p);
     if let (Some(s), Some(s0)) = (share, share_noise) {
@@ -545,15 +571,18 @@ pub fn analyse(
                 rejected.push(c.kind.clone());
                 continue;
             };
-            let test_before = test_rms_of(&p, &accepted);
-            let test_after = test_rms_of(&p_new, &eff_new);
-            if !session.test.is_empty() && !(test_after < test_before) {
+            let e_before = errors_with_effects(session, &ctx, &p, &accepted, &session.test);
+            let e_after = errors_with_effects(session, &ctx, &p_new, &eff_new, &session.test);
+            let (test_before, test_after) = (rms(&e_before), rms(&e_after));
+            let gain_z = paired_gain_z(&e_before, &e_after);
+            if !session.test.is_empty() && !(test_after < test_before && gain_z > HELD_OUT_Z) {
                 notes.push(format!(
-                    "{} ({}) was significant on the train poses but did not improve the held-out RMS ({:.4} -> {:.4} mm): not kept",
+                    "{} ({}) was significant on the train poses but did not improve the held-out RMS by more than noise explains ({:.4} -> {:.4} mm, paired z = {:.1} < {HELD_OUT_Z}): not kept",
                     c.kind.name(),
                     c.what,
                     test_before,
-                    test_after
+                    test_after,
+                    gain_z
                 ));
                 rejected.push(c.kind.clone());
                 continue;

@@ -1,0 +1,31 @@
+//! Headline figures of the blind evaluation on a fixed-seed subset (the
+//! full sweep is `drawcal evaluate`, recorded in EVAL.md).
+
+use drawcal::physics::evaluate::{Sweep, score, sweep, table};
+
+#[test]
+fn blind_evaluation_headline() {
+    let cfg = Sweep {
+        robots: vec!["er3a".into(), "ur5".into(), "arm4_mdh".into()],
+        sizes: vec![0.0, 3.0, 5.0],
+        per_cell: 4,
+        two_effects: 0.3,
+        n_poses: 80,
+        seed: 99,
+    };
+    let outcomes = sweep(&cfg, |_| {});
+    let (_, s) = score(&outcomes);
+    let text = table(&outcomes);
+    assert!(outcomes.len() >= 30, "{text}");
+    assert!(s.named_at_3x.1 >= 20, "{text}");
+    // Goal: 95%. Measured on the full sweep: 93.7% (EVAL.md); the misses
+    // are sensor offsets near 3x that the base pose partly absorbs. The
+    // subset asserts 90% so a regression fails without hiding the gap.
+    assert!(
+        s.named_at_3x.0 as f64 >= 0.90 * s.named_at_3x.1 as f64,
+        "{text}"
+    );
+    // Effect-free: at most one dataset in the subset with any finding.
+    assert!(s.false_alarm_free.0 <= 1, "{text}");
+    assert!(s.median_ratio_final_floor < 1.2, "{text}");
+}
