@@ -1,6 +1,9 @@
 //! The `drawcal` command line: a thin layer over the core that reads files,
 //! prints summaries and writes results.
 
+pub mod evaluate;
+pub mod serve;
+pub mod simulate;
 pub mod summary;
 
 use std::fs::File;
@@ -71,6 +74,12 @@ pub enum Command {
     Compensate(CompensateArgs),
     /// Locate the tool point from string readings.
     Locate(LocateArgs),
+    /// Run the HTTP service.
+    Serve(serve::ServeArgs),
+    /// Simulate a recording from a spec (robot, rig, deviations, effects).
+    Simulate(simulate::SimulateArgs),
+    /// Blind evaluation of the physics analysis on simulated datasets.
+    Evaluate(evaluate::EvaluateArgs),
 }
 
 /// Identification method on the command line.
@@ -173,6 +182,9 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Identify(a) => run_identify(a),
         Command::Compensate(a) => run_compensate(a),
         Command::Locate(a) => run_locate(a),
+        Command::Serve(a) => serve::run(a).map_err(|e| CliError::Other(e.to_string())),
+        Command::Simulate(a) => simulate::run(a).map_err(|e| CliError::Other(e.to_string())),
+        Command::Evaluate(a) => evaluate::run(a).map_err(|e| CliError::Other(e.to_string())),
     }
 }
 

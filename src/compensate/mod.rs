@@ -122,9 +122,21 @@ impl Compensator {
         })
     }
 
-    /// From a calibration report.
+    /// From a calibration report, with the robot-side effects its physics
+    /// analysis accepted (a compliant joint's correction depends on the pose).
     pub fn from_report(report: &Report) -> Result<Self> {
-        Self::new(&report.nominal_robot, &report.calibrated_robot)
+        let comp = Self::new(&report.nominal_robot, &report.calibrated_robot)?;
+        let has_joint_effects = crate::physics::effects_of(&report.findings)
+            .iter()
+            .any(|e| e.kind.joint().is_some());
+        if !has_joint_effects {
+            return Ok(comp);
+        }
+        let findings = report.findings.clone();
+        let robot = report.nominal_robot.clone();
+        Ok(comp.with_joint_offsets(Arc::new(move |q| {
+            crate::physics::joint_offsets_rad(&findings, &robot, q)
+        })))
     }
 
     /// Add robot-side effects (joint offsets at a commanded pose).

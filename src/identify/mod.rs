@@ -509,7 +509,7 @@ pub fn identify(
     let noise_floor_mm = session.noise_floor(string_sigma);
 
     let paper = paper::one_step(&session, &geo.before);
-    let (after_values, method, fixed_sel, sig) = match opts.method {
+    let (mut after_values, method, fixed_sel, sig) = match opts.method {
         Method::Lm => (
             geo.after.values.clone(),
             "lm",
@@ -523,7 +523,27 @@ pub fn identify(
             (p.values.clone(), "paper", None, vec![])
         }
     };
-    let stats = session.stats(&geo.before.values, &after_values);
+    let mut stats = session.stats(&geo.before.values, &after_values);
+    let mut findings = vec![];
+    if opts.physics && opts.method == Method::Lm {
+        progress.update("physics analysis", 0.0);
+        let an = crate::physics::analyse(&session, &geo, opts, progress)?;
+        if !an.effects.is_empty() {
+            // The final model is the geometry refitted with the accepted
+            // effects; its figures are what stats.*.after report.
+            let train = crate::physics::errors_with_effects(
+                &session,
+                &an.context,
+                &an.final_params.values,
+                &an.effects,
+                &session.train,
+            );
+            stats.train.after = stats::error_stats(&train);
+            stats.test.after = stats::error_stats(&an.test_errors);
+            after_values = an.final_params.values.clone();
+        }
+        findings = an.findings;
+    }
     let paper_stats = match (&paper, opts.method) {
         (Ok(p), Method::Lm) => Some(session.stats(&geo.before.values, &p.values)),
         _ => None,
@@ -686,7 +706,7 @@ pub fn identify(
         },
         closed_form_vs_lsq,
         per_pose,
-        findings: vec![],
+        findings,
     })
 }
 
