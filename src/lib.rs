@@ -12,14 +12,21 @@
 //!   closed form and least-squares multilateration), string noise;
 //! - [`identify`]: the Levenberg-Marquardt solver, identifiability analysis,
 //!   the paper's one-step method, statistics and the JSON report;
-//! - [`compensate`]: corrected joint targets from a calibration.
+//! - [`compensate`]: corrected joint targets from a calibration;
+//! - [`physics`]: effects beyond the geometric model (compliance, thermal
+//!   growth, backlash, ...), their blind detection and the simulator.
 //!
-//! The CLI ([`cli`]) is a thin layer around it.
+//! Thin layers around it: the CLI ([`cli`]) and the service: [`store`] (the
+//! only SQL), [`jobs`] (background identification) and [`http`].
 
 pub mod cli;
 pub mod compensate;
 pub mod error;
+/// The HTTP service (axum): routes, errors, OpenAPI, startup and shutdown.
+pub mod http;
 pub mod identify;
+/// Identification jobs: the persistent queue's worker pool.
+pub mod jobs;
 pub mod kinematics;
 pub mod measure;
 pub mod model;
@@ -27,9 +34,5 @@ pub mod physics;
 pub mod rng;
 /// Persistence for the HTTP service (SQLite and PostgreSQL): the only code that speaks SQL.
 pub mod store;
-/// Identification jobs: the persistent queue's worker pool.
-pub mod jobs;
-/// The HTTP service (axum): routes, errors, OpenAPI, startup and shutdown.
-pub mod http;
 
 pub use error::{Error, Result};
