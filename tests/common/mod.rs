@@ -7,14 +7,21 @@ use std::path::PathBuf;
 use drawcal::model::{Dataset, Rig, Robot};
 
 pub fn dir(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
 }
 
 pub fn load(name: &str) -> (Robot, Rig, Dataset) {
     let d = dir(name);
     let robot = Robot::from_json(&std::fs::read_to_string(d.join("robot.json")).unwrap()).unwrap();
     let rig = Rig::from_json(&std::fs::read_to_string(d.join("rig.json")).unwrap()).unwrap();
-    let data = Dataset::from_csv(std::fs::File::open(d.join("poses.csv")).unwrap(), &robot, &rig).unwrap();
+    let data = Dataset::from_csv(
+        std::fs::File::open(d.join("poses.csv")).unwrap(),
+        &robot,
+        &rig,
+    )
+    .unwrap();
     (robot, rig, data)
 }
 
