@@ -322,6 +322,13 @@ pub struct Rollback {
     pub reason: String,
 }
 
+/// Drop the cached active calibration of a robot (see `App::active`).
+fn forget_active(app: &AppState, robot_id: i64) {
+    if let Ok(mut m) = app.active.write() {
+        m.remove(&robot_id);
+    }
+}
+
 fn check_actor(by: &str, reason: &str) -> ApiResult<()> {
     if by.trim().is_empty() || by.len() > 200 {
         return Err(ApiError::invalid("by", "say who (1 to 200 characters)"));
@@ -372,17 +379,18 @@ pub async fn activate(
         }
         Ok(_) => {}
     }
-    Ok(Json(
-        app.store
-            .set_active(
-                id,
-                Some(a.calibration_id),
-                "activate",
-                a.by.trim(),
-                a.reason.trim(),
-            )
-            .await?,
-    ))
+    let rec = app
+        .store
+        .set_active(
+            id,
+            Some(a.calibration_id),
+            "activate",
+            a.by.trim(),
+            a.reason.trim(),
+        )
+        .await;
+    forget_active(&app, id);
+    Ok(Json(rec?))
 }
 
 /// Roll back to the calibration that was active before the current one
@@ -404,11 +412,12 @@ pub async fn rollback(
 ) -> ApiResult<Json<ActivationRec>> {
     check_actor(&r.by, &r.reason)?;
     let previous = app.store.previous_active(id).await?;
-    Ok(Json(
-        app.store
-            .set_active(id, previous, "rollback", r.by.trim(), r.reason.trim())
-            .await?,
-    ))
+    let rec = app
+        .store
+        .set_active(id, previous, "rollback", r.by.trim(), r.reason.trim())
+        .await;
+    forget_active(&app, id);
+    Ok(Json(rec?))
 }
 
 /// A robot's activations and rollbacks, newest first.

@@ -189,6 +189,29 @@ fn check_target(i: usize, t: TargetIn, dof: usize, batch: bool) -> ApiResult<Tar
     })
 }
 
+/// The robot's active calibration id (cached for at most
+/// [`super::ACTIVE_CACHE_TTL`]); not found if the robot does not exist.
+async fn active_calibration(app: &AppState, robot_id: i64) -> ApiResult<Option<i64>> {
+    if let Some((active, at)) = app
+        .active
+        .read()
+        .ok()
+        .and_then(|m| m.get(&robot_id).copied())
+    {
+        if at.elapsed() < super::ACTIVE_CACHE_TTL {
+            return Ok(active);
+        }
+    }
+    let robot = app.store.get_robot(robot_id).await?;
+    if let Ok(mut m) = app.active.write() {
+        m.insert(
+            robot_id,
+            (robot.active_calibration_id, std::time::Instant::now()),
+        );
+    }
+    Ok(robot.active_calibration_id)
+}
+
 /// The compensator of a calibration, from the cache or built (off the
 /// runtime) and cached.
 async fn compensator(app: &AppState, calibration_id: i64) -> ApiResult<Arc<Cached>> {
@@ -266,13 +289,13 @@ pub async fn compensate(
             ),
         ));
     }
-    let robot = app.store.get_robot(req.robot_id).await?;
+    let active = active_calibration(&app, req.robot_id).await?;
     let calibration_id = match req.calibration_id {
         Some(c) => c,
-        None => robot.active_calibration_id.ok_or_else(|| {
+        None => active.ok_or_else(|| {
             ApiError::Conflict(format!(
                 "robot {} has no active calibration: activate one or name calibration_id",
-                robot.id
+                req.robot_id
             ))
         })?,
     };
@@ -285,12 +308,12 @@ pub async fn compensate(
         }
         other => other?,
     };
-    if cached.robot_id != robot.id {
+    if cached.robot_id != req.robot_id {
         return Err(ApiError::invalid(
             "calibration_id",
             format!(
                 "calibration {calibration_id} belongs to robot {}, not {}",
-                cached.robot_id, robot.id
+                cached.robot_id, req.robot_id
             ),
         ));
     }
@@ -321,7 +344,7 @@ pub async fn compensate(
     let results: Vec<CompensatedOut> = results.into_iter().map(Into::into).collect();
     let n_ok = results.iter().filter(|r| r.status == StatusOut::Ok).count();
     Ok(Json(CompensateResponse {
-        robot_id: robot.id,
+        robot_id: req.robot_id,
         calibration_id: cached.calibration_id,
         version: cached.version,
         n_ok,

@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 use tower_http::request_id::{
     MakeRequestId, PropagateRequestIdLayer, RequestId, SetRequestIdLayer,
 };
-use tower_http::trace::TraceLayer;
+use tower_http::trace::{DefaultOnResponse, TraceLayer};
 use utoipa::{IntoParams, OpenApi, ToSchema};
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
@@ -69,7 +69,16 @@ pub struct App {
     pub jobs: Jobs,
     /// Built compensators by calibration id (calibrations are immutable).
     pub compensators: RwLock<HashMap<i64, Arc<compensate::Cached>>>,
+    /// Robots' active calibration ids as last read, with when; refreshed
+    /// after [`ACTIVE_CACHE_TTL`] and dropped at once when this process
+    /// activates or rolls back.
+    pub active: RwLock<HashMap<i64, (Option<i64>, std::time::Instant)>>,
 }
+
+/// How long `/compensate` may use a robot's active calibration id without
+/// reading it again. Activation through this process takes effect at once;
+/// through another replica sharing the database, within this time.
+pub const ACTIVE_CACHE_TTL: Duration = Duration::from_secs(1);
 
 /// Handle to [`App`], cheap to clone.
 #[derive(Clone)]
@@ -210,7 +219,9 @@ pub fn router(state: AppState, max_upload_bytes: usize) -> Router {
         .layer(DefaultBodyLimit::max(max_upload_bytes))
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(
-            TraceLayer::new_for_http().make_span_with(|req: &Request<_>| {
+            TraceLayer::new_for_http()
+                .on_response(DefaultOnResponse::new().level(tracing::Level::INFO))
+                .make_span_with(|req: &Request<_>| {
                 let id = req
                     .headers()
                     .get("x-request-id")
@@ -248,6 +259,7 @@ impl Service {
             store,
             jobs,
             compensators: RwLock::new(HashMap::new()),
+            active: RwLock::new(HashMap::new()),
         }));
         Ok(Service {
             addr,

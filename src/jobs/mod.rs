@@ -218,8 +218,12 @@ pub fn session_csv(columns: &str, batches: &[String]) -> String {
 pub fn summarize(report: &Report, report_json: String) -> NewCalibration {
     let finite = |x: f64| x.is_finite().then_some(x);
     let stats = &report.stats;
-    let mut effects: Vec<&str> = report.findings.iter().map(|f| f.effect.as_str()).collect();
-    effects.dedup();
+    let mut effects: Vec<&str> = Vec::new();
+    for f in &report.findings {
+        if !effects.contains(&f.effect.as_str()) {
+            effects.push(f.effect.as_str());
+        }
+    }
     NewCalibration {
         method: report.method.clone(),
         n_poses: (stats.train.n + stats.test.n) as i64,

@@ -87,6 +87,12 @@ fn parse_dockerfile() -> RuntimeStage {
     }
 }
 
+/// The binary under test: `DRAWCAL_BIN` if set (an installed build), else
+/// this package's.
+fn bin() -> String {
+    std::env::var("DRAWCAL_BIN").unwrap_or_else(|_| env!("CARGO_BIN_EXE_drawcal").to_string())
+}
+
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
@@ -99,7 +105,7 @@ fn free_port() -> u16 {
 /// ENTRYPOINT + CMD, the ENV, `/data` mapped to `data`, port mapped.
 fn start(stage: &RuntimeStage, data: &Path, port: u16, extra_env: &[(&str, &str)]) -> Child {
     assert_eq!(stage.argv[0], "drawcal");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_drawcal"));
+    let mut cmd = Command::new(bin());
     cmd.args(&stage.argv[1..]).env_clear().current_dir(data);
     for (k, v) in &stage.env {
         let v = v
@@ -359,4 +365,83 @@ async fn sigkill_during_a_job_then_restart_completes_it() {
     assert_eq!(all["total"], 1, "exactly one calibration from the job");
     signal(&child2, "-TERM");
     assert!(child2.wait().unwrap().success());
+}
+
+/// The README's service walkthrough, run as written against the built
+/// binary on an empty database (only the port is changed).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn readme_walkthrough_works_as_written() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    let start = readme
+        .find("<!-- SERVICE SECTION START")
+        .expect("service section");
+    let end = readme
+        .find("<!-- SERVICE SECTION END -->")
+        .expect("service section end");
+    let section = &readme[start..end];
+    let blocks: Vec<&str> = section
+        .split("```sh\n")
+        .skip(1)
+        .map(|b| b.split("```").next().unwrap())
+        .collect();
+    assert!(blocks.len() >= 2, "a server block and a client block");
+    assert_eq!(blocks[0].trim(), "cargo run --release -- serve");
+
+    // The first block, from an empty directory (so ./drawcal.db is new).
+    let dir = fresh_dir("readme");
+    let port = free_port();
+    let mut child = Command::new(bin())
+        .arg("serve")
+        .current_dir(&dir)
+        .env_remove("DATABASE_URL")
+        .env("DRAWCAL_LISTEN", format!("127.0.0.1:{port}"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::from(
+            std::fs::File::create(dir.join("server.log")).unwrap(),
+        ))
+        .spawn()
+        .unwrap();
+    let client = reqwest::Client::new();
+    wait_ready(&client, &format!("http://127.0.0.1:{port}"), &mut child).await;
+
+    let script = blocks[1..].join("\n").replace(
+        "BASE=http://127.0.0.1:8080",
+        &format!("BASE=http://127.0.0.1:{port}"),
+    );
+    let out = tokio::task::spawn_blocking(move || {
+        Command::new("bash")
+            .args(["-euo", "pipefail", "-c", &script])
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .unwrap()
+    })
+    .await
+    .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    signal(&child, "-TERM");
+    let _ = child.wait();
+    assert!(
+        out.status.success(),
+        "walkthrough failed: {stderr}\n{stdout}"
+    );
+    assert!(
+        dir.join("drawcal.db").exists(),
+        "the default database file was created"
+    );
+    assert!(stdout.contains("\"state\":\"succeeded\""), "{stdout}");
+    // Both targets compensated, with the calibration that produced them.
+    let comp_line = stdout
+        .lines()
+        .find(|l| l.contains("\"results\""))
+        .expect("compensation answer");
+    let comp: Value = serde_json::from_str(comp_line).unwrap();
+    assert_eq!(comp["calibration_id"], 1);
+    assert_eq!(comp["version"], 1);
+    assert_eq!(comp["n_ok"], 2, "{comp}");
+    assert!(
+        stdout.contains("calibration_id,robot_id,serial_number"),
+        "CSV export"
+    );
 }

@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# Service load figures for BENCHMARKS.md ("## Service load").
+#
+#   tests/api/load/run.sh [path/to/release/drawcal]
+#
+# Starts the release binary on a fresh SQLite file, calibrates a robot from
+# tests/data/er3a_paper_like, then measures with wrk (Debian package `wrk`):
+#   1. POST /compensate, one joint target per request, 64 connections;
+#   2. POST /compensate, 10,000 targets per request (batch throughput);
+#   3. upload + identification of a 2000-pose session, end to end
+#      (the first 2000 poses of tests/data/real_ur10_ipa_random).
+set -euo pipefail
+cd "$(dirname "$0")/../../.."
+BIN=${1:-target/release/drawcal}
+DUR=${DUR:-15s}
+PORT=${PORT:-18080}
+BASE=http://127.0.0.1:$PORT
+WORK=$(mktemp -d)
+trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true; rm -rf "$WORK"' EXIT
+
+DATABASE_URL=sqlite://$WORK/bench.db RUST_LOG=warn "$BIN" serve --listen 127.0.0.1:$PORT --workers 1 2>"$WORK/server.log" &
+SERVER=$!
+until curl -sf $BASE/ready >/dev/null; do sleep 0.2; done
+
+j() { curl -sS --fail-with-body -H 'content-type: application/json' "$@"; }
+id() { python3 -c 'import json,sys; print(json.load(sys.stdin)["id"])'; }
+wait_job() {
+  until curl -sS $BASE/jobs/$1 | grep -Eq '"state":"(succeeded|failed|cancelled)"'; do sleep 0.05; done
+  curl -sS $BASE/jobs/$1 | python3 -c 'import json,sys; j=json.load(sys.stdin); assert j["state"]=="succeeded", j; print(j["calibration_id"])'
+}
+setup() { # dataset serial -> session id
+  local D=tests/data/$1
+  local M=$(j -X POST $BASE/models --data-binary @$D/robot.json | id)
+  local R=$(j -X POST $BASE/robots -d "{\"serial_number\": \"$2\", \"model_id\": $M}" | id)
+  local G=$(j -X POST $BASE/rigs --data-binary @$D/rig.json | id)
+  local S=$(j -X POST $BASE/sessions -d "{\"robot_id\": $R, \"rig_id\": $G}" | id)
+  echo "$R $S"
+}
+
+read ROBOT SESSION < <(setup er3a_paper_like BENCH-1)
+curl -sS --fail-with-body -X POST $BASE/sessions/$SESSION/poses -H 'content-type: text/csv' --data-binary @tests/data/er3a_paper_like/poses.csv >/dev/null
+JOB=$(j -X POST $BASE/sessions/$SESSION/jobs -d '{}' | id)
+CAL=$(wait_job $JOB)
+j -X POST $BASE/robots/$ROBOT/activate -d "{\"calibration_id\": $CAL, \"by\": \"bench\", \"reason\": \"load test\"}" >/dev/null
+
+python3 - "$ROBOT" "$WORK" <<'PY'
+import json, random, sys
+robot, work = int(sys.argv[1]), sys.argv[2]
+rnd = random.Random(1)
+def q():  # nominal joint targets inside the ER3A's limits
+    return [round(rnd.uniform(lo, hi), 4) for lo, hi in [(-150, 150), (-90, 90), (-50, 120), (-150, 150), (-100, 100), (-300, 300)]]
+json.dump({"robot_id": robot, "target": {"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]}}, open(f"{work}/one.json", "w"))
+json.dump({"robot_id": robot, "targets": [{"target": f"t{i}", "q_deg": q()} for i in range(10000)]}, open(f"{work}/batch.json", "w"))
+PY
+echo "### single target, 64 connections"
+BODY=$WORK/one.json wrk -t2 -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
+echo "### batch of 10,000 targets, 2 connections"
+BODY=$WORK/batch.json wrk -t2 -c2 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
+curl -sS -H 'content-type: application/json' --data-binary @$WORK/batch.json $BASE/compensate |
+  python3 -c 'import json,sys; r=json.load(sys.stdin); print("batch statuses:", {s: sum(1 for x in r["results"] if x["status"]==s) for s in ("ok","unreachable","joint_limit")})'
+
+echo "### upload + identify, 2000 poses"
+head -n 2001 tests/data/real_ur10_ipa_random/poses.csv > $WORK/poses2000.csv
+read R2 S2 < <(setup real_ur10_ipa_random BENCH-2)
+T0=$(date +%s.%N)
+curl -sS --fail-with-body -X POST $BASE/sessions/$S2/poses -H 'content-type: text/csv' --data-binary @$WORK/poses2000.csv >/dev/null
+T1=$(date +%s.%N)
+J2=$(j -X POST $BASE/sessions/$S2/jobs -d '{}' | id)
+C2=$(wait_job $J2)
+T2=$(date +%s.%N)
+python3 -c "print(f'upload {($T1-$T0)*1000:.0f} ms, identify {($T2-$T1):.2f} s, end to end {($T2-$T0):.2f} s (calibration $C2)')"
+curl -sS $BASE/calibrations/$C2 | python3 -c 'import json,sys; c=json.load(sys.stdin)["calibration"]; print("held-out RMS before/after (mm):", c["test_rms_before_mm"], c["test_rms_after_mm"])'
