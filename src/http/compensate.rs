@@ -337,10 +337,12 @@ pub async fn compensate(
     }
     let orientation = req.orientation;
     let c = cached.clone();
-    let results =
-        tokio::task::spawn_blocking(move || solve_all(&c.compensator, &targets, orientation))
-            .await
-            .map_err(|e| ApiError::Internal(format!("compensation task: {e}")))?;
+    let threads = solve_threads(targets.len());
+    let results = app
+        .compute
+        .run(move || solve_all(&c.compensator, &targets, orientation, threads))
+        .await
+        .ok_or_else(|| ApiError::Internal("compensation failed (see the log)".into()))?;
     let results: Vec<CompensatedOut> = results.into_iter().map(Into::into).collect();
     let n_ok = results.iter().filter(|r| r.status == StatusOut::Ok).count();
     Ok(Json(CompensateResponse {
@@ -352,12 +354,23 @@ pub async fn compensate(
     }))
 }
 
-/// Solve in order; batches are split across the cores.
-fn solve_all(comp: &Compensator, targets: &[Target], orientation: bool) -> Vec<Compensated> {
-    let threads = std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1);
-    if targets.len() < 256 || threads < 2 {
+/// Threads for a batch: one for small batches, one per core for large ones.
+fn solve_threads(n_targets: usize) -> usize {
+    if n_targets < 256 {
+        1
+    } else {
+        super::compute_threads()
+    }
+}
+
+/// Solve in order, split across `threads` threads.
+fn solve_all(
+    comp: &Compensator,
+    targets: &[Target],
+    orientation: bool,
+    threads: usize,
+) -> Vec<Compensated> {
+    if threads < 2 {
         return crate::compensate::compensate_all(comp, targets, orientation);
     }
     let chunk = targets.len().div_ceil(threads);

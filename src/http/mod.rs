@@ -14,6 +14,7 @@
 
 pub mod calibrations;
 pub mod compensate;
+pub mod compute;
 pub mod error;
 pub mod extract;
 pub mod ops;
@@ -73,6 +74,15 @@ pub struct App {
     /// after [`ACTIVE_CACHE_TTL`] and dropped at once when this process
     /// activates or rolls back.
     pub active: RwLock<HashMap<i64, (Option<i64>, std::time::Instant)>>,
+    /// Threads for request-path numerical work (one per core).
+    pub compute: compute::ComputePool,
+}
+
+/// Threads for request-path numerical work: the number of cores.
+pub fn compute_threads() -> usize {
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
 }
 
 /// How long `/compensate` may use a robot's active calibration id without
@@ -260,6 +270,7 @@ impl Service {
             jobs,
             compensators: RwLock::new(HashMap::new()),
             active: RwLock::new(HashMap::new()),
+            compute: compute::ComputePool::new(compute_threads()),
         }));
         Ok(Service {
             addr,
