@@ -11,6 +11,8 @@ COPY Cargo.toml Cargo.lock ./
 COPY src src
 COPY migrations migrations
 COPY benches benches
+# Datasets the library embeds (include_str!) as built-in examples.
+COPY tests/data tests/data
 RUN cargo build --release --locked --bin drawcal \
  && strip target/release/drawcal
 

@@ -445,3 +445,85 @@ async fn readme_walkthrough_works_as_written() {
         "CSV export"
     );
 }
+
+/// The build stage copies everything the release build reads: the
+/// manifest's targets and every file `include_str!`/`include_bytes!` pulls in.
+#[test]
+fn dockerfile_build_stage_copies_what_the_build_reads() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("Dockerfile")).unwrap();
+    let build_stage: Vec<&str> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("FROM "))
+        .skip(1)
+        .take_while(|l| !l.starts_with("FROM "))
+        .collect();
+    let copied: Vec<String> = build_stage
+        .iter()
+        .filter_map(|l| l.strip_prefix("COPY "))
+        .filter(|l| !l.starts_with("--from"))
+        .flat_map(|l| {
+            let parts: Vec<&str> = l.split_whitespace().collect();
+            parts[..parts.len() - 1]
+                .iter()
+                .map(|s| s.to_string())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let is_copied = |rel: &str| {
+        copied
+            .iter()
+            .any(|c| rel == c || rel.starts_with(&format!("{c}/")))
+    };
+    // Manifest targets.
+    let manifest = std::fs::read_to_string(root.join("Cargo.toml")).unwrap();
+    for line in manifest.lines() {
+        if let Some(p) = line.trim().strip_prefix("path = ") {
+            let p = p.trim_matches('"');
+            assert!(
+                is_copied(p),
+                "Cargo.toml target {p} is not copied into the build stage"
+            );
+        }
+    }
+    for (name, dir) in [("bench", "benches")] {
+        if manifest.contains(&format!("[[{name}]]")) {
+            assert!(is_copied(dir), "{dir} not copied");
+        }
+    }
+    assert!(is_copied("Cargo.lock") && is_copied("src/lib.rs") && is_copied("migrations/sqlite/x"));
+    // Files embedded by the source.
+    let mut stack = vec![root.join("src")];
+    while let Some(dir) = stack.pop() {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+                continue;
+            }
+            let src = std::fs::read_to_string(&p).unwrap_or_default();
+            for mac in ["include_str!(\"", "include_bytes!(\""] {
+                for (i, _) in src.match_indices(mac) {
+                    let rest = &src[i + mac.len()..];
+                    let rel = &rest[..rest.find('"').unwrap()];
+                    let full = p.parent().unwrap().join(rel);
+                    let mut norm = std::path::PathBuf::new();
+                    for c in full.strip_prefix(root).unwrap().components() {
+                        match c {
+                            std::path::Component::ParentDir => {
+                                norm.pop();
+                            }
+                            other => norm.push(other),
+                        }
+                    }
+                    let norm = norm.to_string_lossy().to_string();
+                    assert!(
+                        is_copied(&norm),
+                        "{} embeds {norm}, which the Dockerfile does not copy",
+                        p.display()
+                    );
+                }
+            }
+        }
+    }
+}
