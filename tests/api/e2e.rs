@@ -103,6 +103,11 @@ async fn calibrate_activate_compensate_against_truth() {
             poses.clone(),
         )
         .await;
+    let request_id = r
+        .headers()
+        .get("x-request-id")
+        .expect("a request id on every answer");
+    assert!(!request_id.is_empty());
     let up = validate_response("post", "/sessions/{id}/poses", r).await;
     assert_eq!(up["added"], 50);
     assert_eq!(up["session"]["n_poses"], 50);

@@ -327,7 +327,38 @@ async fn suite(store: Store) {
         .await,
         2
     );
+    concurrent_claims(&store, s.id, r1.id).await;
     store.close().await;
+}
+
+/// Many workers claiming at once: every job is claimed exactly once.
+async fn concurrent_claims(store: &Store, session: i64, robot: i64) {
+    let mut ids = Vec::new();
+    for _ in 0..24 {
+        ids.push(store.create_job(session, robot, "{}", 3).await.unwrap().id);
+    }
+    let now = drawcal::store::now_ms();
+    let mut tasks = Vec::new();
+    for w in 0..6 {
+        let store = store.clone();
+        tasks.push(tokio::spawn(async move {
+            let mut got = Vec::new();
+            while let Some(j) = store
+                .claim_job(&format!("c{w}"), now, 60_000)
+                .await
+                .unwrap()
+            {
+                got.push(j.id);
+            }
+            got
+        }));
+    }
+    let mut claimed = Vec::new();
+    for t in tasks {
+        claimed.extend(t.await.unwrap());
+    }
+    claimed.sort();
+    assert_eq!(claimed, ids, "each job claimed once, none lost");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
