@@ -426,3 +426,87 @@ fn migrations_are_in_lockstep() {
         "migrations/sqlite and migrations/postgres must have the same versions"
     );
 }
+
+/// The whole service on PostgreSQL: upload, identification job, activation,
+/// compensation (a fresh database).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn service_runs_on_postgres() {
+    use crate::helpers::{Options, TestApp, ok_json};
+    use serde_json::json;
+    let admin = std::env::var("DATABASE_URL_POSTGRES")
+        .or_else(|_| std::env::var("DRAWCAL_TEST_PG"))
+        .unwrap_or_else(|_| "postgres://postgres@127.0.0.1:5432/test".into());
+    let name = format!(
+        "drawcal_app_{}_{}",
+        std::process::id(),
+        drawcal::store::now_ms()
+    );
+    let mut conn = sqlx::PgConnection::connect(&admin)
+        .await
+        .expect("PostgreSQL reachable");
+    sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}")))
+        .execute(&mut conn)
+        .await
+        .unwrap();
+    let url = format!("{}/{name}", admin.rsplit_once('/').unwrap().0);
+    let app = TestApp::spawn_on(
+        &url,
+        Options {
+            workers: 2,
+            ..Options::default()
+        },
+    )
+    .await;
+    let ready = ok_json(app.get("/ready").await, 200).await;
+    assert_eq!(ready["database"], "postgres");
+    let ds = "er3a_paper_like";
+    let (_, robot, _, sid) = app.setup(ds, "PG-1").await;
+    ok_json(
+        app.post_raw(
+            &format!("/sessions/{sid}/poses"),
+            Some("text/csv"),
+            read(ds, "poses.csv"),
+        )
+        .await,
+        200,
+    )
+    .await;
+    let job = ok_json(
+        app.post_raw(&format!("/sessions/{sid}/jobs"), None, "")
+            .await,
+        202,
+    )
+    .await;
+    let done = app
+        .wait_job(
+            job["id"].as_i64().unwrap(),
+            std::time::Duration::from_secs(600),
+        )
+        .await;
+    assert_eq!(done["state"], "succeeded", "{done}");
+    let cal = done["calibration_id"].as_i64().unwrap();
+    ok_json(
+        app.post_json(
+            &format!("/robots/{robot}/activate"),
+            &json!({"calibration_id": cal, "by": "pg", "reason": "test"}),
+        )
+        .await,
+        200,
+    )
+    .await;
+    let out = ok_json(
+        app.post_json("/compensate", &json!({"robot_id": robot, "target": {"target": "t", "q_deg": [10, -20, 30, 0, 40, 0]}})).await,
+        200,
+    )
+    .await;
+    assert_eq!(out["results"][0]["status"], "ok");
+    let hist = ok_json(app.get("/calibrations?site=plant-1&format=json").await, 200).await;
+    assert_eq!(hist["total"], 1);
+    app.stop().await;
+    sqlx::query(sqlx::AssertSqlSafe(format!(
+        "DROP DATABASE {name} WITH (FORCE)"
+    )))
+    .execute(&mut conn)
+    .await
+    .unwrap();
+}
