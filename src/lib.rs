@@ -31,6 +31,8 @@ pub mod kinematics;
 pub mod measure;
 pub mod model;
 pub mod physics;
+/// The calibration report as HTML with inline SVG plots (CLI and service).
+pub mod report_html;
 pub mod rng;
 /// Persistence for the HTTP service (SQLite and PostgreSQL): the only code that speaks SQL.
 pub mod store;

@@ -2,6 +2,7 @@
 //! prints summaries and writes results.
 
 pub mod evaluate;
+pub mod report;
 pub mod serve;
 pub mod simulate;
 pub mod summary;
@@ -80,6 +81,7 @@ pub enum Command {
     Simulate(simulate::SimulateArgs),
     /// Blind evaluation of the physics analysis on simulated datasets.
     Evaluate(evaluate::EvaluateArgs),
+    Report(report::ReportArgs),
 }
 
 /// Identification method on the command line.
@@ -185,6 +187,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Serve(a) => serve::run(a).map_err(|e| CliError::Other(e.to_string())),
         Command::Simulate(a) => simulate::run(a).map_err(|e| CliError::Other(e.to_string())),
         Command::Evaluate(a) => evaluate::run(a).map_err(|e| CliError::Other(e.to_string())),
+        Command::Report(a) => report::run(a).map_err(|e| CliError::Other(e.to_string())),
     }
 }
 

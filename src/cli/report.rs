@@ -1,0 +1,65 @@
+//! `drawcal report`: a calibration report as one self-contained HTML file.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use crate::identify::report::Report;
+use crate::report_html::{self, PoseColumns};
+
+/// Write a calibration report as one self-contained HTML file (tables and
+/// inline SVG plots): `drawcal report report.json --html out.html`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// A report written by `drawcal identify --out` (or a calibration as
+    /// `GET /calibrations/{id}` answers it, `{calibration, report}`).
+    pub report: PathBuf,
+    /// Where to write the HTML file.
+    #[arg(long)]
+    pub html: PathBuf,
+    /// The poses.csv the report was identified from: adds the residual
+    /// against each joint angle, time, temperature and string length.
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
+    /// Title of the page (default: the report file's name).
+    #[arg(long)]
+    pub title: Option<String>,
+}
+
+/// Parse a report file: the report itself or the service's calibration
+/// answer wrapping it.
+pub fn parse_report(text: &str) -> Result<Report, String> {
+    let v: serde_json::Value = serde_json::from_str(text).map_err(|e| e.to_string())?;
+    let inner = match v.get("report") {
+        Some(r) if r.is_object() => r.clone(),
+        _ => v,
+    };
+    serde_json::from_value(inner).map_err(|e| format!("not a drawcal report: {e}"))
+}
+
+/// Write the HTML report.
+pub fn run(args: ReportArgs) -> Result<(), Box<dyn std::error::Error>> {
+    let text = std::fs::read_to_string(&args.report)
+        .map_err(|e| format!("{}: {e}", args.report.display()))?;
+    let report = parse_report(&text).map_err(|e| format!("{}: {e}", args.report.display()))?;
+    let poses = match &args.poses {
+        None => None,
+        Some(p) => {
+            let f = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            Some(PoseColumns::from_csv(f).map_err(|e| format!("{}: {e}", p.display()))?)
+        }
+    };
+    let title = args.title.clone().unwrap_or_else(|| {
+        format!(
+            "drawcal calibration report: {}",
+            args.report
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        )
+    });
+    let html = report_html::render(&report, &title, poses.as_ref());
+    std::fs::write(&args.html, html).map_err(|e| format!("{}: {e}", args.html.display()))?;
+    eprintln!("HTML report written to {}", args.html.display());
+    Ok(())
+}

@@ -1,0 +1,239 @@
+//! Minimal SVG plots (scatter and grouped bars) as strings, no JavaScript.
+
+use std::fmt::Write;
+
+/// One series of a scatter plot.
+pub struct Series<'a> {
+    /// Legend label.
+    pub label: &'a str,
+    /// CSS colour.
+    pub color: &'a str,
+    /// Points (x, y).
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Escape text for HTML and SVG.
+pub fn esc(s: &str) -> String {
+    let mut o = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => o.push_str("&amp;"),
+            '<' => o.push_str("&lt;"),
+            '>' => o.push_str("&gt;"),
+            '"' => o.push_str("&quot;"),
+            '\'' => o.push_str("&#39;"),
+            c => o.push(c),
+        }
+    }
+    o
+}
+
+/// "Nice" tick positions covering [lo, hi].
+fn ticks(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    if !(hi > lo) || !lo.is_finite() || !hi.is_finite() {
+        return vec![lo];
+    }
+    let raw = (hi - lo) / n.max(1) as f64;
+    let mag = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 2.5, 5.0, 10.0]
+        .iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * mag);
+    let mut t = (lo / step).ceil() * step;
+    let mut out = Vec::new();
+    while t <= hi + step * 1e-9 {
+        out.push(if t.abs() < step * 1e-9 { 0.0 } else { t });
+        t += step;
+    }
+    out
+}
+
+fn fmt_tick(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        "0".into()
+    } else if a >= 1000.0 || a < 0.001 {
+        format!("{v:.2e}")
+    } else {
+        let s = format!("{v:.4}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        s.to_string()
+    }
+}
+
+fn range(vals: impl Iterator<Item = f64>, zero: bool) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in vals.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    if zero {
+        lo = lo.min(0.0);
+        hi = hi.max(0.0);
+    }
+    if hi - lo < 1e-12 {
+        let d = if lo.abs() > 0.0 { lo.abs() * 0.1 } else { 1.0 };
+        return (lo - d, hi + d);
+    }
+    let pad = (hi - lo) * 0.04;
+    (if zero && lo == 0.0 { 0.0 } else { lo - pad }, hi + pad)
+}
+
+const W: f64 = 560.0;
+const H: f64 = 300.0;
+const L: f64 = 62.0;
+const R: f64 = 12.0;
+const T: f64 = 26.0;
+const B: f64 = 42.0;
+
+fn frame(
+    out: &mut String,
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    x: (f64, f64),
+    y: (f64, f64),
+    xticks: bool,
+) {
+    let pw = W - L - R;
+    let ph = H - T - B;
+    let _ = write!(
+        out,
+        r##"<svg class="plot" viewBox="0 0 {W} {H}" width="{W}" height="{H}" role="img" aria-label="{t}"><title>{t}</title><rect x="{L}" y="{T}" width="{pw}" height="{ph}" fill="#fff" stroke="#999"/><text x="{cx}" y="16" text-anchor="middle" font-size="13" font-weight="bold">{t}</text><text x="{cx}" y="{xl}" text-anchor="middle" font-size="12">{xlab}</text><text transform="translate(14 {cy}) rotate(-90)" text-anchor="middle" font-size="12">{ylab}</text>"##,
+        t = esc(title),
+        cx = L + pw / 2.0,
+        cy = T + ph / 2.0,
+        xl = H - 6.0,
+        xlab = esc(xlabel),
+        ylab = esc(ylabel),
+    );
+    for v in ticks(y.0, y.1, 5) {
+        let py = T + ph * (1.0 - (v - y.0) / (y.1 - y.0));
+        let _ = write!(
+            out,
+            r##"<line x1="{L}" x2="{x2}" y1="{py:.1}" y2="{py:.1}" stroke="#e4e4e4"/><text x="{tx}" y="{ty:.1}" text-anchor="end" font-size="11">{s}</text>"##,
+            x2 = L + pw,
+            tx = L - 4.0,
+            ty = py + 4.0,
+            s = fmt_tick(v)
+        );
+    }
+    if xticks {
+        for v in ticks(x.0, x.1, 6) {
+            let px = L + pw * (v - x.0) / (x.1 - x.0);
+            let _ = write!(
+                out,
+                r##"<line y1="{T}" y2="{y2}" x1="{px:.1}" x2="{px:.1}" stroke="#eee"/><text x="{px:.1}" y="{ty}" text-anchor="middle" font-size="11">{s}</text>"##,
+                y2 = T + ph,
+                ty = T + ph + 14.0,
+                s = fmt_tick(v)
+            );
+        }
+    }
+}
+
+fn legend(out: &mut String, items: &[(&str, &str)]) {
+    let mut x = L + 6.0;
+    for (label, color) in items {
+        let _ = write!(
+            out,
+            r#"<rect x="{x}" y="{y}" width="10" height="10" fill="{color}"/><text x="{tx}" y="{ty}" font-size="11">{l}</text>"#,
+            y = T + 5.0,
+            tx = x + 13.0,
+            ty = T + 14.0,
+            l = esc(label)
+        );
+        x += 22.0 + 6.5 * label.len() as f64;
+    }
+}
+
+/// A scatter plot. Each series is drawn as one SVG path of round dots, so
+/// tens of thousands of points stay cheap to draw.
+pub fn scatter(title: &str, xlabel: &str, ylabel: &str, series: &[Series]) -> String {
+    let x = range(
+        series.iter().flat_map(|s| s.points.iter().map(|p| p.0)),
+        false,
+    );
+    let y = range(
+        series.iter().flat_map(|s| s.points.iter().map(|p| p.1)),
+        true,
+    );
+    let mut out = String::new();
+    frame(&mut out, title, xlabel, ylabel, x, y, true);
+    let pw = W - L - R;
+    let ph = H - T - B;
+    let n: usize = series.iter().map(|s| s.points.len()).sum();
+    let dot = if n > 3000 { 2.0 } else { 4.0 };
+    for s in series {
+        let mut d = String::with_capacity(s.points.len() * 16);
+        for &(px, py) in &s.points {
+            if !(px.is_finite() && py.is_finite()) {
+                continue;
+            }
+            let sx = L + pw * (px - x.0) / (x.1 - x.0);
+            let sy = T + ph * (1.0 - (py - y.0) / (y.1 - y.0));
+            let _ = write!(d, "M{sx:.1} {sy:.1}h0");
+        }
+        let _ = write!(
+            out,
+            r#"<path class="series" data-label="{l}" data-n="{n}" d="{d}" stroke="{c}" stroke-width="{dot}" stroke-linecap="round" fill="none" opacity="0.8"/>"#,
+            l = esc(s.label),
+            n = s.points.len(),
+            c = s.color
+        );
+    }
+    let items: Vec<(&str, &str)> = series.iter().map(|s| (s.label, s.color)).collect();
+    legend(&mut out, &items);
+    out.push_str("</svg>");
+    out
+}
+
+/// Grouped bars: `groups` along x, one bar per entry of `bars` (label,
+/// colour) in each group; `values[g][b]`.
+pub fn bars(
+    title: &str,
+    ylabel: &str,
+    groups: &[&str],
+    bars: &[(&str, &str)],
+    values: &[Vec<f64>],
+) -> String {
+    let y = range(values.iter().flatten().copied(), true);
+    let y = (0.0f64.min(y.0), y.1);
+    let mut out = String::new();
+    frame(&mut out, title, "", ylabel, (0.0, 1.0), y, false);
+    let pw = W - L - R;
+    let ph = H - T - B;
+    let gw = pw / groups.len().max(1) as f64;
+    let bw = gw * 0.8 / bars.len().max(1) as f64;
+    for (g, name) in groups.iter().enumerate() {
+        let gx = L + gw * g as f64 + gw * 0.1;
+        let _ = write!(
+            out,
+            r#"<text x="{x:.1}" y="{ty}" text-anchor="middle" font-size="11">{n}</text>"#,
+            x = L + gw * (g as f64 + 0.5),
+            ty = T + ph + 14.0,
+            n = esc(name)
+        );
+        for (b, (label, color)) in bars.iter().enumerate() {
+            let v = values.get(g).and_then(|r| r.get(b)).copied().unwrap_or(0.0);
+            let top = T + ph * (1.0 - (v.max(y.0) - y.0) / (y.1 - y.0));
+            let base = T + ph * (1.0 - (0.0 - y.0) / (y.1 - y.0));
+            let _ = write!(
+                out,
+                r#"<rect class="bar" x="{x:.1}" y="{yy:.1}" width="{bw:.1}" height="{h:.1}" fill="{color}" data-value="{v}"><title>{n} {l}: {v:.4}</title></rect>"#,
+                x = gx + bw * b as f64,
+                yy = top.min(base),
+                h = (base - top).abs().max(0.5),
+                n = esc(name),
+                l = esc(label),
+            );
+        }
+    }
+    legend(&mut out, bars);
+    out.push_str("</svg>");
+    out
+}
