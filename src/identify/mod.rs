@@ -24,7 +24,7 @@ pub mod stats;
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use crate::error::{Error, Result};
-use crate::kinematics::chain::{Chain, OutputFrame};
+use crate::kinematics::chain::{Chain, OutputFrame, joint_trig};
 use crate::kinematics::{JointParam, Params};
 use crate::measure::{self, Located};
 use crate::model::{BasePose, Dataset, Measurement, Rig, Robot, Split};
@@ -115,6 +115,8 @@ pub struct Session<'a> {
     pub measured: Vec<Vector3<f64>>,
     /// Multilateration results per pose (string data).
     pub located: Vec<Located>,
+    /// Sines and cosines of every pose's joint angles, computed once.
+    pub q_trig: Vec<Vec<(f64, f64)>>,
 }
 
 impl<'a> Session<'a> {
@@ -180,7 +182,9 @@ impl<'a> Session<'a> {
                 Measurement::Point(p) => measured.push(*p),
             }
         }
+        let q_trig = data.poses.iter().map(|p| joint_trig(&p.q_rad)).collect();
         Ok(Session {
+            q_trig,
             robot,
             rig,
             data,
@@ -213,27 +217,33 @@ impl<'a> Session<'a> {
     pub fn errors(&self, p: &[f64], idx: &[usize]) -> Vec<Vector3<f64>> {
         let b = self.chain.layout.base();
         let rb = crate::kinematics::rpy_matrix(p[b + 3], p[b + 4], p[b + 5]);
+        let trig = self.chain.trig(p);
         idx.iter()
             .map(|&i| {
-                let (_, t) = self
-                    .chain
-                    .point(p, &self.data.poses[i].q_rad, OutputFrame::Rig);
-                rb.transpose() * (t - self.measured[i])
+                rb.transpose()
+                    * (self.chain.point_trig(p, &trig, &self.q_trig[i]) - self.measured[i])
             })
             .collect()
     }
 
-    /// Before/after figures on train and test.
-    pub fn stats(&self, before: &[f64], after: &[f64]) -> Stats {
+    /// Before/after figures on train and test from per-pose errors of every
+    /// pose (indexed like `data.poses`).
+    pub fn stats_of(&self, before: &[Vector3<f64>], after: &[Vector3<f64>]) -> Stats {
         let split = |idx: &[usize]| SplitStats {
             n: idx.len(),
-            before: stats::error_stats(&self.errors(before, idx)),
-            after: stats::error_stats(&self.errors(after, idx)),
+            before: stats::error_stats(&idx.iter().map(|&i| before[i]).collect::<Vec<_>>()),
+            after: stats::error_stats(&idx.iter().map(|&i| after[i]).collect::<Vec<_>>()),
         };
         Stats {
             train: split(&self.train),
             test: split(&self.test),
         }
+    }
+
+    /// Before/after figures on train and test.
+    pub fn stats(&self, before: &[f64], after: &[f64]) -> Stats {
+        let all: Vec<usize> = (0..self.data.poses.len()).collect();
+        self.stats_of(&self.errors(before, &all), &self.errors(after, &all))
     }
 
     /// String noise (1 sigma, mm) from the strings' redundancy.
@@ -523,29 +533,30 @@ pub fn identify(
             (p.values.clone(), "paper", None, vec![])
         }
     };
-    let mut stats = session.stats(&geo.before.values, &after_values);
+    let all: Vec<usize> = (0..data.poses.len()).collect();
+    let eb = session.errors(&geo.before.values, &all);
+    let mut ea = session.errors(&after_values, &all);
     let mut findings = vec![];
     if opts.physics && opts.method == Method::Lm {
         progress.update("physics analysis", 0.0);
         let an = crate::physics::analyse(&session, &geo, opts, progress)?;
         if !an.effects.is_empty() {
             // The final model is the geometry refitted with the accepted
-            // effects; its figures are what stats.*.after report.
-            let train = crate::physics::errors_with_effects(
+            // effects; its errors are what stats.*.after and per_pose report.
+            ea = crate::physics::errors_with_effects(
                 &session,
                 &an.context,
                 &an.final_params.values,
                 &an.effects,
-                &session.train,
+                &all,
             );
-            stats.train.after = stats::error_stats(&train);
-            stats.test.after = stats::error_stats(&an.test_errors);
             after_values = an.final_params.values.clone();
         }
         findings = an.findings;
     }
+    let stats = session.stats_of(&eb, &ea);
     let paper_stats = match (&paper, opts.method) {
-        (Ok(p), Method::Lm) => Some(session.stats(&geo.before.values, &p.values)),
+        (Ok(p), Method::Lm) => Some(session.stats_of(&eb, &session.errors(&p.values, &all))),
         _ => None,
     };
 
@@ -643,9 +654,6 @@ pub fn identify(
         .collect();
 
     let mut per_pose = Vec::with_capacity(data.poses.len());
-    let all: Vec<usize> = (0..data.poses.len()).collect();
-    let eb = session.errors(&geo.before.values, &all);
-    let ea = session.errors(&after.values, &all);
     let test_set: std::collections::HashSet<usize> = session.test.iter().copied().collect();
     let mut r = Vec::new();
     for i in all {

@@ -154,23 +154,33 @@ impl LeastSquares for CalibrationProblem<'_> {
         let mut jac: PointJacobian = self.chain.new_jacobian();
         let mut cost = 0.0;
         let g = self.chain.layout.n_geometric();
-        // Rows (scaled by √w) are gathered in blocks and folded in with a
-        // matrix product, which is several times faster than rank-1 updates.
+        // Rows (scaled by √w) are gathered in column-major blocks and folded
+        // in as column dot products over the upper triangle only: half the
+        // work of a full matrix product and several times faster than rank-1
+        // updates.
         const BLOCK: usize = 256;
         let mut rows = DMatrix::<f64>::zeros(BLOCK, n);
         let mut res = DVector::<f64>::zeros(BLOCK);
+        let mut upper = vec![0.0; n * n];
         let mut filled = 0;
-        let flush = |rows: &mut DMatrix<f64>,
-                     res: &mut DVector<f64>,
+        let flush = |rows: &DMatrix<f64>,
+                     res: &DVector<f64>,
                      filled: &mut usize,
-                     jtj: &mut DMatrix<f64>,
+                     upper: &mut [f64],
                      jtr: &mut DVector<f64>| {
-            if *filled == 0 {
+            let m = *filled;
+            if m == 0 {
                 return;
             }
-            let b = rows.rows(0, *filled);
-            jtj.gemm_tr(1.0, &b, &b, 1.0);
-            jtr.gemv_tr(1.0, &b, &res.rows(0, *filled), 1.0);
+            let data = rows.as_slice();
+            let r = &res.as_slice()[..m];
+            for a in 0..n {
+                let ca = &data[a * BLOCK..a * BLOCK + m];
+                jtr[a] += dot(ca, r);
+                for b in a..n {
+                    upper[a * n + b] += dot(ca, &data[b * BLOCK..b * BLOCK + m]);
+                }
+            }
             *filled = 0;
         };
         let trig = self.chain.trig(&p);
@@ -205,7 +215,7 @@ impl LeastSquares for CalibrationProblem<'_> {
                         res[filled] = sw * r;
                         filled += 1;
                         if filled == BLOCK {
-                            flush(&mut rows, &mut res, &mut filled, jtj, jtr);
+                            flush(&rows, &res, &mut filled, &mut upper, jtr);
                         }
                     }
                 }
@@ -223,13 +233,39 @@ impl LeastSquares for CalibrationProblem<'_> {
                         res[filled] = sw * r;
                         filled += 1;
                         if filled == BLOCK {
-                            flush(&mut rows, &mut res, &mut filled, jtj, jtr);
+                            flush(&rows, &res, &mut filled, &mut upper, jtr);
                         }
                     }
                 }
             }
         }
-        flush(&mut rows, &mut res, &mut filled, jtj, jtr);
+        flush(&rows, &res, &mut filled, &mut upper, jtr);
+        for a in 0..n {
+            for b in a..n {
+                jtj[(a, b)] = upper[a * n + b];
+                jtj[(b, a)] = upper[a * n + b];
+            }
+        }
         0.5 * cost
     }
+}
+
+/// Dot product with four independent accumulators, so the compiler can keep
+/// several multiply-adds in flight (and vectorise) without reassociating.
+#[inline(always)]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let ca = a.chunks_exact(4);
+    let cb = b.chunks_exact(4);
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
+    }
+    s
 }
