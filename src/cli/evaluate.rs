@@ -43,7 +43,7 @@ pub fn run(args: EvaluateArgs) -> Result<(), Box<dyn std::error::Error>> {
     let outcomes = evaluate::sweep(&cfg, |o| {
         if verbose {
             println!(
-                "{} seed {} size {}: truth {:?} found {:?} test geo {:.4} final {:.4} floor {:.4} ({:.0} ms)",
+                "{} seed {} size {}: truth {:?} found {:?} test geo {:.4} final {:.4} floor {:.4} ({:.0} ms) worse3d {}",
                 o.robot,
                 o.seed,
                 o.size_x_noise,
@@ -52,7 +52,8 @@ pub fn run(args: EvaluateArgs) -> Result<(), Box<dyn std::error::Error>> {
                 o.test_geometric_mm,
                 o.test_final_mm,
                 o.test_floor_mm,
-                1e3 * o.seconds
+                1e3 * o.seconds,
+                o.worse_3d
             );
         }
     });

@@ -41,6 +41,9 @@ pub struct Outcome {
     pub test_floor_mm: f64,
     /// Analysis time (s).
     pub seconds: f64,
+    /// Named findings whose held-out 3-D RMS went up when modelled (the
+    /// gate is on the held-out readings).
+    pub worse_3d: usize,
 }
 
 /// Slot of an effect: which joint or sensor (1-based).
@@ -145,7 +148,13 @@ pub fn run_case(
         .iter()
         .map(|f| slot(&f.effect, f.joint, f.sensor))
         .collect();
+    let worse_3d = analysis
+        .findings
+        .iter()
+        .filter(|f| f.effect != "unexplained" && f.test_rms_after_mm > f.test_rms_before_mm)
+        .count();
     Ok(Outcome {
+        worse_3d,
         robot: robot.into(),
         seed,
         size_x_noise: size,
