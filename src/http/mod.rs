@@ -20,6 +20,7 @@ pub mod extract;
 pub mod ops;
 pub mod resources;
 pub mod sessions;
+pub mod ui;
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -181,6 +182,7 @@ fn api() -> OpenApiRouter<AppState> {
         .routes(routes!(sessions::cancel_job))
         .routes(routes!(calibrations::list_calibrations))
         .routes(routes!(calibrations::get_calibration))
+        .routes(routes!(ui::calibration_report_html))
         .routes(routes!(calibrations::robot_accuracy))
         .routes(routes!(calibrations::activate))
         .routes(routes!(calibrations::rollback))
@@ -224,6 +226,7 @@ pub fn router(state: AppState, max_upload_bytes: usize) -> Router {
         next: Arc::new(AtomicU64::new(1)),
     };
     router
+        .merge(ui::routes())
         .fallback(|| async { ApiError::NotFound("no such route".into()) })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
         .layer(DefaultBodyLimit::max(max_upload_bytes))

@@ -1,0 +1,400 @@
+// drawcal browser page: plain JavaScript, no framework, no build step.
+// Every number shown comes from the API as it answered; this script only
+// formats it (and draws the accuracy history). The calibration's tables and
+// plots are the server's HTML report (GET /calibrations/{id}/report.html).
+"use strict";
+
+const $ = (sel, root) => (root || document).querySelector(sel);
+const view = () => $("#view");
+
+function esc(s) {
+  return String(s == null ? "" : s).replace(/[&<>"']/g, c =>
+    ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c]));
+}
+function num(v, d) {
+  if (v === null || v === undefined) return "-";
+  return Number(v).toFixed(d === undefined ? 4 : d);
+}
+function td(v) {
+  return `<td class="num" data-value="${v == null ? "" : v}">${num(v)}</td>`;
+}
+
+class ApiErr extends Error {
+  constructor(status, body) {
+    super(body && body.message ? body.message : "HTTP " + status);
+    this.status = status;
+    this.body = body || {};
+  }
+}
+
+async function api(method, path, body, contentType) {
+  const opt = {method, headers: {}};
+  if (body !== undefined) {
+    opt.headers["content-type"] = contentType || "application/json";
+    opt.body = typeof body === "string" ? body : JSON.stringify(body);
+  }
+  const r = await fetch(path, opt);
+  const ct = r.headers.get("content-type") || "";
+  const data = ct.includes("json") ? await r.json() : await r.text();
+  if (!r.ok) throw new ApiErr(r.status, typeof data === "object" ? data : {message: data});
+  return data;
+}
+
+// An API error as the API gives it: code, message, field, row.
+function errorHtml(e) {
+  if (!(e instanceof ApiErr)) return `<div class="error">${esc(e.message || e)}</div>`;
+  const b = e.body;
+  let where = "";
+  if (b.row != null) where += ` row <b class="err-row">${esc(b.row)}</b>`;
+  if (b.field != null) where += ` column/field <b class="err-field">${esc(b.field)}</b>`;
+  return `<div class="error" data-error="${esc(b.error)}">HTTP ${e.status} <b>${esc(b.error || "")}</b>${where ? ":" + where : ""}\n${esc(b.message)}</div>`;
+}
+
+function showError(el, e) { el.innerHTML = errorHtml(e); }
+
+let timers = [];
+function clearTimers() { timers.forEach(clearInterval); timers = []; }
+
+async function route() {
+  clearTimers();
+  const h = location.hash.replace(/^#/, "") || "/";
+  const parts = h.split("/").filter(Boolean);
+  try {
+    if (parts.length === 0) await fleetView();
+    else if (parts[0] === "setup") await setupView();
+    else if (parts[0] === "robot") await robotView(+parts[1]);
+    else if (parts[0] === "session") await sessionView(+parts[1]);
+    else if (parts[0] === "calibration") await calibrationView(+parts[1]);
+    else if (parts[0] === "compensate") await compensateView();
+    else view().innerHTML = "<p>No such view.</p>";
+  } catch (e) {
+    view().innerHTML = errorHtml(e);
+  }
+}
+window.addEventListener("hashchange", route);
+window.addEventListener("DOMContentLoaded", route);
+
+async function all(path) {
+  const sep = path.includes("?") ? "&" : "?";
+  return (await api("GET", `${path}${sep}limit=1000`)).items;
+}
+
+// ---- fleet -------------------------------------------------------------
+
+async function fleetView() {
+  const [robots, cals] = await Promise.all([all("/robots"), all("/calibrations")]);
+  const byId = new Map(cals.map(c => [c.id, c]));
+  let rows = robots.map(r => {
+    const c = r.active_calibration_id != null ? byId.get(r.active_calibration_id) : null;
+    return `<tr data-robot="${r.id}"><td><a href="#/robot/${r.id}">${esc(r.serial_number)}</a></td>
+      <td>${esc(r.model_id)}</td><td>${esc(r.site || "")}</td><td>${esc(r.line || "")}</td><td>${esc(r.cell || "")}</td>
+      <td>${c ? `<a href="#/calibration/${c.id}">#${c.id} v${c.version}</a>` : '<span class="muted">nominal</span>'}</td>
+      ${c ? td(c.test_rms_before_mm) + td(c.test_rms_after_mm) : "<td>-</td><td>-</td>"}
+      <td>${c ? esc(c.effects) : ""}</td></tr>`;
+  }).join("");
+  view().innerHTML = `<h2>Fleet</h2>
+    <table id="fleet"><tr><th>robot</th><th>model</th><th>site</th><th>line</th><th>cell</th>
+    <th>active calibration</th><th>held-out RMS before (mm)</th><th>held-out RMS after (mm)</th><th>effects</th></tr>
+    ${rows || '<tr><td colspan="9" class="muted">No robot yet: add a model, a rig and a robot under “Models &amp; rigs”.</td></tr>'}</table>
+    <h2>Calibrations</h2>${calTable(cals)}`;
+}
+
+function calTable(cals) {
+  if (!cals.length) return '<p class="muted">None yet.</p>';
+  return `<table class="cals"><tr><th>calibration</th><th>robot</th><th>created</th><th>method</th><th>poses (test)</th>
+    <th>held-out RMS before (mm)</th><th>held-out RMS after (mm)</th><th>effects</th><th>active</th></tr>` +
+    cals.map(c => `<tr><td><a href="#/calibration/${c.id}">#${c.id} v${c.version}</a></td>
+      <td><a href="#/robot/${c.robot_id}">${esc(c.serial_number)}</a></td><td>${esc(c.created_at)}</td><td>${esc(c.method)}</td>
+      <td>${c.n_poses} (${c.n_test})</td>${td(c.test_rms_before_mm)}${td(c.test_rms_after_mm)}<td>${esc(c.effects)}</td>
+      <td>${c.active ? "✔" : ""}</td></tr>`).join("") + "</table>";
+}
+
+// ---- setup: models, rigs, robots ----------------------------------------
+
+function fileText(input) {
+  return new Promise((ok, bad) => {
+    const f = input.files[0];
+    if (!f) return bad(new Error("choose a file first"));
+    const rd = new FileReader();
+    rd.onload = () => ok(rd.result);
+    rd.onerror = () => bad(rd.error);
+    rd.readAsText(f);
+  });
+}
+
+async function setupView() {
+  const [models, rigs] = await Promise.all([all("/models"), all("/rigs")]);
+  view().innerHTML = `<h2>Models &amp; rigs</h2><div class="row">
+    <fieldset><legend>Robot model (robot.json)</legend><input type="file" id="model-file" accept=".json">
+      <button id="model-add">Add model</button><div id="model-msg"></div>
+      <table><tr><th>id</th><th>name</th><th>joints</th></tr>${models.map(m =>
+        `<tr><td>${m.id}</td><td>${esc(m.name)}</td><td>${m.dof}</td></tr>`).join("")}</table></fieldset>
+    <fieldset><legend>Rig (rig.json)</legend><input type="file" id="rig-file" accept=".json">
+      <button id="rig-add">Add rig</button><div id="rig-msg"></div>
+      <table><tr><th>id</th><th>name</th><th>strings</th></tr>${rigs.map(r =>
+        `<tr><td>${r.id}</td><td>${esc(r.name)}</td><td>${r.n_strings}</td></tr>`).join("")}</table></fieldset>
+    <fieldset><legend>Robot</legend>
+      <label>serial <input type="text" id="robot-serial"></label>
+      <label>model <select id="robot-model">${models.map(m => `<option value="${m.id}">${m.id}: ${esc(m.name)}</option>`).join("")}</select></label><br>
+      <label>site <input type="text" id="robot-site" size="8"></label><label>line <input type="text" id="robot-line" size="6"></label>
+      <label>cell <input type="text" id="robot-cell" size="6"></label>
+      <button id="robot-add">Add robot</button><div id="robot-msg"></div></fieldset></div>`;
+  const upload = (btn, file, path, msg) => $(btn).onclick = async () => {
+    try {
+      const text = await fileText($(file));
+      const r = await api("POST", path, text);
+      $(msg).innerHTML = `<div class="ok">added #${r.id}</div>`;
+      setTimeout(route, 400);
+    } catch (e) { showError($(msg), e); }
+  };
+  upload("#model-add", "#model-file", "/models", "#model-msg");
+  upload("#rig-add", "#rig-file", "/rigs", "#rig-msg");
+  $("#robot-add").onclick = async () => {
+    const opt = s => ($(s).value.trim() || null);
+    try {
+      const r = await api("POST", "/robots", {serial_number: $("#robot-serial").value.trim(),
+        model_id: +$("#robot-model").value, site: opt("#robot-site"), line: opt("#robot-line"), cell: opt("#robot-cell")});
+      location.hash = `#/robot/${r.id}`;
+    } catch (e) { showError($("#robot-msg"), e); }
+  };
+}
+
+// ---- robot: history, sessions, activation ------------------------------
+
+function historySvg(hist) {
+  if (!hist.length) return "";
+  const W = 560, H = 240, L = 56, R = 12, T = 22, B = 34;
+  const vals = hist.flatMap(p => [p.test_rms_before_mm, p.test_rms_after_mm]).filter(v => v != null);
+  const ymax = Math.max(...vals, 1e-9) * 1.08;
+  const x = i => L + (hist.length === 1 ? (W - L - R) / 2 : i * (W - L - R) / (hist.length - 1));
+  const y = v => T + (H - T - B) * (1 - v / ymax);
+  const line = (key, color) => {
+    const pts = hist.map((p, i) => p[key] == null ? null : [x(i), y(p[key])]).filter(Boolean);
+    return `<polyline fill="none" stroke="${color}" stroke-width="2" points="${pts.map(p => p.join(",")).join(" ")}"/>` +
+      pts.map(p => `<circle cx="${p[0]}" cy="${p[1]}" r="3.5" fill="${color}"/>`).join("");
+  };
+  let grid = "";
+  for (let k = 0; k <= 4; k++) {
+    const v = ymax * k / 4;
+    grid += `<line x1="${L}" x2="${W - R}" y1="${y(v)}" y2="${y(v)}" stroke="#e4e4e4"/><text x="${L - 4}" y="${y(v) + 4}" text-anchor="end" font-size="11">${num(v, 3)}</text>`;
+  }
+  const marks = hist.map((p, i) => `<text x="${x(i)}" y="${H - 18}" text-anchor="middle" font-size="11">v${p.version}${p.effects.length ? " ★" : ""}</text>` +
+    (p.effects.length ? `<title>${esc(p.effects.join(", "))}</title>` : "")).join("");
+  return `<svg id="history-plot" class="plot" viewBox="0 0 ${W} ${H}" width="${W}" height="${H}"><rect x="${L}" y="${T}" width="${W - L - R}" height="${H - T - B}" fill="#fff" stroke="#999"/>
+    ${grid}${line("test_rms_before_mm", "#e8a33d")}${line("test_rms_after_mm", "#d62728")}${marks}
+    <text x="${L + 4}" y="14" font-size="12"><tspan fill="#e8a33d">■ held-out RMS before</tspan> <tspan fill="#d62728">■ after</tspan> (mm; ★ physics finding)</text>
+    <text x="${W / 2}" y="${H - 3}" text-anchor="middle" font-size="11">calibration version</text></svg>`;
+}
+
+async function robotView(id) {
+  const [robot, acc, cals, sessions, acts, rigs] = await Promise.all([
+    api("GET", `/robots/${id}`), api("GET", `/robots/${id}/accuracy`), all(`/calibrations?robot_id=${id}`),
+    all(`/sessions?robot_id=${id}`), api("GET", `/robots/${id}/activations?limit=50`), all("/rigs")]);
+  view().innerHTML = `<h2>Robot ${esc(robot.serial_number)}</h2>
+    <p>model ${robot.model_id}, site ${esc(robot.site || "-")}, line ${esc(robot.line || "-")}, cell ${esc(robot.cell || "-")};
+    active calibration: ${robot.active_calibration_id != null ? `<a href="#/calibration/${robot.active_calibration_id}">#${robot.active_calibration_id}</a>` : "nominal"}</p>
+    <h3>Accuracy over time</h3>${historySvg(acc.history)}
+    <table id="history"><tr><th>version</th><th>calibration</th><th>created</th><th>held-out RMS before (mm)</th><th>held-out RMS after (mm)</th><th>findings</th><th>active</th></tr>
+    ${acc.history.map(p => `<tr><td>v${p.version}</td><td><a href="#/calibration/${p.calibration_id}">#${p.calibration_id}</a></td><td>${esc(p.created_at)}</td>
+      ${td(p.test_rms_before_mm)}${td(p.test_rms_after_mm)}<td>${esc(p.effects.join(", "))}</td><td>${p.active ? "✔" : ""}</td></tr>`).join("")}</table>
+    <h3>Sessions</h3>
+    <table><tr><th>session</th><th>name</th><th>rig</th><th>poses</th><th>created</th></tr>
+    ${sessions.map(s => `<tr><td><a href="#/session/${s.id}">#${s.id}</a></td><td>${esc(s.name || "")}</td><td>${s.rig_id}</td><td>${s.n_poses}</td><td>${esc(s.created_at)}</td></tr>`).join("")}</table>
+    <fieldset><legend>New session</legend>
+      <label>rig <select id="session-rig">${rigs.map(r => `<option value="${r.id}">${r.id}: ${esc(r.name)}</option>`).join("")}</select></label>
+      <label>name <input type="text" id="session-name" value="commissioning"></label>
+      <button id="session-add">Create session</button><div id="session-msg"></div></fieldset>
+    <fieldset><legend>Roll back</legend>
+      <label>by <input type="text" id="rb-by"></label><label>reason <input type="text" id="rb-reason" size="40"></label>
+      <button id="rollback">Roll back to the previous calibration</button><div id="rb-msg"></div></fieldset>
+    <h3>Activations</h3><table id="activations"><tr><th>when</th><th>action</th><th>calibration</th><th>by</th><th>reason</th></tr>
+    ${acts.items.map(a => `<tr><td>${esc(a.created_at)}</td><td>${esc(a.action)}</td><td>${a.calibration_id != null ? "#" + a.calibration_id : "nominal"}</td><td>${esc(a.actor)}</td><td>${esc(a.reason)}</td></tr>`).join("")}</table>`;
+  $("#session-add").onclick = async () => {
+    try {
+      const s = await api("POST", "/sessions", {robot_id: id, rig_id: +$("#session-rig").value, name: $("#session-name").value || null});
+      location.hash = `#/session/${s.id}`;
+    } catch (e) { showError($("#session-msg"), e); }
+  };
+  $("#rollback").onclick = async () => {
+    try {
+      await api("POST", `/robots/${id}/rollback`, {by: $("#rb-by").value, reason: $("#rb-reason").value});
+      route();
+    } catch (e) { showError($("#rb-msg"), e); }
+  };
+}
+
+// ---- session: upload, identify, progress, cancel -------------------------
+
+async function sessionView(id) {
+  const [s, jobs] = await Promise.all([api("GET", `/sessions/${id}`), all(`/jobs?session_id=${id}`)]);
+  view().innerHTML = `<h2>Session #${s.id} ${esc(s.name || "")}</h2>
+    <p>robot <a href="#/robot/${s.robot_id}">#${s.robot_id}</a>, rig ${s.rig_id}; <b id="n-poses">${s.n_poses}</b> poses in ${s.n_batches} upload(s)</p>
+    <fieldset><legend>Upload poses (poses.csv)</legend>
+      <div class="drop" id="drop">Drop a poses.csv here, or <input type="file" id="poses-file" accept=".csv,text/csv"></div>
+      <button id="upload">Upload</button> <div id="upload-msg"></div></fieldset>
+    <fieldset><legend>Identify</legend>
+      <label><input type="checkbox" id="opt-robust"> robust loss</label>
+      <label><input type="checkbox" id="opt-physics" checked> physics analysis</label>
+      <button id="start">Start identification</button> <div id="job-msg"></div>
+      <div id="job"></div></fieldset>
+    <h3>Jobs</h3><table id="jobs"><tr><th>job</th><th>state</th><th>stage</th><th>progress</th><th>calibration</th><th>error</th></tr>
+    ${jobs.map(j => `<tr><td>#${j.id}</td><td>${esc(j.state)}</td><td>${esc(j.stage || "")}</td><td>${num(j.progress * 100, 0)} %</td>
+      <td>${j.calibration_id != null ? `<a href="#/calibration/${j.calibration_id}">#${j.calibration_id}</a>` : ""}</td><td>${esc(j.error || "")}</td></tr>`).join("")}</table>`;
+  let dropped = null;
+  const drop = $("#drop");
+  drop.ondragover = e => { e.preventDefault(); drop.classList.add("over"); };
+  drop.ondragleave = () => drop.classList.remove("over");
+  drop.ondrop = e => {
+    e.preventDefault(); drop.classList.remove("over");
+    dropped = e.dataTransfer.files[0];
+    if (dropped) drop.firstChild.textContent = `${dropped.name} ready; `;
+  };
+  $("#upload").onclick = async () => {
+    const msg = $("#upload-msg");
+    try {
+      const text = dropped ? await dropped.text() : await fileText($("#poses-file"));
+      msg.innerHTML = '<span class="muted">uploading…</span>';
+      const r = await api("POST", `/sessions/${id}/poses`, text, "text/csv");
+      msg.innerHTML = `<div class="ok" id="upload-ok">${r.added} poses added; the session holds ${r.session.n_poses}.</div>`;
+      $("#n-poses").textContent = r.session.n_poses;
+    } catch (e) { showError(msg, e); }
+  };
+  $("#start").onclick = async () => {
+    try {
+      const job = await api("POST", `/sessions/${id}/jobs`, {robust: $("#opt-robust").checked, physics: $("#opt-physics").checked});
+      watchJob(job.id);
+    } catch (e) { showError($("#job-msg"), e); }
+  };
+  const live = jobs.find(j => j.state === "queued" || j.state === "running");
+  if (live) watchJob(live.id);
+}
+
+function watchJob(jobId) {
+  const box = $("#job");
+  $("#job-msg").innerHTML = "";
+  const draw = j => {
+    const done = ["succeeded", "failed", "cancelled"].includes(j.state);
+    box.innerHTML = `<p id="job-state" data-state="${esc(j.state)}">job #${j.id}: <b>${esc(j.state)}</b> ${esc(j.stage || "")}
+      <progress max="1" value="${j.progress}"></progress> ${num(j.progress * 100, 0)} %
+      ${done ? "" : '<button id="cancel">Cancel</button>'}</p>
+      ${j.error ? `<div class="error">${esc(j.error)}</div>` : ""}
+      ${j.calibration_id != null ? `<p class="ok">Calibration ready: <a id="cal-link" href="#/calibration/${j.calibration_id}">#${j.calibration_id}</a></p>` : ""}`;
+    const c = $("#cancel");
+    if (c) c.onclick = async () => {
+      try { draw(await api("POST", `/jobs/${j.id}/cancel`)); } catch (e) { showError($("#job-msg"), e); }
+    };
+    return done;
+  };
+  const poll = async () => {
+    try {
+      if (draw(await api("GET", `/jobs/${jobId}`))) clearTimers();
+    } catch (e) { showError($("#job-msg"), e); clearTimers(); }
+  };
+  clearTimers();
+  poll();
+  timers.push(setInterval(poll, 500));
+}
+
+// ---- calibration ---------------------------------------------------------
+
+async function calibrationView(id) {
+  const c = (await api("GET", `/calibrations/${id}`)).calibration;
+  view().innerHTML = `<h2>Calibration #${c.id} v${c.version} of <a href="#/robot/${c.robot_id}">${esc(c.serial_number)}</a></h2>
+    <p>${esc(c.created_at)}, method ${esc(c.method)}, ${c.n_poses} poses (${c.n_test} held out), session
+    <a href="#/session/${c.session_id}">#${c.session_id}</a>; ${c.active ? "<b>active</b>" : "not active"}.
+    <a href="/calibrations/${c.id}" download="calibration-${c.id}.json">report JSON</a> ·
+    <a href="/calibrations/${c.id}/report.html" download="calibration-${c.id}.html">report HTML</a></p>
+    <fieldset><legend>Activate for the robot</legend>
+      <label>by <input type="text" id="act-by"></label><label>reason <input type="text" id="act-reason" size="40"></label>
+      <button id="activate" ${c.active ? "disabled" : ""}>Activate</button>
+      <label>rollback reason <input type="text" id="rb-reason" size="20"></label><button id="rollback">Roll back</button>
+      <div id="act-msg"></div></fieldset>
+    <div id="report"><p class="muted">Loading the report…</p></div>`;
+  $("#activate").onclick = async () => {
+    try {
+      await api("POST", `/robots/${c.robot_id}/activate`, {calibration_id: c.id, by: $("#act-by").value, reason: $("#act-reason").value});
+      route();
+    } catch (e) { showError($("#act-msg"), e); }
+  };
+  $("#rollback").onclick = async () => {
+    try {
+      await api("POST", `/robots/${c.robot_id}/rollback`, {by: $("#act-by").value, reason: $("#rb-reason").value});
+      route();
+    } catch (e) { showError($("#act-msg"), e); }
+  };
+  const t0 = performance.now();
+  const html = await api("GET", `/calibrations/${id}/report.html`);
+  const doc = new DOMParser().parseFromString(html, "text/html");
+  const frag = doc.querySelector(".drawcal-report");
+  const box = $("#report");
+  box.innerHTML = "";
+  box.appendChild(document.adoptNode(frag));
+  requestAnimationFrame(() => {
+    box.dataset.drawMs = (performance.now() - t0).toFixed(0);
+    $("#status").textContent = `report drawn in ${box.dataset.drawMs} ms`;
+  });
+}
+
+// ---- compensate ------------------------------------------------------------
+
+// targets.csv rows to API targets: joint targets (q1_deg...) or Cartesian
+// (x_mm, y_mm, z_mm[, roll_deg, pitch_deg, yaw_deg]). Values are passed as
+// read.
+function parseTargets(text) {
+  const lines = text.split(/\r?\n/).filter(l => l.trim() && !l.startsWith("#"));
+  if (lines.length < 2) throw new Error("give a header line and at least one target");
+  const head = lines[0].split(",").map(s => s.trim());
+  const col = n => head.indexOf(n);
+  const qs = head.map((h, i) => [h, i]).filter(([h]) => /^q\d+_deg$/.test(h))
+    .sort((a, b) => parseInt(a[0].slice(1)) - parseInt(b[0].slice(1))).map(([, i]) => i);
+  if (col("target") < 0) throw new Error("targets.csv needs a 'target' column");
+  return lines.slice(1).map((l, k) => {
+    const c = l.split(",").map(s => s.trim());
+    const t = {target: c[col("target")]};
+    const n = i => {
+      const v = Number(c[i]);
+      if (c[i] === undefined || c[i] === "" || !isFinite(v)) throw new Error(`row ${k + 1}: column ${head[i]} is not a number`);
+      return v;
+    };
+    if (qs.length) t.q_deg = qs.map(n);
+    else if (col("x_mm") >= 0) {
+      t.xyz_mm = ["x_mm", "y_mm", "z_mm"].map(h => n(col(h)));
+      if (col("roll_deg") >= 0) t.rpy_deg = ["roll_deg", "pitch_deg", "yaw_deg"].map(h => n(col(h)));
+    } else throw new Error("targets.csv needs q1_deg... or x_mm, y_mm, z_mm columns");
+    return t;
+  });
+}
+
+async function compensateView() {
+  const robots = await all("/robots");
+  view().innerHTML = `<h2>Compensate targets</h2>
+    <fieldset><legend>Targets (targets.csv)</legend>
+      <label>robot <select id="comp-robot">${robots.map(r => `<option value="${r.id}">${esc(r.serial_number)}${r.active_calibration_id != null ? " (calibration #" + r.active_calibration_id + ")" : " (no active calibration)"}</option>`).join("")}</select></label>
+      <label>calibration id (default: active) <input type="text" id="comp-cal" size="5"></label>
+      <label><input type="checkbox" id="comp-orient"> hold orientation</label><br>
+      <textarea id="comp-targets" rows="8">target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg
+t1,10,-20,30,0,40,0</textarea><br>
+      or load a file <input type="file" id="comp-file" accept=".csv"> <button id="comp-run">Compensate</button>
+      <div id="comp-msg"></div></fieldset><div id="comp-out"></div>`;
+  $("#comp-file").onchange = async () => { $("#comp-targets").value = await fileText($("#comp-file")); };
+  $("#comp-run").onclick = async () => {
+    const msg = $("#comp-msg");
+    msg.innerHTML = "";
+    try {
+      const req = {robot_id: +$("#comp-robot").value, orientation: $("#comp-orient").checked,
+        targets: parseTargets($("#comp-targets").value)};
+      if ($("#comp-cal").value.trim()) req.calibration_id = +$("#comp-cal").value;
+      const r = await api("POST", "/compensate", req);
+      const dof = Math.max(0, ...r.results.map(x => x.q_deg ? x.q_deg.length : 0));
+      const head = ["target", ...Array.from({length: dof}, (_, j) => `q${j + 1}_deg`), "residual_mm", "iterations", "status", "message"];
+      const q = (s) => /[",\n]/.test(s) ? '"' + s.replace(/"/g, '""') + '"' : s;
+      const csv = [head.join(",")].concat(r.results.map(x => [q(x.target),
+        ...Array.from({length: dof}, (_, j) => x.q_deg ? String(x.q_deg[j]) : ""),
+        x.residual_mm == null ? "" : String(x.residual_mm), String(x.iterations), x.status, q(x.message || "")].join(","))).join("\n") + "\n";
+      const url = URL.createObjectURL(new Blob([csv], {type: "text/csv"}));
+      $("#comp-out").innerHTML = `<p>calibration #${r.calibration_id} v${r.version}: ${r.n_ok} of ${r.results.length} ok.
+        <a id="comp-download" href="${url}" download="compensated.csv">Download compensated.csv</a></p>
+        <textarea id="comp-csv" rows="8" readonly>${esc(csv)}</textarea>`;
+    } catch (e) { showError(msg, e); }
+  };
+}
