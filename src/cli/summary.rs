@@ -118,6 +118,9 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
         );
     }
     let _ = writeln!(s);
+    for note in &r.physics_notes {
+        let _ = writeln!(s, "physics: {note}");
+    }
     if r.findings.is_empty() {
         let _ = writeln!(s, "physics: nothing found beyond the geometric model");
     } else {

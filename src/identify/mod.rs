@@ -537,6 +537,7 @@ pub fn identify(
     let eb = session.errors(&geo.before.values, &all);
     let mut ea = session.errors(&after_values, &all);
     let mut findings = vec![];
+    let mut physics_notes = vec![];
     if opts.physics && opts.method == Method::Lm {
         progress.update("physics analysis", 0.0);
         let an = crate::physics::analyse(&session, &geo, opts, progress)?;
@@ -553,6 +554,7 @@ pub fn identify(
             after_values = an.final_params.values.clone();
         }
         findings = an.findings;
+        physics_notes = an.notes;
     }
     let stats = session.stats_of(&eb, &ea);
     let paper_stats = match (&paper, opts.method) {
@@ -715,6 +717,7 @@ pub fn identify(
         closed_form_vs_lsq,
         per_pose,
         findings,
+        physics_notes,
     })
 }
 

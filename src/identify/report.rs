@@ -247,4 +247,8 @@ pub struct Report {
     pub per_pose: Vec<PoseResidual>,
     /// Physics found beyond geometry (see the physics analysis).
     pub findings: Vec<Finding>,
+    /// What the physics analysis saw: where the residual lives (robot or
+    /// sensor side, joints, time) and the candidates it tried and rejected.
+    #[serde(default)]
+    pub physics_notes: Vec<String>,
 }
