@@ -57,6 +57,7 @@ function clearTimers() { timers.forEach(clearInterval); timers = []; }
 
 async function route() {
   clearTimers();
+  $("#status").textContent = "";
   const h = location.hash.replace(/^#/, "") || "/";
   const parts = h.split("/").filter(Boolean);
   try {
@@ -127,11 +128,11 @@ async function setupView() {
   view().innerHTML = `<h2>Models &amp; rigs</h2><div class="row">
     <fieldset><legend>Robot model (robot.json)</legend><input type="file" id="model-file" accept=".json">
       <button id="model-add">Add model</button><div id="model-msg"></div>
-      <table><tr><th>id</th><th>name</th><th>joints</th></tr>${models.map(m =>
+      <table id="models-table"><tr><th>id</th><th>name</th><th>joints</th></tr>${models.map(m =>
         `<tr><td>${m.id}</td><td>${esc(m.name)}</td><td>${m.dof}</td></tr>`).join("")}</table></fieldset>
     <fieldset><legend>Rig (rig.json)</legend><input type="file" id="rig-file" accept=".json">
       <button id="rig-add">Add rig</button><div id="rig-msg"></div>
-      <table><tr><th>id</th><th>name</th><th>strings</th></tr>${rigs.map(r =>
+      <table id="rigs-table"><tr><th>id</th><th>name</th><th>strings</th></tr>${rigs.map(r =>
         `<tr><td>${r.id}</td><td>${esc(r.name)}</td><td>${r.n_strings}</td></tr>`).join("")}</table></fieldset>
     <fieldset><legend>Robot</legend>
       <label>serial <input type="text" id="robot-serial"></label>
