@@ -56,21 +56,6 @@ pub struct Dataset {
     pub n_strings: usize,
 }
 
-fn parse_num(row: usize, col: &str, raw: &str) -> Result<f64> {
-    let v: f64 = raw
-        .trim()
-        .parse()
-        .map_err(|_| Error::cell(row, col, format!("'{raw}' is not a number")))?;
-    if !v.is_finite() {
-        return Err(Error::cell(
-            row,
-            col,
-            format!("'{raw}' is not a finite number"),
-        ));
-    }
-    Ok(v)
-}
-
 fn parse_opt(
     row: usize,
     col: Option<(usize, &str)>,
@@ -82,7 +67,7 @@ fn parse_opt(
             if raw.is_empty() {
                 Ok(None)
             } else {
-                parse_num(row, name, raw).map(Some)
+                super::parse_cell(row, name, raw).map(Some)
             }
         }
         None => Ok(None),
@@ -94,14 +79,7 @@ impl Dataset {
     /// anything is returned; the first problem is reported with its row
     /// (1-based, header excluded) and column.
     pub fn from_csv<R: Read>(input: R, robot: &Robot, rig: &Rig) -> Result<Self> {
-        let mut rdr = csv::ReaderBuilder::new()
-            .trim(csv::Trim::All)
-            .flexible(true)
-            .from_reader(input);
-        let headers = rdr
-            .headers()
-            .map_err(|e| Error::field("header", e.to_string()))?
-            .clone();
+        let (mut rdr, headers) = super::csv_with_header(input)?;
         let idx = |name: &str| headers.iter().position(|h| h == name);
         let n = robot.dof();
         let pose_col = idx("pose").ok_or_else(|| Error::field("pose", "missing column 'pose'"))?;
@@ -183,7 +161,7 @@ impl Dataset {
             let mut q_rad = Vec::with_capacity(n);
             for (j, &c) in q_cols.iter().enumerate() {
                 let name = format!("q{}_deg", j + 1);
-                let v = parse_num(row, &name, rec.get(c).unwrap_or(""))?;
+                let v = super::parse_cell(row, &name, rec.get(c).unwrap_or(""))?;
                 let js = &robot.joints[j];
                 if v < js.q_min_deg - 1e-6 || v > js.q_max_deg + 1e-6 {
                     return Err(Error::cell(
@@ -201,7 +179,7 @@ impl Dataset {
                 let mut ls = Vec::with_capacity(m);
                 for (k, c) in l_cols.iter().enumerate() {
                     let name = format!("l{}_mm", k + 1);
-                    let v = parse_num(row, &name, rec.get(c.unwrap()).unwrap_or(""))?;
+                    let v = super::parse_cell(row, &name, rec.get(c.unwrap()).unwrap_or(""))?;
                     if v < 0.0 {
                         return Err(Error::cell(
                             row,
@@ -224,7 +202,7 @@ impl Dataset {
             } else {
                 let mut p = [0.0; 3];
                 for (c, name) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
-                    p[c] = parse_num(row, name, rec.get(xyz[c].unwrap()).unwrap_or(""))?;
+                    p[c] = super::parse_cell(row, name, rec.get(xyz[c].unwrap()).unwrap_or(""))?;
                 }
                 Measurement::Point(Vector3::from(p))
             };
@@ -346,14 +324,7 @@ pub fn string_readings_from_csv<R: Read>(input: R, rig: &Rig) -> Result<Vec<(Str
             "the rig has no strings to locate from",
         ));
     }
-    let mut rdr = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .flexible(true)
-        .from_reader(input);
-    let headers = rdr
-        .headers()
-        .map_err(|e| Error::field("header", e.to_string()))?
-        .clone();
+    let (mut rdr, headers) = super::csv_with_header(input)?;
     let idx = |name: &str| headers.iter().position(|h| h == name);
     let pose_col = idx("pose").ok_or_else(|| Error::field("pose", "missing column 'pose'"))?;
     let mut cols = Vec::with_capacity(m);
@@ -372,7 +343,7 @@ pub fn string_readings_from_csv<R: Read>(input: R, rig: &Rig) -> Result<Vec<(Str
         let mut ls = Vec::with_capacity(m);
         for (k, &c) in cols.iter().enumerate() {
             let name = format!("l{}_mm", k + 1);
-            let v = parse_num(row, &name, rec.get(c).unwrap_or(""))?;
+            let v = super::parse_cell(row, &name, rec.get(c).unwrap_or(""))?;
             if v < 0.0 || range.is_some_and(|rg| v > rg) {
                 return Err(Error::cell(
                     row,

@@ -40,14 +40,7 @@ pub enum TargetKind {
 
 /// Parse targets.csv for a robot with `dof` joints.
 pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
-    let mut rdr = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .flexible(true)
-        .from_reader(input);
-    let headers = rdr
-        .headers()
-        .map_err(|e| Error::field("header", e.to_string()))?
-        .clone();
+    let (mut rdr, headers) = super::csv_with_header(input)?;
     let idx = |name: &str| headers.iter().position(|h| h == name);
     let id_col = idx("target").ok_or_else(|| Error::field("target", "missing column 'target'"))?;
     let q_cols: Vec<Option<usize>> = (1..=dof).map(|j| idx(&format!("q{j}_deg"))).collect();
@@ -77,18 +70,6 @@ pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
             "give all of roll_deg, pitch_deg, yaw_deg or none",
         ));
     }
-    let num = |row: usize, name: &str, rec: &csv::StringRecord, c: usize| -> Result<f64> {
-        let raw = rec.get(c).unwrap_or("");
-        let v: f64 = raw
-            .trim()
-            .parse()
-            .map_err(|_| Error::cell(row, name, format!("'{raw}' is not a number")))?;
-        if v.is_finite() {
-            Ok(v)
-        } else {
-            Err(Error::cell(row, name, "not a finite number"))
-        }
-    };
     let mut out = Vec::new();
     let mut seen = std::collections::HashSet::new();
     for (r, rec) in rdr.records().enumerate() {
@@ -119,18 +100,22 @@ pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
         let kind = if joints {
             let mut q = Vec::with_capacity(dof);
             for (j, c) in q_cols.iter().enumerate() {
-                q.push(num(row, &format!("q{}_deg", j + 1), &rec, c.unwrap())?);
+                q.push(super::parse_cell(
+                    row,
+                    &format!("q{}_deg", j + 1),
+                    rec.get(c.unwrap()).unwrap_or(""),
+                )?);
             }
             TargetKind::Joints { q_deg: q }
         } else {
             let mut p = [0.0; 3];
             for (k, n) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
-                p[k] = num(row, n, &rec, xyz[k].unwrap())?;
+                p[k] = super::parse_cell(row, n, rec.get(xyz[k].unwrap()).unwrap_or(""))?;
             }
             let rpy_deg = if with_rpy {
                 let mut a = [0.0; 3];
                 for (k, n) in ["roll_deg", "pitch_deg", "yaw_deg"].iter().enumerate() {
-                    a[k] = num(row, n, &rec, rpy[k].unwrap())?;
+                    a[k] = super::parse_cell(row, n, rec.get(rpy[k].unwrap()).unwrap_or(""))?;
                 }
                 Some(a)
             } else {
