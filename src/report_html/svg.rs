@@ -53,7 +53,9 @@ fn fmt_tick(v: f64) -> String {
     let a = v.abs();
     if a == 0.0 {
         "0".into()
-    } else if a >= 1000.0 || a < 0.001 {
+    } else if (1000.0..1e6).contains(&a) {
+        format!("{v:.0}")
+    } else if a >= 1e6 || a < 0.001 {
         format!("{v:.2e}")
     } else {
         let s = format!("{v:.4}");
