@@ -181,6 +181,10 @@ fn cli_report_holds_the_numbers_and_draws_the_plots() {
         has_value(&html, f.magnitude, "finding magnitude");
     }
 
+    for n in &r.physics_notes {
+        assert!(html.contains(&format!("<li>{}</li>", esc(n))), "note {n}");
+    }
+
     // Plots: every one drew something; per pose holds every pose twice
     // (before and after) and the residual plots exist per joint angle.
     let plots = plots(&html);

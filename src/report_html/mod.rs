@@ -464,6 +464,14 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
         o.push_str("</div>");
     }
 
+    if !r.physics_notes.is_empty() {
+        o.push_str(r#"<h3>What the physics analysis saw</h3><ul id="physics-notes">"#);
+        for n in &r.physics_notes {
+            let _ = write!(o, "<li>{}</li>", esc(n));
+        }
+        o.push_str("</ul>");
+    }
+
     // Parameters.
     o.push_str(r#"<h2 id="parameters">Parameters (1σ)</h2><table id="parameters-table"><tr><th>name</th><th>value</th><th>deviation</th><th>1σ</th><th>unit</th><th>|deviation| / σ</th></tr>"#);
     for p in &r.parameters {
