@@ -42,9 +42,25 @@ struct Driver {
 }
 
 impl Drop for Driver {
+    /// End the WebDriver session (which closes Chromium, also when the test
+    /// panicked), then chromedriver.
     fn drop(&mut self) {
+        use std::io::{Read, Write};
+        if !self.session.is_empty() {
+            let addr = self.base.trim_start_matches("http://").to_string();
+            if let Ok(mut c) = std::net::TcpStream::connect(&addr) {
+                let _ = c.set_read_timeout(Some(Duration::from_secs(10)));
+                let _ = write!(
+                    c,
+                    "DELETE /session/{} HTTP/1.1\r\nHost: {addr}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+                    self.session
+                );
+                let _ = c.read_to_end(&mut Vec::new());
+            }
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
+        let _ = std::fs::remove_dir_all(&self._profile);
     }
 }
 
@@ -222,12 +238,13 @@ impl Driver {
         .await;
     }
 
-    async fn quit(self) {
+    async fn quit(mut self) {
         let _ = self
             .http
             .delete(format!("{}/session/{}", self.base, self.session))
             .send()
             .await;
+        self.session.clear();
     }
 }
 
