@@ -260,3 +260,34 @@ fn real_ur10_random_with_physics_reaches_the_goal() {
         assert!(f.test_rms_after_mm < f.test_rms_before_mm, "{f:?}");
     }
 }
+
+#[test]
+fn per_pose_string_residuals_include_the_accepted_effects() {
+    let (robot, rig, data) = common::load("er3a_compliance_j2");
+    let rep = identify(
+        &robot,
+        &rig,
+        &data,
+        &IdentifyOptions::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        rep.findings
+            .iter()
+            .any(|f| f.effect == "joint_compliance" && f.joint == Some(2)),
+        "{:?}",
+        rep.findings
+    );
+    let all: Vec<f64> = rep
+        .per_pose
+        .iter()
+        .flat_map(|p| p.strings_mm.clone().unwrap())
+        .collect();
+    let rms = (all.iter().map(|v| v * v).sum::<f64>() / all.len() as f64).sqrt();
+    // The final model (geometry + compliance) leaves string noise only.
+    assert!(
+        rms < 1.5 * rep.string_sigma_mm.unwrap(),
+        "string residual RMS {rms}"
+    );
+}

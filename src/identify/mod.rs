@@ -538,6 +538,7 @@ pub fn identify(
     let mut ea = session.errors(&after_values, &all);
     let mut findings = vec![];
     let mut physics_notes = vec![];
+    let mut accepted = None;
     if opts.physics && opts.method == Method::Lm {
         progress.update("physics analysis", 0.0);
         let an = crate::physics::analyse(&session, &geo, opts, progress)?;
@@ -552,6 +553,7 @@ pub fn identify(
                 &all,
             );
             after_values = an.final_params.values.clone();
+            accepted = Some((an.context, an.effects));
         }
         findings = an.findings;
         physics_notes = an.notes;
@@ -660,7 +662,29 @@ pub fn identify(
     let mut r = Vec::new();
     for i in all {
         let strings_mm = if l.n_strings > 0 {
-            train_problem.pose_residuals(&after.values, &data.poses[i], &mut r);
+            match (&accepted, &data.poses[i].measurement) {
+                // With accepted effects: the residual of the final model,
+                // effects included (as the physics fit defines it).
+                (Some((ctx, effects)), Measurement::Strings(readings)) => {
+                    let (t, dl) = crate::physics::problem::EffectProblem::model_point(
+                        &session.chain,
+                        ctx,
+                        &after.values,
+                        effects,
+                        i,
+                        &data.poses[i].q_rad,
+                    );
+                    let g = l.n_geometric();
+                    let rr = after.values[l.r()];
+                    r = (0..l.n_strings)
+                        .map(|k| {
+                            (t - session.anchors[k]).norm() - rr - after.values[g + k] + dl[k]
+                                - readings[k]
+                        })
+                        .collect();
+                }
+                _ => train_problem.pose_residuals(&after.values, &data.poses[i], &mut r),
+            }
             Some(r.clone())
         } else {
             None
