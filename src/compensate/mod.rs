@@ -210,7 +210,6 @@ impl Compensator {
         };
         let mut last_iterations = 0;
         let mut limit_msg = None;
-        let mut best_residual = f64::INFINITY;
         for seed in seeds {
             match self.solve(&pos, rot.as_ref(), &seed) {
                 Some(sol) => {
@@ -228,10 +227,7 @@ impl Compensator {
                         message: None,
                     };
                 }
-                None => {
-                    last_iterations += self.max_iterations;
-                    best_residual = best_residual.min(self.residual(&pos, &seed));
-                }
+                None => last_iterations += self.max_iterations,
             }
         }
         match limit_msg {
@@ -245,10 +241,6 @@ impl Compensator {
                 ),
             ),
         }
-    }
-
-    fn residual(&self, pos: &Vector3<f64>, q: &[f64]) -> f64 {
-        (self.calibrated_pose(q).0 - pos).norm()
     }
 
     fn limit_violation(&self, q: &[f64]) -> Option<String> {

@@ -240,12 +240,6 @@ impl<'a> Session<'a> {
         }
     }
 
-    /// Before/after figures on train and test.
-    pub fn stats(&self, before: &[f64], after: &[f64]) -> Stats {
-        let all: Vec<usize> = (0..self.data.poses.len()).collect();
-        self.stats_of(&self.errors(before, &all), &self.errors(after, &all))
-    }
-
     /// String noise (1 sigma, mm) from the strings' redundancy.
     pub fn string_sigma(&self) -> Option<f64> {
         measure::string_sigma(&self.located)
@@ -618,11 +612,9 @@ pub fn identify(
             .iter()
             .map(|&i| {
                 let (conv, u) = unit(i);
-                let start = if i < l.base() || i >= l.tool() {
-                    Params::nominal(robot, &geo.before.base(), rig, l.n_strings).values[i]
-                } else {
-                    geo.before.values[i]
-                };
+                // `nominal` carries the fitted "before" base pose, so base
+                // deviations are from that fit, the rest from nominal.
+                let start = nominal.values[i];
                 ParamEstimate {
                     name: l.name(i),
                     value: conv(after.values[i]),

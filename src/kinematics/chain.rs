@@ -31,12 +31,6 @@ impl Frame {
     }
 
     #[inline(always)]
-    fn rot(&mut self, axis: usize, t: f64) {
-        let (s, c) = t.sin_cos();
-        self.rot_sc(axis, s, c);
-    }
-
-    #[inline(always)]
     fn rot_sc(&mut self, axis: usize, s: f64, c: f64) {
         let (i, j) = match axis {
             0 => (1, 2),
@@ -149,24 +143,32 @@ impl Chain {
     fn walk(&self, p: &[f64], q: &[f64], f: &mut Frame, mut each: impl FnMut(&Frame)) {
         for (j, &qj) in q.iter().enumerate().take(self.layout.n_joints) {
             let k = 5 * j;
-            let (a, al, d, th, be) = (p[k], p[k + 1], p[k + 2], p[k + 3], p[k + 4]);
-            match self.convention {
-                Convention::Dh => {
-                    f.rot(Z, qj + th);
-                    f.trans(Z, d);
-                    f.trans(X, a);
-                    f.rot(X, al);
-                    f.rot(Y, be);
-                }
-                Convention::Mdh => {
-                    f.rot(X, al);
-                    f.rot(Y, be);
-                    f.trans(X, a);
-                    f.rot(Z, qj + th);
-                    f.trans(Z, d);
-                }
-            }
+            let jt = [p[k + 3].sin_cos(), p[k + 1].sin_cos(), p[k + 4].sin_cos()];
+            self.link(f, p[k], p[k + 2], qj.sin_cos(), jt);
             each(f);
+        }
+    }
+
+    /// One joint's link transform (DH or MDH) from the sines and cosines of
+    /// its joint angle `qsc` and of its `[θ, α, β]`.
+    #[inline(always)]
+    fn link(&self, f: &mut Frame, a: f64, d: f64, qsc: (f64, f64), [th, al, be]: [(f64, f64); 3]) {
+        let (sz, cz) = add_angles(qsc, th);
+        match self.convention {
+            Convention::Dh => {
+                f.rot_sc(Z, sz, cz);
+                f.trans(Z, d);
+                f.trans(X, a);
+                f.rot_sc(X, al.0, al.1);
+                f.rot_sc(Y, be.0, be.1);
+            }
+            Convention::Mdh => {
+                f.rot_sc(X, al.0, al.1);
+                f.rot_sc(Y, be.0, be.1);
+                f.trans(X, a);
+                f.rot_sc(Z, sz, cz);
+                f.trans(Z, d);
+            }
         }
     }
 
@@ -289,33 +291,9 @@ impl Chain {
     /// T in the rig frame with precomputed trigonometry (see
     /// [`Chain::point_jacobian_trig`]).
     pub fn point_trig(&self, p: &[f64], trig: &Trig, qsc: &[(f64, f64)]) -> Vector3<f64> {
-        let b = self.layout.base();
-        let mut f = Frame::identity();
-        f.o = Vector3::new(p[b], p[b + 1], p[b + 2]);
-        f.rot_sc(Z, trig.base[0].0, trig.base[0].1);
-        f.rot_sc(Y, trig.base[1].0, trig.base[1].1);
-        f.rot_sc(X, trig.base[2].0, trig.base[2].1);
+        let mut f = self.base_frame_sc(p, trig.base);
         for (j, &qj) in qsc.iter().enumerate().take(self.layout.n_joints) {
-            let k = 5 * j;
-            let (a, d) = (p[k], p[k + 2]);
-            let [th, al, be] = trig.joints[j];
-            let (sz, cz) = add_angles(qj, th);
-            match self.convention {
-                Convention::Dh => {
-                    f.rot_sc(Z, sz, cz);
-                    f.trans(Z, d);
-                    f.trans(X, a);
-                    f.rot_sc(X, al.0, al.1);
-                    f.rot_sc(Y, be.0, be.1);
-                }
-                Convention::Mdh => {
-                    f.rot_sc(X, al.0, al.1);
-                    f.rot_sc(Y, be.0, be.1);
-                    f.trans(X, a);
-                    f.rot_sc(Z, sz, cz);
-                    f.trans(Z, d);
-                }
-            }
+            self.link(&mut f, p[5 * j], p[5 * j + 2], qj, trig.joints[j]);
         }
         let t = self.layout.tool();
         f.apply(&Vector3::new(p[t], p[t + 1], p[t + 2]))
@@ -356,14 +334,27 @@ impl Chain {
     }
 
     fn base_frame(&self, p: &[f64], frame: OutputFrame) -> Frame {
-        let mut f = Frame::identity();
-        if frame == OutputFrame::Rig {
-            let b = self.layout.base();
-            f.o = Vector3::new(p[b], p[b + 1], p[b + 2]);
-            f.rot(Z, p[b + 5]);
-            f.rot(Y, p[b + 4]);
-            f.rot(X, p[b + 3]);
+        match frame {
+            OutputFrame::Rig => {
+                let b = self.layout.base();
+                self.base_frame_sc(
+                    p,
+                    [p[b + 5].sin_cos(), p[b + 4].sin_cos(), p[b + 3].sin_cos()],
+                )
+            }
+            OutputFrame::Base => Frame::identity(),
         }
+    }
+
+    /// The base pose in the rig frame from the sines and cosines of yaw,
+    /// pitch and roll.
+    fn base_frame_sc(&self, p: &[f64], [yaw, pitch, roll]: [(f64, f64); 3]) -> Frame {
+        let b = self.layout.base();
+        let mut f = Frame::identity();
+        f.o = Vector3::new(p[b], p[b + 1], p[b + 2]);
+        f.rot_sc(Z, yaw.0, yaw.1);
+        f.rot_sc(Y, pitch.0, pitch.1);
+        f.rot_sc(X, roll.0, roll.1);
         f
     }
 
