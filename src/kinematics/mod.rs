@@ -1,9 +1,11 @@
 //! Kinematics of the measured point: the parameter vector ([`params`]),
 //! forward kinematics with analytic derivatives ([`chain`]) and the paper's
-//! differential error model, equations (15)-(22) ([`error_model`]).
+//! differential error model, equations (15)-(22) ([`error_model`]); the
+//! closed-form inverse kinematics of nominal arms that allow one ([`ik`]).
 
 pub mod chain;
 pub mod error_model;
+pub mod ik;
 pub mod params;
 
 pub use chain::{Chain, Frame, PointJacobian};
