@@ -192,6 +192,72 @@ pub struct Finding {
     /// The effect's fitted parameters, for compensation and re-use.
     #[serde(default)]
     pub parameters: serde_json::Value,
+    /// The plot that is the finding's evidence: per pose, the residual the
+    /// effect explains against what drives it, beside the fitted effect.
+    /// `None` for `unexplained` and for reports written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub evidence_plot: Option<EvidencePlot>,
+}
+
+/// Evidence of one finding, computed by the engine
+/// (`physics::evidence`): at every pose (or string reading), the residual
+/// of the model with this effect left out, projected on the effect's own
+/// signature, against the effect's driver, beside the fitted effect's
+/// contribution along the same direction. Where the effect is real the
+/// points follow the model.
+///
+/// Robot-side effects: `y` is the 3-D error (measured minus model, with
+/// the geometry and the other effects as refitted with this one) along the
+/// unit displacement this effect causes at the pose, `model` the effect's
+/// displacement along it. Sensor-side effects: `y` is the string's reading
+/// minus the model's reading without the effect, `model` the effect's
+/// change of that reading (one point per string for cable sag).
+///
+/// Bounded: at most [`EvidencePlot::MAX_POINTS`] points, the poses
+/// subsampled deterministically by a fixed stride in visiting order
+/// (`stride` > 1 says so); `n_total` counts the points before.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EvidencePlot {
+    /// What `x` is (`gravity torque on joint 2`...).
+    pub x_label: String,
+    /// Unit of `x` (`N*m`, `deg`, `mm`, `s`, `h`, `K`, `m`, `±1`).
+    pub x_unit: String,
+    /// What `y` and `model` are.
+    pub y_label: String,
+    /// Unit of `y` and `model` (mm).
+    pub y_unit: String,
+    /// Pearson correlation of `y` with `model` over the points (`None`
+    /// where either does not vary).
+    pub correlation: Option<f64>,
+    /// Points before subsampling.
+    pub n_total: usize,
+    /// Every `stride`-th pose was kept (1: all).
+    pub stride: usize,
+    /// The points, in visiting order.
+    pub points: Vec<EvidencePoint>,
+}
+
+impl EvidencePlot {
+    /// Most points one plot holds (bounds the report's size).
+    pub const MAX_POINTS: usize = 2000;
+}
+
+/// One point of an [`EvidencePlot`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EvidencePoint {
+    /// Pose id.
+    pub pose: String,
+    /// `train` or `test`.
+    pub split: crate::model::Split,
+    /// String (1-based) for effects plotted per string reading.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<usize>,
+    /// The effect's driver at the pose.
+    pub x: f64,
+    /// Residual with the effect left out, on its signature (mm).
+    pub y: f64,
+    /// The fitted effect along the same direction (mm).
+    pub model: f64,
 }
 
 /// The whole result of an identification.

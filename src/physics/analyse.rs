@@ -843,6 +843,13 @@ pub fn analyse(
                     test_rms_before_mm: stage_rms[stage],
                     test_rms_after_mm: stage_rms[stage + 1],
                     parameters: params,
+                    evidence_plot: super::evidence::evidence_plot(
+                        session,
+                        &ctx,
+                        &p_new,
+                        &eff_new,
+                        accepted.len() + mi,
+                    ),
                 });
             }
             p = p_new;
@@ -1209,5 +1216,6 @@ fn unexplained(
         test_rms_before_mm: test,
         test_rms_after_mm: test,
         parameters: serde_json::json!({"ordering": name, "z": z}),
+        evidence_plot: None,
     })
 }

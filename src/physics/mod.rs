@@ -11,6 +11,7 @@
 pub mod analyse;
 pub mod effects;
 pub mod evaluate;
+pub mod evidence;
 pub mod problem;
 pub mod simulate;
 pub mod stats;

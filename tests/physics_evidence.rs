@@ -1,0 +1,151 @@
+//! The evidence plot of a finding, computed by the engine: on the labelled
+//! compliance dataset the plot of the joint-2 compliance has the gravity
+//! torque on joint 2 as x, its residual follows the fitted effect, and the
+//! plot stays bounded on a large session.
+
+use drawcal::identify::report::{EvidencePlot, Finding};
+use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric};
+use drawcal::model::{Dataset, Rig, Robot, Split};
+use drawcal::physics::{self, Kind, effects::Basis};
+
+fn load(dir: &str) -> (Robot, Rig, Dataset) {
+    let robot =
+        Robot::from_json(&std::fs::read_to_string(format!("{dir}/robot.json")).unwrap()).unwrap();
+    let rig = Rig::from_json(&std::fs::read_to_string(format!("{dir}/rig.json")).unwrap()).unwrap();
+    let data = Dataset::from_csv(
+        std::fs::File::open(format!("{dir}/poses.csv")).unwrap(),
+        &robot,
+        &rig,
+    )
+    .unwrap();
+    (robot, rig, data)
+}
+
+fn pearson(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let sab: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+    let saa: f64 = a.iter().map(|x| (x - ma) * (x - ma)).sum();
+    let sbb: f64 = b.iter().map(|y| (y - mb) * (y - mb)).sum();
+    sab / (saa * sbb).sqrt()
+}
+
+#[test]
+fn compliance_evidence_is_the_torque_and_the_residual_follows_the_model() {
+    let (robot, rig, data) = load("tests/data/er3a_compliance_j2");
+    let opts = IdentifyOptions::default();
+    let s = Session::new(&robot, &rig, &data, &opts).unwrap();
+    let g = geometric(&s, &opts, &NoProgress).unwrap();
+    let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
+    let f: &Finding = a
+        .findings
+        .iter()
+        .find(|f| f.effect == "joint_compliance")
+        .expect("compliance found");
+    assert_eq!(f.joint, Some(2));
+    let ev: &EvidencePlot = f.evidence_plot.as_ref().expect("evidence plot");
+    assert_eq!(ev.x_label, "gravity torque on joint 2");
+    assert_eq!(ev.x_unit, "N*m");
+    assert_eq!(ev.y_unit, "mm");
+    // Every pose, train and test, once.
+    assert_eq!(ev.stride, 1);
+    assert_eq!(ev.n_total, data.poses.len());
+    assert_eq!(ev.points.len(), data.poses.len());
+    let n_test = ev.points.iter().filter(|p| p.split == Split::Test).count();
+    assert_eq!(n_test, s.test.len());
+    // x is the gravity torque on joint 2 as the effect's own basis has it.
+    let ctx = physics::session_context(&s, &g.after);
+    let mut buf = Basis::default();
+    let torque = Kind::JointCompliance {
+        joint_index: 1,
+        regressors: vec![],
+    };
+    for (i, p) in ev.points.iter().enumerate() {
+        assert_eq!(p.pose, data.poses[i].id);
+        ctx.basis(&torque, i, &mut buf);
+        assert!((p.x - buf.dq[1]).abs() < 1e-9, "{} vs {}", p.x, buf.dq[1]);
+    }
+    let xs: Vec<f64> = ev.points.iter().map(|p| p.x).collect();
+    assert!(
+        xs.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+            - xs.iter().cloned().fold(f64::INFINITY, f64::min)
+            > 1.0,
+        "the torque varies over the poses"
+    );
+    // The residual follows the fitted effect, on train and on test poses.
+    let ys: Vec<f64> = ev.points.iter().map(|p| p.y).collect();
+    let ms: Vec<f64> = ev.points.iter().map(|p| p.model).collect();
+    let r = pearson(&ys, &ms);
+    eprintln!(
+        "compliance evidence: correlation {r:.4} (report {:?}), {} points",
+        ev.correlation,
+        ev.points.len()
+    );
+    assert!(r > 0.9, "correlation {r}");
+    assert!((ev.correlation.unwrap() - r).abs() < 1e-9);
+    let test: Vec<usize> = (0..ev.points.len())
+        .filter(|&i| ev.points[i].split == Split::Test)
+        .collect();
+    let rt = pearson(
+        &test.iter().map(|&i| ys[i]).collect::<Vec<_>>(),
+        &test.iter().map(|&i| ms[i]).collect::<Vec<_>>(),
+    );
+    assert!(rt > 0.8, "held-out correlation {rt}");
+    // The model is the effect, not noise: it spans more than the scatter
+    // around it.
+    let sd = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64).sqrt()
+    };
+    let resid: Vec<f64> = ys.iter().zip(&ms).map(|(y, m)| y - m).collect();
+    assert!(sd(&ms) > 2.0 * sd(&resid), "{} vs {}", sd(&ms), sd(&resid));
+    // Nothing for the unexplained finding (no effect to plot).
+    for u in a.findings.iter().filter(|f| f.effect == "unexplained") {
+        assert!(u.evidence_plot.is_none());
+    }
+    // The plot survives the report's JSON.
+    // (serde_json's default float parsing may be 1 ulp off.)
+    let back: Finding = serde_json::from_str(&serde_json::to_string(f).unwrap()).unwrap();
+    let eb0 = back.evidence_plot.as_ref().unwrap();
+    assert_eq!(eb0.x_label, ev.x_label);
+    assert_eq!(eb0.points.len(), ev.points.len());
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(1.0);
+    for (a, b) in eb0.points.iter().zip(&ev.points) {
+        assert_eq!((&a.pose, a.split, a.sensor), (&b.pose, b.split, b.sensor));
+        assert!(close(a.x, b.x) && close(a.y, b.y) && close(a.model, b.model));
+    }
+
+    // A session 30 times larger (the poses repeated under new ids): the
+    // plot is subsampled to the bound, deterministically.
+    let mut big = data.clone();
+    big.poses = (0..30)
+        .flat_map(|c| {
+            data.poses.iter().map(move |p| {
+                let mut q = p.clone();
+                q.id = format!("{}-{c}", p.id);
+                q
+            })
+        })
+        .collect();
+    let sb = Session::new(&robot, &rig, &big, &opts).unwrap();
+    let ctx_b = physics::session_context(&sb, &g.after);
+    let k = a
+        .effects
+        .iter()
+        .position(|e| matches!(e.kind, Kind::JointCompliance { .. }))
+        .unwrap();
+    let eb = physics::evidence::evidence_plot(&sb, &ctx_b, &a.final_params.values, &a.effects, k)
+        .unwrap();
+    assert_eq!(eb.n_total, big.poses.len());
+    assert!(eb.points.len() <= EvidencePlot::MAX_POINTS);
+    assert_eq!(
+        eb.stride,
+        big.poses.len().div_ceil(EvidencePlot::MAX_POINTS)
+    );
+    assert_eq!(eb.points[0].pose, big.poses[0].id);
+    assert_eq!(eb.points[1].pose, big.poses[eb.stride].id);
+    let again =
+        physics::evidence::evidence_plot(&sb, &ctx_b, &a.final_params.values, &a.effects, k)
+            .unwrap();
+    assert_eq!(again, eb);
+}
