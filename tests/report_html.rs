@@ -181,6 +181,51 @@ fn cli_report_holds_the_numbers_and_draws_the_plots() {
         has_value(&html, f.magnitude, "finding magnitude");
     }
 
+    // Each finding with the plot that is its evidence (train and test
+    // points and the fitted effect, one dot each) and the held-out RMS
+    // before and after it.
+    let mut n_evidence = 0;
+    for (i, f) in r.findings.iter().enumerate() {
+        let fig = html
+            .split(&format!("<figure class=\"evidence\" data-finding=\"{i}\""))
+            .nth(1)
+            .unwrap_or_else(|| panic!("no evidence figure for finding {i}"))
+            .split("</figure>")
+            .next()
+            .unwrap();
+        assert!(fig.contains(&format!(
+            "class=\"rms-before\" data-value=\"{}\"",
+            f.test_rms_before_mm
+        )));
+        assert!(fig.contains(&format!(
+            "class=\"rms-after\" data-value=\"{}\"",
+            f.test_rms_after_mm
+        )));
+        let Some(ev) = &f.evidence_plot else {
+            assert_eq!(f.effect, "unexplained", "finding {i} has no evidence plot");
+            continue;
+        };
+        n_evidence += 1;
+        let p = plots(fig);
+        assert_eq!(p.len(), 1, "one plot in the figure of finding {i}");
+        assert!(p[0].0.contains("held-out RMS"), "{}", p[0].0);
+        assert_eq!(p[0].1, 2 * ev.points.len(), "{}", p[0].0);
+        assert!(!ev.points.is_empty());
+        assert!(fig.contains(&esc(&ev.x_label)), "{}", ev.x_label);
+        if let Some(c) = ev.correlation {
+            assert!(fig.contains(&format!("data-value=\"{c}\"")));
+        }
+    }
+    assert!(
+        n_evidence >= 1,
+        "the compliance finding has its evidence plot"
+    );
+    // A report from before evidence plots still renders, and says so.
+    let mut old = r.clone();
+    old.findings.iter_mut().for_each(|f| f.evidence_plot = None);
+    let old_html = report_html::render_fragment(&old, None);
+    assert!(old_html.contains("the report predates evidence plots"));
+
     for n in &r.physics_notes {
         assert!(html.contains(&format!("<li>{}</li>", esc(n))), "note {n}");
     }

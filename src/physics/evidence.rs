@@ -235,14 +235,28 @@ pub fn evidence_plot(
         // Model minus measured (base frame) without the effect; measured
         // points re-located with the other sensor-side effects applied.
         let errs = errors_with_effects(session, ctx, p, &without, &idx);
+        // The displacement the effect causes at every pose (rig frame).
+        let disp: Vec<Vector3<f64>> = idx
+            .iter()
+            .map(|&i| {
+                let q = &session.data.poses[i].q_rad;
+                EffectProblem::model_point(&session.chain, ctx, p, effects, i, q).0
+                    - EffectProblem::model_point(&session.chain, ctx, p, &without, i, q).0
+            })
+            .collect();
+        // For effects without a joint angle or thermal multiplier to
+        // differentiate (added to the catalogue later, e.g. a rigid motion
+        // of the rig): the direction of the largest displacement orients
+        // every pose's own, and stands in where the effect does nothing.
+        let reference = disp
+            .iter()
+            .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))
+            .copied()
+            .unwrap_or_else(Vector3::zeros);
         for (pos, &i) in idx.iter().enumerate() {
-            let q = &session.data.poses[i].q_rad;
-            let t_with = EffectProblem::model_point(&session.chain, ctx, p, effects, i, q).0;
-            let t_without = EffectProblem::model_point(&session.chain, ctx, p, &without, i, q).0;
-            let d = t_with - t_without;
+            let d = disp[pos];
             // Unit displacement of a positive change of what the effect
-            // moves (a joint angle, the thermal multiplier); for effects
-            // added later, the displacement itself.
+            // moves (a joint angle, the thermal multiplier).
             let g = match (&e.kind, e.kind.joint()) {
                 (_, Some(j)) => {
                     point(session, ctx, p, effects, i, Some((j, STEP)), 0.0)
@@ -252,7 +266,14 @@ pub fn evidence_plot(
                     point(session, ctx, p, effects, i, None, STEP)
                         - point(session, ctx, p, effects, i, None, 0.0)
                 }
-                _ => d,
+                _ if d.norm() > 1e-9 * reference.norm() => {
+                    if d.dot(&reference) < 0.0 {
+                        -d
+                    } else {
+                        d
+                    }
+                }
+                _ => reference,
             };
             let gn = g.norm();
             if !(gn > 1e-12) {

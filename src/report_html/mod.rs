@@ -108,6 +108,8 @@ const CSS: &str = r#"
 .drawcal-report .plots{display:flex;flex-wrap:wrap;gap:8px}
 .drawcal-report svg.plot{max-width:100%;height:auto;border:1px solid #eee}
 .drawcal-report .muted{color:#666}
+.drawcal-report figure.evidence{margin:0;max-width:560px}
+.drawcal-report figure.evidence figcaption{font-size:12px;color:#444}
 "#;
 
 fn stats_rows(out: &mut String, split: &str, model: &str, e: &ErrorStats) {
@@ -207,21 +209,25 @@ fn pose_series<'a>(
             label: "train before",
             color: GREY,
             points: vec![],
+            dot: 0.0,
         },
         Series {
             label: "test before",
             color: BEFORE_TEST,
             points: vec![],
+            dot: 0.0,
         },
         Series {
             label: "train after",
             color: TRAIN,
             points: vec![],
+            dot: 0.0,
         },
         Series {
             label: "test after",
             color: TEST,
             points: vec![],
+            dot: 0.0,
         },
     ];
     for (i, p) in r.per_pose.iter().enumerate() {
@@ -254,6 +260,92 @@ fn finding_row(out: &mut String, i: usize, f: &Finding) {
         esc(&f.evidence),
         num(f.test_rms_before_mm),
         num(f.test_rms_after_mm),
+    );
+}
+
+/// One finding's evidence plot (from the report's `evidence_plot`) with the
+/// held-out RMS before and after it.
+fn evidence_figure(out: &mut String, i: usize, f: &Finding) {
+    let name = match (f.joint, f.sensor) {
+        (Some(j), _) => format!("{} j{j}", f.effect),
+        (None, Some(s)) => format!("{} s{s}", f.effect),
+        _ => f.effect.clone(),
+    };
+    let rms = format!(
+        r#"held-out RMS <span class="rms-before" data-value="{b}">{b:.4}</span> → <span class="rms-after" data-value="{a}">{a:.4}</span> mm"#,
+        b = f.test_rms_before_mm,
+        a = f.test_rms_after_mm
+    );
+    let Some(ev) = &f.evidence_plot else {
+        let _ = write!(
+            out,
+            r#"<figure class="evidence" data-finding="{i}"><figcaption><b>{}</b>: {rms}; no evidence plot ({}).</figcaption></figure>"#,
+            esc(&name),
+            if f.effect == "unexplained" {
+                "no effect is modelled; see its evidence text"
+            } else {
+                "the report predates evidence plots"
+            }
+        );
+        return;
+    };
+    let mut tr = Series {
+        label: "train",
+        color: TRAIN,
+        points: vec![],
+        dot: 0.0,
+    };
+    let mut te = Series {
+        label: "test",
+        color: TEST,
+        points: vec![],
+        dot: 0.0,
+    };
+    let mut model = Series {
+        label: "fitted effect",
+        color: "#000",
+        points: vec![],
+        dot: 2.0,
+    };
+    for p in &ev.points {
+        if p.split == Split::Test {
+            &mut te
+        } else {
+            &mut tr
+        }
+        .points
+        .push((p.x, p.y));
+        model.points.push((p.x, p.model));
+    }
+    let plot = svg::scatter(
+        &format!(
+            "{name}: held-out RMS {:.4} → {:.4} mm",
+            f.test_rms_before_mm, f.test_rms_after_mm
+        ),
+        &format!("{} ({})", ev.x_label, ev.x_unit),
+        &format!("residual on the effect ({})", ev.y_unit),
+        &[tr, te, model],
+    );
+    let corr = match ev.correlation {
+        Some(c) => format!(r#"<span class="corr" data-value="{c}">{c:.3}</span>"#),
+        None => "-".into(),
+    };
+    let sub = if ev.stride > 1 {
+        format!(
+            "{} of {} points (one pose in {}, by visiting order)",
+            ev.points.len(),
+            ev.n_total,
+            ev.stride
+        )
+    } else {
+        format!("{} points", ev.points.len())
+    };
+    let _ = write!(
+        out,
+        r#"<figure class="evidence" data-finding="{i}" data-n="{n}">{plot}<figcaption><b>{}</b>: {rms}; correlation of residual and fitted effect {corr}; {sub}. y: {}.</figcaption></figure>"#,
+        esc(&name),
+        esc(&ev.y_label),
+        n = ev.points.len(),
     );
 }
 
@@ -411,8 +503,8 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
                 for k in 0..n_str {
                     let col = format!("l{}_mm", k + 1);
                     let Some(c) = pc.column(&col) else { continue };
-                    let mut tr = Series { label: "train", color: TRAIN, points: vec![] };
-                    let mut te = Series { label: "test", color: TEST, points: vec![] };
+                    let mut tr = Series { label: "train", color: TRAIN, points: vec![], dot: 0.0 };
+                    let mut te = Series { label: "test", color: TEST, points: vec![], dot: 0.0 };
                     for p in &r.per_pose {
                         let (Some(s), Some(v)) = (&p.strings_mm, pc.rows.get(&p.pose)) else { continue };
                         let (Some(res), l) = (s.get(k), v[c]) else { continue };
@@ -461,6 +553,11 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
             &[("before", BEFORE_TEST), ("after", TEST)],
             &values,
         ));
+        o.push_str("</div>");
+        o.push_str(r#"<h3 id="evidence">Evidence of each finding</h3><p class="muted">Per pose, the residual with the effect left out of the fitted model, on the effect's own signature (robot side: the error along the displacement the effect causes; sensor side: the string's reading error), against what drives the effect; black: the fitted effect along the same direction. Where the effect is real the points follow it.</p><div class="plots">"#);
+        for (i, f) in r.findings.iter().enumerate() {
+            evidence_figure(&mut o, i, f);
+        }
         o.push_str("</div>");
     }
 

@@ -10,6 +10,8 @@ pub struct Series<'a> {
     pub color: &'a str,
     /// Points (x, y).
     pub points: Vec<(f64, f64)>,
+    /// Dot diameter (px); 0 for the default (smaller above 3000 points).
+    pub dot: f64,
 }
 
 /// Escape text for HTML and SVG.
@@ -182,10 +184,11 @@ pub fn scatter(title: &str, xlabel: &str, ylabel: &str, series: &[Series]) -> St
         }
         let _ = write!(
             out,
-            r#"<path class="series" data-label="{l}" data-n="{n}" d="{d}" stroke="{c}" stroke-width="{dot}" stroke-linecap="round" fill="none" opacity="0.8"/>"#,
+            r#"<path class="series" data-label="{l}" data-n="{n}" d="{d}" stroke="{c}" stroke-width="{w}" stroke-linecap="round" fill="none" opacity="0.8"/>"#,
             l = esc(s.label),
             n = s.points.len(),
-            c = s.color
+            c = s.color,
+            w = if s.dot > 0.0 { s.dot } else { dot },
         );
     }
     let items: Vec<(&str, &str)> = series.iter().map(|s| (s.label, s.color)).collect();
