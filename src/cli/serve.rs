@@ -31,6 +31,31 @@ pub struct ServeArgs {
     /// it is handed back to the queue (seconds).
     #[arg(long, env = "DRAWCAL_SHUTDOWN_GRACE_SECS", default_value_t = 10)]
     pub shutdown_grace_secs: u64,
+    /// Log lines on stderr: `text` (key=value) or `json` (one object per
+    /// line, for log collectors). Either way every line logged while a
+    /// request is handled carries its request id.
+    #[arg(long, env = "DRAWCAL_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
+    pub log_format: LogFormat,
+}
+
+/// How log lines are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LogFormat {
+    /// `LEVEL span{request_id=...}: message key=value`, one per line.
+    Text,
+    /// One JSON object per line: `timestamp`, `level`, `fields.message`,
+    /// the event's other fields, and `span`/`spans` with the request span's
+    /// `request_id`, `method` and `uri`.
+    Json,
+}
+
+impl std::fmt::Display for LogFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LogFormat::Text => "text",
+            LogFormat::Json => "json",
+        })
+    }
 }
 
 fn redact(url: &str) -> String {
@@ -55,15 +80,16 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
     if args.job_lease_secs == 0 {
         return Err("--job-lease-secs must be at least 1".into());
     }
-    init_tracing();
+    init_tracing(args.log_format);
     eprintln!(
-        "drawcal serve: listen={} database={} workers={} max_upload_bytes={} job_lease_secs={} shutdown_grace_secs={}",
+        "drawcal serve: listen={} database={} workers={} max_upload_bytes={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
         args.listen,
         redact(&args.database),
         args.workers,
         args.max_upload_bytes,
         args.job_lease_secs,
-        args.shutdown_grace_secs
+        args.shutdown_grace_secs,
+        args.log_format
     );
     let cfg = ServiceConfig {
         listen: args.listen,
@@ -93,16 +119,25 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-/// Structured logs (key=value, with request and job spans) to stderr;
-/// `RUST_LOG` filters (default `info`).
-fn init_tracing() {
+/// Structured logs (key=value text or JSON lines, with request and job
+/// spans) to stderr; `RUST_LOG` filters (default `info,sqlx=warn`).
+fn init_tracing(format: LogFormat) {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx=warn"));
-    let _ = tracing_subscriber::fmt()
+    let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
-        .with_target(false)
-        .try_init();
+        .with_target(false);
+    let _ = match format {
+        LogFormat::Text => builder.try_init(),
+        // The current span and the list of enclosing spans: the request
+        // span (request_id, method, uri) is in every line of a request.
+        LogFormat::Json => builder
+            .json()
+            .with_current_span(true)
+            .with_span_list(true)
+            .try_init(),
+    };
 }
 
 #[cfg(test)]

@@ -324,6 +324,8 @@ pub struct Rollback {
 
 /// Drop the cached active calibration of a robot (see `App::active`).
 fn forget_active(app: &AppState, robot_id: i64) {
+    app.activations
+        .fetch_add(1, std::sync::atomic::Ordering::SeqCst);
     if let Ok(mut m) = app.active.write() {
         m.remove(&robot_id);
     }

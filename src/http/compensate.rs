@@ -1,21 +1,29 @@
 //! `POST /compensate`: corrected joint targets from a robot's calibration.
 //!
 //! Compensators are built once per calibration (calibrations are immutable)
-//! and cached. The solves run on blocking threads; a large batch is split
-//! across the cores.
+//! and cached. A request of a few joint targets is solved inline (see
+//! [`INLINE_MAX_JOINT_TARGETS`]); anything larger runs on the compute
+//! threads, a large batch split across the cores. Targets arrive as JSON or
+//! targets.csv; the answer is JSON or compensated.csv (`Accept: text/csv`),
+//! written by the engine's own [`crate::compensate::write_csv`].
 
 use std::collections::HashSet;
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 
 use axum::Json;
 use axum::extract::State;
+use axum::http::header::{ACCEPT, CONTENT_TYPE};
+use axum::http::{HeaderMap, HeaderName, HeaderValue};
+use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
-use utoipa::ToSchema;
+use utoipa::{IntoParams, ToSchema};
 
-use super::extract::ApiJson;
+use super::extract::{ApiQuery, RawBody, is_json, parse_json};
 use super::{ApiError, ApiResult, AppState, ErrorBody, MAX_COMPENSATE_TARGETS};
 use crate::compensate::{Compensated, CompensationStatus, Compensator};
 use crate::identify::report::Report;
+use crate::model::targets::targets_from_csv;
 use crate::model::{Target, TargetKind};
 
 /// A built compensator and what it came from.
@@ -189,25 +197,61 @@ fn check_target(i: usize, t: TargetIn, dof: usize, batch: bool) -> ApiResult<Tar
     })
 }
 
-/// The robot's active calibration id (cached for at most
-/// [`super::ACTIVE_CACHE_TTL`]); not found if the robot does not exist.
+/// The robot's active calibration id; not found if the robot does not
+/// exist.
+///
+/// Cached per robot for [`super::ACTIVE_CACHE_TTL`] (dropped at once when
+/// this process activates or rolls back). When the entry has expired, the
+/// first request to see it re-reads the robot (one primary-key read) while
+/// concurrent requests keep using the old id until that read lands, so the
+/// database sees one read per robot per TTL, never a burst. An activation
+/// made through another replica on the same database is therefore seen
+/// within the TTL plus one read.
 async fn active_calibration(app: &AppState, robot_id: i64) -> ApiResult<Option<i64>> {
+    let now = std::time::Instant::now();
     if let Some((active, at)) = app
         .active
         .read()
         .ok()
         .and_then(|m| m.get(&robot_id).copied())
     {
-        if at.elapsed() < super::ACTIVE_CACHE_TTL {
+        if now.duration_since(at) < super::ACTIVE_CACHE_TTL {
+            return Ok(active);
+        }
+        // Expired: claim the refresh (the entry looks fresh to the others
+        // while this request reads the robot), unless another one has.
+        let claimed = match app.active.write() {
+            Ok(mut m) => match m.get_mut(&robot_id) {
+                Some(e) if now.duration_since(e.1) >= super::ACTIVE_CACHE_TTL => {
+                    e.1 = now;
+                    true
+                }
+                _ => false,
+            },
+            Err(_) => true,
+        };
+        if !claimed {
             return Ok(active);
         }
     }
-    let robot = app.store.get_robot(robot_id).await?;
+    let read_at = std::time::Instant::now();
+    let epoch = app.activations.load(Ordering::SeqCst);
+    let robot = match app.store.get_robot(robot_id).await {
+        Ok(r) => r,
+        Err(e) => {
+            if let Ok(mut m) = app.active.write() {
+                m.remove(&robot_id);
+            }
+            return Err(e.into());
+        }
+    };
     if let Ok(mut m) = app.active.write() {
-        m.insert(
-            robot_id,
-            (robot.active_calibration_id, std::time::Instant::now()),
-        );
+        // Not if an activation through this process may have raced the read.
+        if app.activations.load(Ordering::SeqCst) == epoch {
+            m.insert(robot_id, (robot.active_calibration_id, read_at));
+        } else {
+            m.remove(&robot_id);
+        }
     }
     Ok(robot.active_calibration_id)
 }
@@ -245,57 +289,160 @@ async fn compensator(app: &AppState, calibration_id: i64) -> ApiResult<Arc<Cache
     Ok(cached)
 }
 
+/// Query parameters of `POST /compensate`, for a `text/csv` body only (a
+/// JSON body carries them itself).
+#[derive(Debug, Default, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+#[serde(deny_unknown_fields)]
+pub struct CompensateQuery {
+    /// Robot (required with a `text/csv` body).
+    pub robot_id: Option<i64>,
+    /// Calibration to use (default: the robot's active one).
+    pub calibration_id: Option<i64>,
+    /// Also hold the flange orientation (default false).
+    pub orientation: Option<bool>,
+}
+
+impl CompensateQuery {
+    fn is_empty(&self) -> bool {
+        self.robot_id.is_none() && self.calibration_id.is_none() && self.orientation.is_none()
+    }
+}
+
+/// The targets as they arrived: JSON objects (checked against the robot
+/// once its calibration is known) or a targets.csv body.
+enum Inputs {
+    Json { targets: Vec<TargetIn>, batch: bool },
+    Csv(axum::body::Bytes),
+}
+
+/// Does the client ask for compensated.csv? True when `text/csv` comes
+/// before any JSON (or wildcard) media range in `Accept`; JSON otherwise.
+/// Errors are always JSON.
+fn wants_csv(headers: &HeaderMap) -> bool {
+    for value in headers.get_all(ACCEPT) {
+        let Ok(value) = value.to_str() else { continue };
+        for range in value.split(',') {
+            let mut parts = range.split(';');
+            let media = parts.next().unwrap_or("").trim().to_ascii_lowercase();
+            let refused = parts.any(|p| {
+                let p = p.trim();
+                p.strip_prefix("q=")
+                    .and_then(|q| q.trim().parse::<f64>().ok())
+                    .is_some_and(|q| q <= 0.0)
+            });
+            if refused {
+                continue;
+            }
+            match media.as_str() {
+                "text/csv" => return true,
+                "application/json" | "*/*" | "application/*" => return false,
+                m if m.ends_with("+json") => return false,
+                _ => {}
+            }
+        }
+    }
+    false
+}
+
 /// Compensate targets for a robot with its active calibration (or a named
 /// one). Per-target failures (unreachable, joint limit) are reported in the
 /// results; they never fail the batch.
-#[utoipa::path(post, path = "/compensate", tag = "compensation", request_body = CompensateRequest,
+///
+/// Targets come as JSON (`CompensateRequest`) or as DATA_FORMAT.md
+/// targets.csv (`Content-Type: text/csv`, with `robot_id` and the options in
+/// the query string). The answer is JSON unless `Accept` prefers `text/csv`:
+/// then it is compensated.csv, in request order, with the calibration that
+/// produced it in the `X-Calibration-Id` and `X-Calibration-Version`
+/// headers. Errors are always JSON.
+#[utoipa::path(post, path = "/compensate", tag = "compensation",
+    params(CompensateQuery),
+    request_body(
+        description = "JSON, or DATA_FORMAT.md targets.csv (`target,q1_deg..qn_deg` or `target,x_mm,y_mm,z_mm[,roll_deg,pitch_deg,yaw_deg]`) with `robot_id` in the query string.",
+        content(
+            (CompensateRequest = "application/json"),
+            (String = "text/csv"))),
     responses(
-        (status = 200, description = "Results, in order", body = CompensateResponse),
-        (status = 400, description = "Malformed JSON", body = ErrorBody),
+        (status = 200, description = "Results, in order: JSON, or with `Accept: text/csv` DATA_FORMAT.md compensated.csv (`target,q1_deg..qn_deg,residual_mm,iterations,status,message`)",
+            content(
+                (CompensateResponse = "application/json"),
+                (String = "text/csv")),
+            headers(
+                ("x-calibration-id" = i64, description = "Calibration used (on text/csv answers; JSON has it in the body)"),
+                ("x-calibration-version" = i64, description = "Its version (on text/csv answers)"))),
+        (status = 400, description = "Malformed JSON or query string", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody),
         (status = 409, description = "The robot has no active calibration", body = ErrorBody),
         (status = 413, description = "Body too large", body = ErrorBody),
-        (status = 415, description = "Not JSON", body = ErrorBody),
-        (status = 422, description = "Invalid target (row = 1-based position), too many targets, or a calibration of another robot", body = ErrorBody)))]
+        (status = 415, description = "Neither application/json nor text/csv", body = ErrorBody),
+        (status = 422, description = "Invalid target (row = 1-based position or CSV row), too many targets, a calibration of another robot, or robot_id missing with a CSV body", body = ErrorBody)))]
 pub async fn compensate(
     State(app): State<AppState>,
-    ApiJson(req): ApiJson<CompensateRequest>,
-) -> ApiResult<Json<CompensateResponse>> {
-    let (inputs, batch) = match (req.target, req.targets) {
-        (Some(t), None) => (vec![t], false),
-        (None, Some(ts)) => (ts, true),
-        (Some(_), Some(_)) => {
-            return Err(ApiError::invalid(
-                "targets",
-                "give target or targets, not both",
-            ));
+    headers: HeaderMap,
+    ApiQuery(query): ApiQuery<CompensateQuery>,
+    body: RawBody,
+) -> ApiResult<Response> {
+    let csv_out = wants_csv(&headers);
+    let (robot_id, calibration_id, orientation, inputs) = match body.content_type.as_deref() {
+        ct if is_json(ct) => {
+            if !query.is_empty() {
+                return Err(ApiError::invalid(
+                    "robot_id",
+                    "with a JSON body, robot_id, calibration_id and orientation go in the body, not the query string",
+                ));
+            }
+            let req: CompensateRequest = parse_json(&body.bytes)?;
+            let (targets, batch) = match (req.target, req.targets) {
+                (Some(t), None) => (vec![t], false),
+                (None, Some(ts)) => (ts, true),
+                (Some(_), Some(_)) => {
+                    return Err(ApiError::invalid(
+                        "targets",
+                        "give target or targets, not both",
+                    ));
+                }
+                (None, None) => {
+                    return Err(ApiError::invalid(
+                        "targets",
+                        "give target (one) or targets (a batch)",
+                    ));
+                }
+            };
+            check_count(targets.len())?;
+            (
+                req.robot_id,
+                req.calibration_id,
+                req.orientation,
+                Inputs::Json { targets, batch },
+            )
         }
-        (None, None) => {
-            return Err(ApiError::invalid(
-                "targets",
-                "give target (one) or targets (a batch)",
-            ));
+        Some("text/csv") => {
+            let robot_id = query.robot_id.ok_or_else(|| {
+                ApiError::invalid(
+                    "robot_id",
+                    "a text/csv body needs robot_id in the query string (/compensate?robot_id=N)",
+                )
+            })?;
+            (
+                robot_id,
+                query.calibration_id,
+                query.orientation.unwrap_or(false),
+                Inputs::Csv(body.bytes),
+            )
+        }
+        other => {
+            return Err(ApiError::UnsupportedMediaType(format!(
+                "targets are sent as application/json or text/csv, got {}",
+                other.unwrap_or("none")
+            )));
         }
     };
-    if inputs.is_empty() {
-        return Err(ApiError::invalid("targets", "the batch is empty"));
-    }
-    if inputs.len() > MAX_COMPENSATE_TARGETS {
-        return Err(ApiError::invalid(
-            "targets",
-            format!(
-                "{} targets: at most {MAX_COMPENSATE_TARGETS} per request",
-                inputs.len()
-            ),
-        ));
-    }
-    let active = active_calibration(&app, req.robot_id).await?;
-    let calibration_id = match req.calibration_id {
+    let active = active_calibration(&app, robot_id).await?;
+    let calibration_id = match calibration_id {
         Some(c) => c,
         None => active.ok_or_else(|| {
             ApiError::Conflict(format!(
-                "robot {} has no active calibration: activate one or name calibration_id",
-                req.robot_id
+                "robot {robot_id} has no active calibration: activate one or name calibration_id"
             ))
         })?,
     };
@@ -308,16 +455,75 @@ pub async fn compensate(
         }
         other => other?,
     };
-    if cached.robot_id != req.robot_id {
+    if cached.robot_id != robot_id {
         return Err(ApiError::invalid(
             "calibration_id",
             format!(
-                "calibration {calibration_id} belongs to robot {}, not {}",
-                cached.robot_id, req.robot_id
+                "calibration {calibration_id} belongs to robot {}, not {robot_id}",
+                cached.robot_id
             ),
         ));
     }
     let dof = cached.compensator.dof();
+    let targets = match inputs {
+        Inputs::Json { targets, batch } => json_targets(targets, dof, batch)?,
+        Inputs::Csv(bytes) => {
+            // targets.csv is parsed here, on the runtime: a few µs per row,
+            // like the JSON parse of the same targets.
+            let targets = targets_from_csv(&bytes[..], dof)?;
+            check_count(targets.len())?;
+            targets
+        }
+    };
+    let results = solve(&app, cached.clone(), targets, orientation).await?;
+    if csv_out {
+        let mut out = Vec::with_capacity(64 + results.len() * (16 + 14 * dof));
+        crate::compensate::write_csv(&mut out, dof, &results)
+            .map_err(|e| ApiError::Internal(format!("writing compensated.csv: {e}")))?;
+        return Ok((
+            [
+                (CONTENT_TYPE, HeaderValue::from_static("text/csv")),
+                (
+                    HeaderName::from_static("x-calibration-id"),
+                    HeaderValue::from(cached.calibration_id),
+                ),
+                (
+                    HeaderName::from_static("x-calibration-version"),
+                    HeaderValue::from(cached.version),
+                ),
+            ],
+            out,
+        )
+            .into_response());
+    }
+    let results: Vec<CompensatedOut> = results.into_iter().map(Into::into).collect();
+    let n_ok = results.iter().filter(|r| r.status == StatusOut::Ok).count();
+    Ok(Json(CompensateResponse {
+        robot_id,
+        calibration_id: cached.calibration_id,
+        version: cached.version,
+        n_ok,
+        results,
+    })
+    .into_response())
+}
+
+/// A batch has 1 to [`MAX_COMPENSATE_TARGETS`] targets.
+fn check_count(n: usize) -> ApiResult<()> {
+    if n == 0 {
+        return Err(ApiError::invalid("targets", "the batch is empty"));
+    }
+    if n > MAX_COMPENSATE_TARGETS {
+        return Err(ApiError::invalid(
+            "targets",
+            format!("{n} targets: at most {MAX_COMPENSATE_TARGETS} per request"),
+        ));
+    }
+    Ok(())
+}
+
+/// JSON targets checked against the robot's joints; ids unique.
+fn json_targets(inputs: Vec<TargetIn>, dof: usize, batch: bool) -> ApiResult<Vec<Target>> {
     let mut seen = HashSet::with_capacity(inputs.len());
     let mut targets = Vec::with_capacity(inputs.len());
     for (i, t) in inputs.into_iter().enumerate() {
@@ -335,23 +541,53 @@ pub async fn compensate(
         }
         targets.push(t);
     }
-    let orientation = req.orientation;
-    let c = cached.clone();
+    Ok(targets)
+}
+
+/// Requests of at most this many targets, all nominal joint targets, are
+/// compensated inline on the async runtime's thread; anything larger, and
+/// any Cartesian target, goes to the compute threads.
+///
+/// Why this is within "numerical work never runs on the async runtime's
+/// threads": the rule is there so that solves cannot stall the runtime, and
+/// a joint target is one short Newton solve from the taught angles — 2.7 µs
+/// (position) or 4.7 µs (with orientation) in `cargo bench --bench engine`,
+/// at most 50 iterations (about 50 µs) when it does not converge. That is
+/// the cost of parsing the request's JSON, far under the ~100 µs a task may
+/// run between awaits, while the hand-off to a compute thread and back (two
+/// thread wake-ups) costs more than the solve and was the largest part of
+/// the single-target latency under load (BENCHMARKS.md). A Cartesian target
+/// runs up to 12 inverse-kinematics seeds (up to about a millisecond), so it
+/// never runs inline.
+pub const INLINE_MAX_JOINT_TARGETS: usize = 4;
+
+fn runs_inline(targets: &[Target]) -> bool {
+    targets.len() <= INLINE_MAX_JOINT_TARGETS
+        && targets
+            .iter()
+            .all(|t| matches!(t.kind, TargetKind::Joints { .. }))
+}
+
+/// Compensate `targets` in order: inline when tiny (see
+/// [`INLINE_MAX_JOINT_TARGETS`]), else on the compute threads.
+async fn solve(
+    app: &AppState,
+    cached: Arc<Cached>,
+    targets: Vec<Target>,
+    orientation: bool,
+) -> ApiResult<Vec<Compensated>> {
+    if runs_inline(&targets) {
+        return Ok(crate::compensate::compensate_all(
+            &cached.compensator,
+            &targets,
+            orientation,
+        ));
+    }
     let threads = solve_threads(targets.len());
-    let results = app
-        .compute
-        .run(move || solve_all(&c.compensator, &targets, orientation, threads))
+    app.compute
+        .run(move || solve_all(&cached.compensator, &targets, orientation, threads))
         .await
-        .ok_or_else(|| ApiError::Internal("compensation failed (see the log)".into()))?;
-    let results: Vec<CompensatedOut> = results.into_iter().map(Into::into).collect();
-    let n_ok = results.iter().filter(|r| r.status == StatusOut::Ok).count();
-    Ok(Json(CompensateResponse {
-        robot_id: req.robot_id,
-        calibration_id: cached.calibration_id,
-        version: cached.version,
-        n_ok,
-        results,
-    }))
+        .ok_or_else(|| ApiError::Internal("compensation failed (see the log)".into()))
 }
 
 /// Threads for a batch: one for small batches, one per core for large ones.

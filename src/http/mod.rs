@@ -75,6 +75,9 @@ pub struct App {
     /// after [`ACTIVE_CACHE_TTL`] and dropped at once when this process
     /// activates or rolls back.
     pub active: RwLock<HashMap<i64, (Option<i64>, std::time::Instant)>>,
+    /// Bumped by every activation and rollback through this process, so
+    /// that a read of the active id that raced with one is not cached.
+    pub activations: AtomicU64,
     /// Threads for request-path numerical work (one per core).
     pub compute: compute::ComputePool,
 }
@@ -273,6 +276,7 @@ impl Service {
             jobs,
             compensators: RwLock::new(HashMap::new()),
             active: RwLock::new(HashMap::new()),
+            activations: AtomicU64::new(0),
             compute: compute::ComputePool::new(compute_threads()),
         }));
         Ok(Service {

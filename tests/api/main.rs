@@ -3,9 +3,11 @@
 //! fresh SQLite file (the store conformance suite also runs on PostgreSQL).
 
 mod bad_requests;
+mod compensate_csv;
 mod deploy;
 mod e2e;
 mod helpers;
 mod jobs;
+mod logs;
 mod openapi;
 mod store;

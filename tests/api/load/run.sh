@@ -9,16 +9,20 @@
 #   2. POST /compensate, 10,000 targets per request (batch throughput);
 #   3. upload + identification of a 2000-pose session, end to end
 #      (the first 2000 poses of tests/data/real_ur10_ipa_random).
+# PARTS selects (default "single batch identify"); DUR the wrk duration;
+# LOG_LEVEL the server's RUST_LOG (default warn), LOG_FORMAT its log format.
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
 BIN=${1:-target/release/drawcal}
 DUR=${DUR:-15s}
 PORT=${PORT:-18080}
+PARTS=${PARTS:-single batch identify}
+has() { [[ " $PARTS " == *" $1 "* ]]; }
 BASE=http://127.0.0.1:$PORT
 WORK=$(mktemp -d)
 trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true; rm -rf "$WORK"' EXIT
 
-DATABASE_URL=sqlite://$WORK/bench.db RUST_LOG=warn "$BIN" serve --listen 127.0.0.1:$PORT --workers 1 2>"$WORK/server.log" &
+DATABASE_URL=sqlite://$WORK/bench.db RUST_LOG=${LOG_LEVEL:-warn} DRAWCAL_LOG_FORMAT=${LOG_FORMAT:-text} "$BIN" serve --listen 127.0.0.1:$PORT --workers 1 2>"$WORK/server.log" &
 SERVER=$!
 until curl -sf $BASE/ready >/dev/null; do sleep 0.2; done
 
@@ -52,12 +56,17 @@ def q():  # nominal joint targets inside the ER3A's limits
 json.dump({"robot_id": robot, "target": {"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]}}, open(f"{work}/one.json", "w"))
 json.dump({"robot_id": robot, "targets": [{"target": f"t{i}", "q_deg": q()} for i in range(10000)]}, open(f"{work}/batch.json", "w"))
 PY
-echo "### single target, 64 connections"
-BODY=$WORK/one.json wrk -t2 -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
-echo "### batch of 10,000 targets, 2 connections"
-BODY=$WORK/batch.json wrk -t2 -c2 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
-curl -sS -H 'content-type: application/json' --data-binary @$WORK/batch.json $BASE/compensate |
-  python3 -c 'import json,sys; r=json.load(sys.stdin); print("batch statuses:", {s: sum(1 for x in r["results"] if x["status"]==s) for s in ("ok","unreachable","joint_limit")})'
+if has single; then
+  echo "### single target, 64 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
+  BODY=$WORK/one.json wrk -t2 -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
+fi
+if has batch; then
+  echo "### batch of 10,000 targets, 2 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
+  BODY=$WORK/batch.json wrk -t2 -c2 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
+  curl -sS -H 'content-type: application/json' --data-binary @$WORK/batch.json $BASE/compensate |
+    python3 -c 'import json,sys; r=json.load(sys.stdin); print("batch statuses:", {s: sum(1 for x in r["results"] if x["status"]==s) for s in ("ok","unreachable","joint_limit")})'
+fi
+has identify || exit 0
 
 echo "### upload + identify, 2000 poses"
 head -n 2001 tests/data/real_ur10_ipa_random/poses.csv > $WORK/poses2000.csv
