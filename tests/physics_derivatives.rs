@@ -134,6 +134,11 @@ fn string_effects_match_finite_differences() {
                 },
                 vec![0.3, -0.2, 0.1],
             ),
+            (
+                Kind::RigStep { t0_s: 300.0 },
+                vec![0.2, -0.1, 0.3, 0.05, -0.04, 0.02],
+            ),
+            (Kind::RigDrift, vec![0.1, 0.2, -0.1, 0.03, 0.01, -0.02]),
         ],
     );
 }
@@ -165,6 +170,11 @@ fn point_data_and_mass_free_compliance_match_finite_differences() {
                 vec![2e-5],
             ),
             (Kind::Backlash { joint_index: 0 }, vec![1e-4]),
+            (
+                Kind::RigStep { t0_s: 10.5 },
+                vec![0.2, -0.1, 0.3, 0.05, -0.04, 0.02],
+            ),
+            (Kind::RigDrift, vec![0.1, 0.2, -0.1, 0.03, 0.01, -0.02]),
         ],
     );
 }

@@ -46,9 +46,11 @@ pub const HELD_OUT_Z: f64 = 2.0;
 /// Cross-validation folds.
 const FOLDS: usize = 5;
 /// At most this many effects are modelled.
-const MAX_EFFECTS: usize = 4;
+const MAX_EFFECTS: usize = 6;
 /// Change-point grid of the anchor-step scan (coarse, then refined).
 const STEP_GRID: usize = 12;
+/// Cap on the look-elsewhere count of one scanned change-point family.
+const SCAN_EFFECTIVE_MAX: usize = 100;
 /// Leading candidates for which a jointly tested partner is sought.
 const PAIR_LEADS: usize = 4;
 /// Proposals (single effects or pairs) tried per round.
@@ -302,8 +304,49 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
             },
         );
     }
+    // Change points at quantiles of the train times; each family scans
+    // every change point of the session, so its look-elsewhere count is
+    // spread over the grid.
+    let mut times: Vec<f64> = train.iter().map(|&i| ctx.poses[i].time_s).collect();
+    times.sort_by(|a, b| a.total_cmp(b));
+    times.dedup();
+    let change_points: Vec<f64> = if times.len() >= 2 * STEP_GRID {
+        (1..STEP_GRID)
+            .map(|g| {
+                let at = g * times.len() / STEP_GRID;
+                0.5 * (times[at - 1] + times[at])
+            })
+            .collect()
+    } else {
+        vec![]
+    };
+    // Look-elsewhere allowance of a change point scanned over the session:
+    // every position counts while they are few; beyond SCAN_EFFECTIVE_MAX
+    // the scan's statistics at neighbouring positions are so correlated
+    // that more positions add almost no chance of a false alarm (for a
+    // step scanned over a fixed fraction of the session the tail
+    // probability tends to a constant times one test's: Siegmund's
+    // approximation gives tens of effective tests at these thresholds).
+    let scanned_per_point = times
+        .len()
+        .saturating_sub(1)
+        .min(SCAN_EFFECTIVE_MAX)
+        .div_ceil(STEP_GRID - 1);
+    if times.len() > 2 {
+        push(
+            Kind::RigDrift,
+            1,
+            "a steady motion of the whole rig over the session".into(),
+        );
+    }
+    for &t0 in &change_points {
+        push(
+            Kind::RigStep { t0_s: t0 },
+            scanned_per_point,
+            format!("a move of the whole rig at {t0:.0} s"),
+        );
+    }
     if m > 0 {
-        let l = session.chain.layout;
         for k in 0..m {
             push(
                 Kind::SensorScale { sensor_index: k },
@@ -315,30 +358,18 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
                 1,
                 format!("a constant on string {}", k + 1),
             );
-            let _ = l;
         }
         push(Kind::CableSag, 1, "horizontal span of the strings".into());
-        // Change points at quantiles of the train times.
-        let mut times: Vec<f64> = train.iter().map(|&i| ctx.poses[i].time_s).collect();
-        times.sort_by(|a, b| a.total_cmp(b));
-        times.dedup();
-        if times.len() >= 2 * STEP_GRID {
-            let n_positions = times.len() - 1;
-            for g in 1..STEP_GRID {
-                let at = g * times.len() / STEP_GRID;
-                let t0 = 0.5 * (times[at - 1] + times[at]);
-                for k in 0..m {
-                    // The family scans every change point of the session:
-                    // spread its look-elsewhere count over the grid.
-                    push(
-                        Kind::AnchorStep {
-                            sensor_index: k,
-                            t0_s: t0,
-                        },
-                        n_positions.div_ceil(STEP_GRID - 1),
-                        format!("a change at {t0:.0} s on string {}", k + 1),
-                    );
-                }
+        for &t0 in &change_points {
+            for k in 0..m {
+                push(
+                    Kind::AnchorStep {
+                        sensor_index: k,
+                        t0_s: t0,
+                    },
+                    scanned_per_point,
+                    format!("a change at {t0:.0} s on string {}", k + 1),
+                );
             }
         }
     }
@@ -356,12 +387,132 @@ fn same_slot(a: &Kind, b: &Kind) -> bool {
                 sensor_index: y, ..
             },
         ) => x == y,
+        (Kind::RigStep { t0_s: x }, Kind::RigStep { t0_s: y }) => x == y,
         (
             Kind::JointCompliance { joint_index: x, .. },
             Kind::JointCompliance { joint_index: y, .. },
         ) => x == y,
         _ => a == b,
     }
+}
+
+/// Each train pose (position in `train`) paired with its nearest other
+/// train pose in joint space. Above 12,000 poses a deterministic stride
+/// subsample bounds this quadratic search (0.1 s at that size).
+fn nearest_in_joint_space(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)> {
+    let stride = train.len().div_ceil(12_000).max(1);
+    let pick: Vec<usize> = (0..train.len()).step_by(stride).collect();
+    let q = |a: usize| &ctx.poses[train[a]].q_rad;
+    pick.iter()
+        .filter_map(|&a| {
+            pick.iter()
+                .filter(|&&b| b != a)
+                .map(|&b| {
+                    let d: f64 = q(a).iter().zip(q(b)).map(|(x, y)| (x - y).powi(2)).sum();
+                    (d, b)
+                })
+                .min_by(|x, y| x.0.total_cmp(&y.0))
+                .map(|(_, b)| (a, b))
+        })
+        .collect()
+}
+
+/// Where in the workspace the residual is largest: the quarter of one
+/// joint's range (over the train poses) with the highest residual RMS,
+/// when it stands out (1.3 times the overall RMS or more).
+fn worst_region(ctx: &Context, train: &[usize], res: &[f64], rpp: usize) -> String {
+    let n_t = train.len();
+    if n_t < 40 {
+        return String::new();
+    }
+    let sq = |a: usize| (0..rpp).map(|c| res[a * rpp + c].powi(2)).sum::<f64>();
+    let all = ((0..n_t).map(sq).sum::<f64>() / n_t as f64).sqrt();
+    let mut best: Option<(f64, String)> = None;
+    for j in 0..ctx.n_joints {
+        let mut order: Vec<usize> = (0..n_t).collect();
+        order.sort_by(|a, b| ctx.poses[train[*a]].q_rad[j].total_cmp(&ctx.poses[train[*b]].q_rad[j]));
+        let lo = ctx.poses[train[order[0]]].q_rad[j];
+        let hi = ctx.poses[train[order[n_t - 1]]].q_rad[j];
+        if (hi - lo).to_degrees() < 5.0 {
+            continue;
+        }
+        for quarter in order.chunks(n_t.div_ceil(4)) {
+            let r = (quarter.iter().map(|&a| sq(a)).sum::<f64>() / quarter.len() as f64).sqrt();
+            let (a, b) = (
+                ctx.poses[train[quarter[0]]].q_rad[j].to_degrees(),
+                ctx.poses[train[quarter[quarter.len() - 1]]].q_rad[j].to_degrees(),
+            );
+            if best.as_ref().is_none_or(|x| r > x.0) {
+                best = Some((r, format!("joint {} between {a:.0} and {b:.0} deg", j + 1)));
+            }
+        }
+    }
+    match best {
+        Some((r, where_)) if r >= 1.3 * all => format!(
+            "; largest where {where_} (residual RMS {:.3} mm per reading there, {:.3} overall)",
+            r / (rpp as f64).sqrt(),
+            all / (rpp as f64).sqrt()
+        ),
+        _ => String::new(),
+    }
+}
+
+/// Each member of a pair significant given the other (chi-square of its
+/// columns over its threshold), linearised at the current parameters.
+fn pair_holds(
+    session: &Session,
+    ctx: &Context,
+    p: &[f64],
+    free: &[usize],
+    accepted: &[EffectModel],
+    pair: &[Candidate],
+    thresholds: &[f64],
+) -> bool {
+    let mut all = accepted.to_vec();
+    all.extend(pair.iter().map(|c| EffectModel {
+        coef: vec![0.0; c.kind.n_coef()],
+        kind: c.kind.clone(),
+    }));
+    let problem = EffectProblem {
+        chain: session.chain,
+        ctx,
+        data: session.data,
+        poses: session.train.clone(),
+        full: p.to_vec(),
+        free: free.to_vec(),
+        effects: all,
+    };
+    let nm = normals(&problem, &problem.x0(), &vec![0; session.train.len()]);
+    let (a, b, rr) = nm.total();
+    let n_acc: usize = accepted.iter().map(|e| e.kind.n_coef()).sum();
+    let base: Vec<usize> = (0..free.len() + n_acc).collect();
+    let mut off = base.len();
+    let own: Vec<Vec<usize>> = pair
+        .iter()
+        .map(|c| {
+            let nc = c.kind.n_coef();
+            let cols = unaliased(&a, &base, &(off..off + nc).collect::<Vec<_>>());
+            off += nc;
+            cols
+        })
+        .collect();
+    let mut full = base.clone();
+    own.iter().for_each(|c| full.extend(c));
+    let Some((d_full, _)) = solve_subset(&a, &b, &full) else {
+        return false;
+    };
+    let dof = (nm.rows as f64 - full.len() as f64).max(1.0);
+    let s2 = ((rr - d_full) / dof).max(1e-30);
+    (0..pair.len()).all(|mi| {
+        let mut without = base.clone();
+        for (oi, c) in own.iter().enumerate() {
+            if oi != mi {
+                without.extend(c);
+            }
+        }
+        solve_subset(&a, &b, &without)
+            .is_some_and(|(d, _)| (d_full - d) / s2 > thresholds[mi])
+    })
 }
 
 /// Normal equations of a column set, split by fold.
@@ -672,7 +823,7 @@ pub fn analyse(
             // Refine a scanned change point between its grid neighbours,
             // with the partner (if any) fitted alongside.
             for i in 0..cs.len() {
-                if let Kind::AnchorStep { sensor_index, t0_s } = cs[i].kind {
+                if let Some(t0_s) = cs[i].kind.change_time_s() {
                     let mut ctx_eff = accepted.clone();
                     ctx_eff.extend(
                         cs.iter()
@@ -683,12 +834,23 @@ pub fn analyse(
                                 kind: c.kind.clone(),
                             }),
                     );
-                    let t0 = refine_step(session, &ctx, &p, &free, &ctx_eff, sensor_index, t0_s);
-                    cs[i].kind = Kind::AnchorStep {
-                        sensor_index,
-                        t0_s: t0,
+                    let t0 = refine_step(session, &ctx, &p, &free, &ctx_eff, &cs[i].kind, t0_s);
+                    cs[i].kind = cs[i].kind.with_change_time(t0);
+                    cs[i].what = match cs[i].kind.sensor() {
+                        Some(k) => format!("a change at {t0:.0} s on string {}", k + 1),
+                        None => format!("a move of the whole rig at {t0:.0} s"),
                     };
-                    cs[i].what = format!("a change at {t0:.0} s on string {}", sensor_index + 1);
+                }
+            }
+            // A pair chosen with a change point on the coarse grid may lean
+            // on its partner to mop up the misplaced step; with the step
+            // refined, each member must still be significant given the
+            // other (the step alone is proposed separately).
+            if !single && cs.iter().any(|c| c.scanned > 1) {
+                let thresholds: Vec<f64> =
+                    prop.members.iter().map(|m| scored[m.0].threshold).collect();
+                if !pair_holds(session, &ctx, &p, &free, &accepted, &cs, &thresholds) {
+                    continue;
                 }
             }
             let mut cv_cols = base.clone();
@@ -950,7 +1112,7 @@ fn refine_step(
     p: &[f64],
     free: &[usize],
     accepted: &[EffectModel],
-    k: usize,
+    kind: &Kind,
     t0: f64,
 ) -> f64 {
     let mut times: Vec<f64> = session.train.iter().map(|&i| ctx.poses[i].time_s).collect();
@@ -972,11 +1134,8 @@ fn refine_step(
         let t = 0.5 * (times[at - 1] + times[at]);
         let mut all = accepted.to_vec();
         all.push(EffectModel {
-            kind: Kind::AnchorStep {
-                sensor_index: k,
-                t0_s: t,
-            },
-            coef: vec![0.0; 3],
+            kind: kind.with_change_time(t),
+            coef: vec![0.0; kind.n_coef()],
         });
         let problem = EffectProblem {
             chain: session.chain,
@@ -991,7 +1150,7 @@ fn refine_step(
         let (a, b, _) = nm.total();
         let mut cols = base.clone();
         let nb = base.len();
-        cols.extend(nb..nb + 3);
+        cols.extend(nb..nb + kind.n_coef());
         if let (Some((d1, _)), Some((d0, _))) =
             (solve_subset(&a, &b, &cols), solve_subset(&a, &b, &base))
         {
@@ -1045,6 +1204,32 @@ fn magnitude(
         Kind::AnchorStep { .. } => {
             Box::new(|c: &[f64]| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
         }
+        Kind::RigStep { .. } | Kind::RigDrift => {
+            // RMS displacement of T the rig motion causes over the train
+            // poses (step: those after the move; drift: over the session).
+            let kind = e.kind.clone();
+            let train = session.train.clone();
+            Box::new(move |c: &[f64]| {
+                let mut buf = super::effects::Basis::default();
+                let (mut s, mut n) = (0.0, 0usize);
+                for &i in &train {
+                    ctx.basis(&kind, i, &mut buf);
+                    let d = (0..3)
+                        .map(|r| {
+                            (0..6)
+                                .map(|k| c[k] * buf.dp[k * 3 + r])
+                                .sum::<f64>()
+                                .powi(2)
+                        })
+                        .sum::<f64>();
+                    if buf.dp.iter().any(|v| *v != 0.0) {
+                        s += d;
+                        n += 1;
+                    }
+                }
+                (s / n.max(1) as f64).sqrt()
+            })
+        }
     };
     let unit = match &e.kind {
         Kind::JointCompliance { regressors, .. } if regressors.is_empty() => "deg/(N*m)",
@@ -1059,6 +1244,8 @@ fn magnitude(
         Kind::SensorOffset { .. } => "mm",
         Kind::CableSag => "mm/m^3",
         Kind::AnchorStep { .. } => "mm",
+        Kind::RigStep { .. } => "mm (RMS displacement of T after the move)",
+        Kind::RigDrift => "mm (RMS displacement of T over the session)",
     };
     let c = &e.coef;
     let v = f(c);
@@ -1171,17 +1358,29 @@ fn unexplained(
                 .collect(),
         ));
     }
-    let alpha = 1e-3 / keys.len() as f64;
+    // Neighbour pairs per ordering: sorted by one key, and each pose with
+    // its nearest neighbour in joint space (the workspace). Poses close in
+    // time are usually close in the workspace too (a tour, a raster), so
+    // time only wins where it beats the configuration itself.
+    let mut pairings: Vec<(String, Vec<(usize, usize)>)> = keys
+        .iter()
+        .map(|(name, key)| {
+            let mut order: Vec<usize> = (0..key.len()).collect();
+            order.sort_by(|a, b| key[*a].total_cmp(&key[*b]));
+            (name.clone(), order.windows(2).map(|w| (w[0], w[1])).collect())
+        })
+        .collect();
+    pairings.push((
+        "the joint configuration (nearest pose in joint space)".into(),
+        nearest_in_joint_space(ctx, &session.train),
+    ));
+    let alpha = 1e-3 / pairings.len() as f64;
     let zcrit = normal_quantile(1.0 - alpha);
     let mut best: Option<(f64, String)> = None;
-    for (name, key) in &keys {
-        let mut order: Vec<usize> = (0..key.len()).collect();
-        order.sort_by(|a, b| key[*a].total_cmp(&key[*b]));
+    for (name, pairs) in &pairings {
         let (mut s, mut v) = (0.0, 0.0);
-        for w in order.windows(2) {
-            let d: f64 = (0..rpp)
-                .map(|c| res[w[0] * rpp + c] * res[w[1] * rpp + c])
-                .sum();
+        for &(i, k) in pairs {
+            let d: f64 = (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
             s += d;
             v += d * d;
         }
@@ -1194,6 +1393,7 @@ fn unexplained(
         }
     }
     let (z, name) = best?;
+    let region = worst_region(ctx, &session.train, &res, rpp);
     let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
     let test = rms(&errors_with_effects(
         session,
@@ -1211,7 +1411,7 @@ fn unexplained(
         unit: "mm (train residual RMS per reading)".into(),
         explanation: "structure remains that no effect of the catalogue explains; it is reported rather than forced onto a wrong name".into(),
         evidence: format!(
-            "residuals of neighbouring poses sorted by {name} agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch varies smoothly with {name}"
+            "residuals of neighbouring poses by {name} agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch varies smoothly with {name}{region}"
         ),
         test_rms_before_mm: test,
         test_rms_after_mm: test,

@@ -8,7 +8,9 @@
 //!   Jacobian: dT/dq_j is the θ_j column),
 //! - a change of the link lengths (thermal expansion: a multiple of the
 //!   nominal a and d values),
-//! - a change of each string reading `dl`.
+//! - a change of each string reading `dl`,
+//! - a displacement of T relative to the rig `dp` (the rig, i.e. the
+//!   anchors or the tracker, moved relative to the robot base).
 //!
 //! The same [`Context::basis`] serves the simulator (evaluated with the true
 //! point and true lengths) and the identification (with the located point
@@ -86,6 +88,17 @@ pub enum Kind {
         /// Time of the move (s); poses with `time_s > t0_s` see it.
         t0_s: f64,
     },
+    /// The whole rig (every anchor, or the tracker) moved rigidly relative
+    /// to the robot base at `t0_s`: a translation (mm, 3 coefficients) and
+    /// a small rotation (mrad, 3) about the centre of the measured points.
+    RigStep {
+        /// Time of the move (s); poses with `time_s > t0_s` see it.
+        t0_s: f64,
+    },
+    /// The rig creeps steadily relative to the robot base: a translation
+    /// rate (mm/h, 3 coefficients) and a rotation rate (mrad/h, 3) about the
+    /// centre of the measured points, times the hours since the first pose.
+    RigDrift,
 }
 
 impl Kind {
@@ -100,6 +113,8 @@ impl Kind {
             Kind::SensorOffset { .. } => "sensor_offset",
             Kind::CableSag => "cable_sag",
             Kind::AnchorStep { .. } => "anchor_step",
+            Kind::RigStep { .. } => "rig_step",
+            Kind::RigDrift => "rig_drift",
         }
     }
 
@@ -123,8 +138,9 @@ impl Kind {
         }
     }
 
-    /// True when the effect moves the robot (T), false when it changes
-    /// what a string reads.
+    /// True when the effect moves T relative to the rig (the robot, or
+    /// the whole rig relative to the robot), false when it changes what one
+    /// string reads.
     pub fn robot_side(&self) -> bool {
         matches!(
             self,
@@ -132,7 +148,30 @@ impl Kind {
                 | Kind::Backlash { .. }
                 | Kind::JointPeriodic { .. }
                 | Kind::ThermalExpansion { .. }
+                | Kind::RigStep { .. }
+                | Kind::RigDrift
         )
+    }
+
+    /// Time of a change point, for effects that have one.
+    pub fn change_time_s(&self) -> Option<f64> {
+        match self {
+            Kind::AnchorStep { t0_s, .. } | Kind::RigStep { t0_s } => Some(*t0_s),
+            _ => None,
+        }
+    }
+
+    /// The same effect with its change point moved to `t0_s` (unchanged
+    /// for effects without one).
+    pub fn with_change_time(&self, t0_s: f64) -> Kind {
+        match self {
+            Kind::AnchorStep { sensor_index, .. } => Kind::AnchorStep {
+                sensor_index: *sensor_index,
+                t0_s,
+            },
+            Kind::RigStep { .. } => Kind::RigStep { t0_s },
+            other => other.clone(),
+        }
     }
 
     /// Number of coefficients.
@@ -141,6 +180,7 @@ impl Kind {
             Kind::JointCompliance { regressors, .. } => regressors.len().max(1),
             Kind::JointPeriodic { .. } => 2,
             Kind::AnchorStep { .. } => 3,
+            Kind::RigStep { .. } | Kind::RigDrift => 6,
             _ => 1,
         }
     }
@@ -188,6 +228,12 @@ impl Kind {
                 sensor_index + 1,
                 t0_s
             ),
+            Kind::RigStep { t0_s } => format!(
+                "the whole measuring rig (anchors or tracker) moved relative to the robot base at about {t0_s:.0} s, e.g. knocked or re-set up"
+            ),
+            Kind::RigDrift => {
+                "the measuring rig (anchors or tracker) crept steadily relative to the robot base during the session (a settling stand, a floor or a tracker drifting)".into()
+            }
         }
     }
 }
@@ -238,6 +284,9 @@ pub struct Context {
     pub thermal_driver: ThermalDriver,
     /// `(parameter index, nominal value)` of every a and d.
     pub lengths: Vec<(usize, f64)>,
+    /// Centre of the poses' points (rig frame): the pivot of rig rotations,
+    /// so that their coefficients are not mostly translation.
+    pub centre_rig: Vector3<f64>,
     /// Per pose, in visiting order.
     pub poses: Vec<PoseContext>,
 }
@@ -373,6 +422,10 @@ impl Context {
                 }
             })
             .collect();
+        let centre_rig = poses
+            .iter()
+            .fold(Vector3::zeros(), |acc, p| acc + p.point_rig)
+            / poses.len().max(1) as f64;
         Context {
             n_joints: n,
             anchors,
@@ -381,6 +434,7 @@ impl Context {
             has_masses: masses.is_some(),
             thermal_driver,
             lengths,
+            centre_rig,
             poses: ctx_poses,
         }
     }
@@ -419,7 +473,8 @@ impl Context {
 
     /// The basis of `kind` at pose `i`: per coefficient, `n_joints` joint
     /// angle changes (rad), one thermal multiplier of the nominal lengths,
-    /// and one reading change per string (mm), written into `out`.
+    /// one reading change per string (mm) and a displacement of T relative
+    /// to the rig (3, mm), written into `out`.
     pub fn basis(&self, kind: &Kind, i: usize, out: &mut Basis) {
         let n = self.n_joints;
         let m = self.anchors.len();
@@ -475,6 +530,32 @@ impl Context {
                     }
                 }
             }
+            Kind::RigStep { t0_s } => {
+                if pc.time_s > *t0_s {
+                    self.rigid_basis(pc, 1.0, out);
+                }
+            }
+            Kind::RigDrift => {
+                let t_first = self.poses.first().map_or(0.0, |p| p.time_s);
+                self.rigid_basis(pc, (pc.time_s - t_first) / 3600.0, out);
+            }
+        }
+    }
+
+    /// A rigid motion of the rig relative to the base, scaled by `w`:
+    /// T moves by `-(v + ω × (T - centre))` relative to the rig (the rig
+    /// moving by +v makes T appear to move by -v, so the coefficients are
+    /// the rig's own motion; rotations in mrad).
+    fn rigid_basis(&self, pc: &PoseContext, w: f64, out: &mut Basis) {
+        let arm = pc.point_rig - self.centre_rig;
+        for c in 0..3 {
+            out.dp[c * 3 + c] = -w;
+            let mut e = Vector3::zeros();
+            e[c] = 1.0;
+            let d = -w * e.cross(&arm) * 1e-3;
+            for r in 0..3 {
+                out.dp[(3 + c) * 3 + r] = d[r];
+            }
         }
     }
 
@@ -487,6 +568,7 @@ impl Context {
             dq: vec![0.0; n],
             thermal: 0.0,
             dl: vec![0.0; m],
+            dp: Vector3::zeros(),
         };
         for e in effects {
             self.basis(&e.kind, i, buf);
@@ -497,6 +579,9 @@ impl Context {
                 d.thermal += v * buf.thermal[c];
                 for k in 0..m {
                     d.dl[k] += v * buf.dl[c * m + k];
+                }
+                for r in 0..3 {
+                    d.dp[r] += v * buf.dp[c * 3 + r];
                 }
             }
         }
@@ -522,6 +607,8 @@ pub struct Basis {
     pub thermal: Vec<f64>,
     /// `n_coef × n_strings`, row-major.
     pub dl: Vec<f64>,
+    /// `n_coef × 3`, row-major: displacement of T relative to the rig (mm).
+    pub dp: Vec<f64>,
 }
 
 impl Basis {
@@ -532,6 +619,8 @@ impl Basis {
         self.thermal.resize(nc, 0.0);
         self.dl.clear();
         self.dl.resize(nc * m, 0.0);
+        self.dp.clear();
+        self.dp.resize(nc * 3, 0.0);
     }
 }
 
@@ -544,4 +633,6 @@ pub struct Delta {
     pub thermal: f64,
     /// Reading changes (mm): the string reads this much more.
     pub dl: Vec<f64>,
+    /// Displacement of T relative to the rig (mm, rig frame).
+    pub dp: Vector3<f64>,
 }

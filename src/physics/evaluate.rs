@@ -7,7 +7,7 @@ use crate::identify::{self, IdentifyOptions, NoProgress, Session};
 use crate::rng::Rng;
 
 /// The effects drawn at random.
-pub const CATALOGUE: [&str; 8] = [
+pub const CATALOGUE: [&str; 10] = [
     "joint_compliance",
     "backlash",
     "joint_periodic",
@@ -16,6 +16,8 @@ pub const CATALOGUE: [&str; 8] = [
     "sensor_offset",
     "cable_sag",
     "anchor_step",
+    "rig_step",
+    "rig_drift",
 ];
 
 /// What one dataset held and what the analysis said.

@@ -106,7 +106,7 @@ impl<'a> EffectProblem<'a> {
             }
             self.chain
                 .point_jacobian(&pp, &q, OutputFrame::Rig, &mut jac);
-            let t = jac.point;
+            let t = jac.point + delta.dp;
             let dlen = if thermal_used {
                 self.ctx
                     .lengths
@@ -127,7 +127,8 @@ impl<'a> EffectProblem<'a> {
                             v += jac.d_params[l.joint(j, JointParam::Theta)] * b;
                         }
                     }
-                    dt[c0 + c] = v;
+                    dt[c0 + c] =
+                        v + Vector3::new(buf.dp[c * 3], buf.dp[c * 3 + 1], buf.dp[c * 3 + 2]);
                     for k in 0..m {
                         dl[(c0 + c) * m + k] = buf.dl[c * m + k];
                     }
@@ -188,7 +189,10 @@ impl<'a> EffectProblem<'a> {
         let mut pp = p.to_vec();
         ctx.apply_thermal(&mut pp, delta.thermal);
         let q: Vec<f64> = q_rad.iter().zip(&delta.dq).map(|(a, b)| a + b).collect();
-        (chain.point(&pp, &q, OutputFrame::Rig).1, delta.dl)
+        (
+            chain.point(&pp, &q, OutputFrame::Rig).1 + delta.dp,
+            delta.dl,
+        )
     }
 }
 

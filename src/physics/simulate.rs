@@ -200,16 +200,19 @@ pub struct EffectSpec {
     /// Phase of `joint_periodic` (deg): `A sin(h q + phase)`.
     #[serde(default)]
     pub phase_deg: Option<f64>,
-    /// Direction of an `anchor_step` (rig frame, normalised; default random).
+    /// Direction of an `anchor_step`, `rig_step` or `rig_drift` translation
+    /// (rig frame, normalised; default random).
     #[serde(default)]
     pub direction: Option<[f64; 3]>,
-    /// When an `anchor_step` happens, as a fraction of the session (default
-    /// random in 0.2-0.8).
+    /// When an `anchor_step` or `rig_step` happens, as a fraction of the
+    /// session (default random in 0.2-0.8).
     #[serde(default)]
     pub at_fraction: Option<f64>,
     /// Magnitude in report units: compliance deg/(N*m), backlash deg (half
     /// dead band), periodic deg (amplitude), thermal ppm/K, sensor_scale
-    /// ppm, sensor_offset mm, cable_sag mm/m^3, anchor_step mm.
+    /// ppm, sensor_offset mm, cable_sag mm/m^3, anchor_step mm, rig_step mm
+    /// (translation; plus as many mrad of rotation about a random axis),
+    /// rig_drift mm/h (likewise mrad/h).
     #[serde(default)]
     pub magnitude: Option<f64>,
     /// Size as a multiple of the point noise (overrides `magnitude`).
@@ -570,7 +573,7 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
             let mut pp = truth_p.values.clone();
             ctx0.apply_thermal(&mut pp, d.thermal);
             let q: Vec<f64> = q_rad[i].iter().zip(&d.dq).map(|(a, b)| a + b).collect();
-            chain.point(&pp, &q, OutputFrame::Rig).1
+            chain.point(&pp, &q, OutputFrame::Rig).1 + d.dp
         })
         .collect();
     let ctx1 = make_ctx(&true_t);
@@ -792,6 +795,33 @@ fn effect_model(
                 vec![mag * dir[0], mag * dir[1], mag * dir[2]],
             )
         }
+        "rig_step" | "rig_drift" => {
+            let unit = |v: Vector3<f64>| v.try_normalize(1e-12);
+            let dir = match es.direction {
+                Some(d) => Vector3::new(d[0], d[1], d[2]),
+                None => Vector3::new(rng.normal(), rng.normal(), rng.normal()),
+            };
+            let dir = unit(dir).ok_or("rig motion direction is zero")?;
+            let axis = unit(Vector3::new(rng.normal(), rng.normal(), rng.normal()))
+                .unwrap_or(Vector3::z());
+            // As much rotation as translation: `mag` mrad moves a point 1 m
+            // from the centre by `mag` mm.
+            let coef = vec![
+                mag * dir[0],
+                mag * dir[1],
+                mag * dir[2],
+                mag * axis[0],
+                mag * axis[1],
+                mag * axis[2],
+            ];
+            if es.effect == "rig_step" {
+                let frac = es.at_fraction.unwrap_or_else(|| rng.range(0.2, 0.8));
+                let last = time.last().copied().unwrap_or(0.0);
+                (Kind::RigStep { t0_s: frac * last }, coef)
+            } else {
+                (Kind::RigDrift, coef)
+            }
+        }
         other => return Err(format!("unknown effect '{other}'")),
     };
     Ok(EffectModel { kind, coef })
@@ -810,6 +840,8 @@ pub fn report_magnitude(e: &EffectModel, _ctx: &Context) -> (f64, &'static str) 
         Kind::SensorOffset { .. } => (c[0], "mm"),
         Kind::CableSag => (c[0], "mm/m^3"),
         Kind::AnchorStep { .. } => ((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt(), "mm"),
+        Kind::RigStep { .. } => (c[..3].iter().map(|v| v * v).sum::<f64>().sqrt(), "mm"),
+        Kind::RigDrift => (c[..3].iter().map(|v| v * v).sum::<f64>().sqrt(), "mm/h"),
     }
 }
 
@@ -833,7 +865,7 @@ pub fn effect_rms(
             let mut pp = p.to_vec();
             ctx.apply_thermal(&mut pp, d.thermal);
             let qq: Vec<f64> = q.iter().zip(&d.dq).map(|(a, b)| a + b).collect();
-            s += (chain.point(&pp, &qq, OutputFrame::Rig).1 - t0).norm_squared();
+            s += (chain.point(&pp, &qq, OutputFrame::Rig).1 + d.dp - t0).norm_squared();
         } else {
             let mut gtg = Matrix3::zeros();
             let mut gtr = Vector3::zeros();
