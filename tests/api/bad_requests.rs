@@ -393,7 +393,17 @@ async fn bad_requests_are_refused_and_change_nothing() {
             .join("\n")
     );
     assert!(big.len() > 64 * 1024);
-    refused(&app, upload(big), 413, "payload_too_large", None, None).await;
+    // (`connection: close`: the server answers 413 before reading the whole
+    // body and drops the connection; the client must not pool it.)
+    refused(
+        &app,
+        upload(big).header("connection", "close"),
+        413,
+        "payload_too_large",
+        None,
+        None,
+    )
+    .await;
 
     // Bad job options.
     refused(
@@ -496,6 +506,7 @@ async fn bad_requests_are_refused_and_change_nothing() {
         .collect();
     let big_app_req = c
         .post(app.url("/compensate"))
+        .header("connection", "close")
         .json(&json!({"robot_id": robot_id, "targets": many}));
     // (over 64 KiB: the body limit answers first)
     refused(&app, big_app_req, 413, "payload_too_large", None, None).await;
