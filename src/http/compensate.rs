@@ -621,3 +621,51 @@ fn solve_all(
             .collect()
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn joint(id: &str) -> Target {
+        Target {
+            target: id.into(),
+            kind: TargetKind::Joints {
+                q_deg: vec![0.0; 6],
+            },
+        }
+    }
+
+    #[test]
+    fn only_a_few_joint_targets_run_inline() {
+        let few: Vec<Target> = (0..INLINE_MAX_JOINT_TARGETS)
+            .map(|i| joint(&i.to_string()))
+            .collect();
+        assert!(runs_inline(&few));
+        let mut more = few.clone();
+        more.push(joint("x"));
+        assert!(!runs_inline(&more));
+        let cartesian = vec![Target {
+            target: "c".into(),
+            kind: TargetKind::Cartesian {
+                xyz_mm: [1.0, 2.0, 3.0],
+                rpy_deg: None,
+            },
+        }];
+        assert!(!runs_inline(&cartesian), "IK seeds never run inline");
+    }
+
+    #[test]
+    fn accept_picks_csv_only_when_preferred() {
+        let h = |v: &str| {
+            let mut m = HeaderMap::new();
+            m.insert(ACCEPT, HeaderValue::from_str(v).unwrap());
+            m
+        };
+        assert!(wants_csv(&h("text/csv")));
+        assert!(wants_csv(&h("text/html, text/csv;q=0.9, */*;q=0.1")));
+        assert!(!wants_csv(&h("application/json, text/csv")));
+        assert!(!wants_csv(&h("text/csv;q=0, */*")));
+        assert!(!wants_csv(&h("*/*")));
+        assert!(!wants_csv(&HeaderMap::new()));
+    }
+}
