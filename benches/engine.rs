@@ -1,15 +1,17 @@
 //! Engine benchmarks: one pose's point with its full Jacobian, an
 //! identification of 50 and of 2000 string poses, the 11,911-pose tracker
-//! grid, one compensation. Run: `cargo bench --bench engine`.
+//! grid, the physics analysis of 2000 string poses, one compensation. Run:
+//! `cargo bench --bench engine`.
 
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use drawcal::compensate::Compensator;
-use drawcal::identify::{IdentifyOptions, NoProgress, identify};
+use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric, identify};
 use drawcal::kinematics::Params;
 use drawcal::kinematics::chain::{Chain, OutputFrame};
 use drawcal::model::{Dataset, Measurement, PoseRecord, Rig, Robot, Split, Target, TargetKind};
+use drawcal::physics::{self, simulate};
 use drawcal::rng::Rng;
 
 fn load(name: &str) -> (Robot, Rig, Dataset) {
@@ -109,6 +111,34 @@ fn benches(c: &mut Criterion) {
     g.bench_function("identify_ur10_grid_11911_points", |b| {
         b.iter(|| identify(&rg, &rigg, black_box(&grid), &opts, &NoProgress).unwrap())
     });
+    // The physics analysis alone (after the geometric fit) on 2000 string
+    // poses: effect-free (every candidate tried, nothing kept) and with a
+    // concealed compliance and rig step (found, refined, refitted).
+    for (name, effects) in [
+        (
+            "physics_analysis_2000_poses_effect_free",
+            serde_json::json!([]),
+        ),
+        (
+            "physics_analysis_2000_poses_compliance_and_rig_step",
+            serde_json::json!([
+                {"effect": "joint_compliance", "joint": 2, "size_x_noise": 5},
+                {"effect": "rig_step", "size_x_noise": 5, "at_fraction": 0.4}
+            ]),
+        ),
+    ] {
+        let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
+            "robot": "er3a", "n_poses": 2000, "seed": 5, "effects": effects
+        }))
+        .unwrap();
+        let sim = simulate::generate(&spec).unwrap();
+        let po = IdentifyOptions::default();
+        let session = Session::new(&sim.robot, &sim.rig, &sim.dataset, &po).unwrap();
+        let geo = geometric(&session, &po, &NoProgress).unwrap();
+        g.bench_function(name, |b| {
+            b.iter(|| physics::analyse(&session, black_box(&geo), &po, &NoProgress).unwrap())
+        });
+    }
     g.finish();
 
     let report = identify(&robot, &rig, &data50, &opts, &NoProgress).unwrap();
