@@ -220,7 +220,7 @@ pub struct Finding {
 pub struct EvidencePlot {
     /// What `x` is (`gravity torque on joint 2`...).
     pub x_label: String,
-    /// Unit of `x` (`N*m`, `deg`, `mm`, `s`, `h`, `K`, `m`, `±1`).
+    /// Unit of `x` (`N*m`, `deg`, `mm`, `s`, `h`, `K`, `m`, `±1; 0 unknown`).
     pub x_unit: String,
     /// What `y` and `model` are.
     pub y_label: String,

@@ -70,11 +70,8 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             ),
         },
         Kind::Backlash { joint_index } => d(
-            format!(
-                "direction joint {} approached from (+1, -1; 0 unknown)",
-                joint_index + 1
-            ),
-            "±1",
+            format!("direction joint {} approached from", joint_index + 1),
+            "±1; 0 unknown",
         ),
         Kind::JointPeriodic { joint_index, .. } => {
             d(format!("joint {} angle", joint_index + 1), "deg")
