@@ -7,9 +7,12 @@
 //! calibrated Jacobian (damped least squares, minimum-norm when the arm is
 //! redundant for the task), until T is within 1 micrometre of the target
 //! (and the flange orientation within 1 microradian, when asked). Nominal
-//! joint targets start from the taught angles; Cartesian targets from a
-//! numerical inverse kinematics on the nominal model tried from several
-//! seeds. Joint limits are checked, never clamped.
+//! joint targets start from the taught angles. Cartesian targets start from
+//! the closed-form inverse kinematics of the nominal arm when its geometry
+//! allows one ([`crate::kinematics::ik`]: spherical wrist, UR family), every
+//! branch, those inside the joint limits and nearest a reference first;
+//! then, for any arm, from a numerical inverse kinematics on the nominal
+//! model tried from several seeds. Joint limits are checked, never clamped.
 
 use std::sync::Arc;
 
@@ -19,6 +22,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, Result};
 use crate::identify::report::Report;
 use crate::kinematics::chain::{Chain, OutputFrame};
+use crate::kinematics::ik::{self, ClosedFormIk};
 use crate::kinematics::{Params, rpy_matrix};
 use crate::model::{Robot, Target, TargetKind};
 use crate::rng::Rng;
@@ -75,6 +79,11 @@ pub struct Compensator {
     calibrated: Params,
     limits_rad: Vec<(f64, f64)>,
     joint_offsets: Option<JointOffsets>,
+    /// The nominal arm's closed-form inverse kinematics, if it has one.
+    ik: Option<Arc<ClosedFormIk>>,
+    /// Seed Cartesian targets with the closed form when there is one
+    /// (default); `false` leaves only the numerical seeds (for comparison).
+    pub closed_form: bool,
     /// Stop when T is this close to the target (mm).
     pub tolerance_mm: f64,
     /// Stop when the flange orientation is this close (rad).
@@ -89,6 +98,15 @@ impl std::fmt::Debug for Compensator {
             .field("joints", &self.chain.layout.n_joints)
             .finish()
     }
+}
+
+/// Which model a solve runs on.
+#[derive(Clone, Copy)]
+enum Model {
+    /// The nominal model, without joint effects (seeding).
+    Nominal,
+    /// The calibrated model with its joint effects.
+    Calibrated,
 }
 
 struct Solution {
@@ -116,6 +134,8 @@ impl Compensator {
                 .map(|j| (j.q_min_deg.to_radians(), j.q_max_deg.to_radians()))
                 .collect(),
             joint_offsets: None,
+            ik: ClosedFormIk::from_robot(nominal).map(Arc::new),
+            closed_form: true,
             tolerance_mm: 1e-3,
             tolerance_rad: 1e-6,
             max_iterations: 50,
@@ -150,6 +170,20 @@ impl Compensator {
         self.chain.layout.n_joints
     }
 
+    /// Which closed-form inverse kinematics seeds Cartesian targets
+    /// (`None`: the numerical seeds only).
+    pub fn closed_form_geometry(&self) -> Option<ik::Geometry> {
+        self.ik.as_ref().map(|k| k.geometry())
+    }
+
+    /// The home joints: zero, moved into the limits.
+    fn home(&self) -> Vec<f64> {
+        self.limits_rad
+            .iter()
+            .map(|(lo, hi)| 0.0f64.clamp(*lo, *hi))
+            .collect()
+    }
+
     /// Where the nominal model puts T and the flange at `q_rad`.
     pub fn nominal_pose(&self, q_rad: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
         let (f, t) = self
@@ -179,6 +213,18 @@ impl Compensator {
     /// orientation (the nominal one for joint targets, the given one for
     /// Cartesian targets with angles).
     pub fn compensate(&self, target: &Target, orientation: bool) -> Compensated {
+        self.compensate_near(target, orientation, None)
+    }
+
+    /// [`Compensator::compensate`], trying the closed-form branches of a
+    /// Cartesian target nearest `reference_rad` first (e.g. the robot's
+    /// current joints; default: home). Joint targets ignore it.
+    pub fn compensate_near(
+        &self,
+        target: &Target,
+        orientation: bool,
+        reference_rad: Option<&[f64]>,
+    ) -> Compensated {
         let n = self.dof();
         let fail = |status, iterations, message: String| Compensated {
             target: target.target.clone(),
@@ -205,13 +251,45 @@ impl Compensator {
                 let r = rpy_deg
                     .map(|a| rpy_matrix(a[0].to_radians(), a[1].to_radians(), a[2].to_radians()));
                 let t = Vector3::from(*xyz_mm);
-                (t, r, self.seeds(&t, r.as_ref()))
+                let home = self.home();
+                let reference = match reference_rad {
+                    Some(q) if q.len() != n => {
+                        return fail(
+                            CompensationStatus::Unreachable,
+                            0,
+                            format!(
+                                "a reference of {} joint angles for a {n}-joint robot",
+                                q.len()
+                            ),
+                        );
+                    }
+                    Some(q) => q,
+                    None => &home,
+                };
+                (t, r, self.closed_form_seeds(&t, r.as_ref(), reference))
             }
         };
+        let cartesian = matches!(target.kind, TargetKind::Cartesian { .. });
         let mut last_iterations = 0;
         let mut limit_msg = None;
-        for seed in seeds {
-            match self.solve(&pos, rot.as_ref(), &seed) {
+        let mut tried: Vec<Vec<f64>> = Vec::new();
+        // Closed-form (or taught) seeds first; the numerical ones only when
+        // those fail, computed lazily.
+        let numeric = cartesian
+            .then(|| self.numeric_seeds(&pos, rot.as_ref()))
+            .into_iter()
+            .flatten();
+        for seed in seeds.into_iter().chain(numeric) {
+            // A seed already tried gives the same answer again.
+            if tried
+                .iter()
+                .any(|t| t.iter().zip(&seed).all(|(a, b)| (a - b).abs() < 1e-9))
+            {
+                continue;
+            }
+            let solved = self.solve(&pos, rot.as_ref(), &seed);
+            tried.push(seed);
+            match solved {
                 Some(sol) => {
                     last_iterations += sol.iterations;
                     if let Some(msg) = self.limit_violation(&sol.q) {
@@ -260,17 +338,39 @@ impl Compensator {
             })
     }
 
-    /// Starting joints for a Cartesian target: inverse kinematics on the
-    /// nominal model from a fixed set of seeds (home first).
-    fn seeds(&self, pos: &Vector3<f64>, rot: Option<&Matrix3<f64>>) -> Vec<Vec<f64>> {
+    /// The closed-form solutions of the nominal arm for a Cartesian target
+    /// (position-only targets with the canonical orientation of
+    /// [`ClosedFormIk::solve_position`]), ordered by [`ik::order_near`]:
+    /// inside the limits first, then nearest `reference`. Empty when the arm
+    /// has no closed form or the pose is out of its reach.
+    fn closed_form_seeds(
+        &self,
+        pos: &Vector3<f64>,
+        rot: Option<&Matrix3<f64>>,
+        reference: &[f64],
+    ) -> Vec<Vec<f64>> {
+        let Some(ik) = self.ik.as_ref().filter(|_| self.closed_form) else {
+            return vec![];
+        };
+        let mut out = match rot {
+            Some(r) => ik.solve(pos, r, reference),
+            None => ik.solve_position(pos, reference),
+        };
+        ik::order_near(&mut out, reference, &self.limits_rad);
+        out
+    }
+
+    /// Starting joints for a Cartesian target, any arm: inverse kinematics
+    /// on the nominal model from a fixed set of seeds (home first), each
+    /// solved only when the previous ones are used up.
+    fn numeric_seeds<'a>(
+        &'a self,
+        pos: &'a Vector3<f64>,
+        rot: Option<&'a Matrix3<f64>>,
+    ) -> impl Iterator<Item = Vec<f64>> + 'a {
         let n = self.dof();
         let mut rng = Rng::new(0x5EED);
-        let mut starts = vec![
-            self.limits_rad
-                .iter()
-                .map(|(lo, hi)| 0.0f64.clamp(*lo, *hi))
-                .collect::<Vec<f64>>(),
-        ];
+        let mut starts = vec![self.home()];
         for _ in 0..11 {
             starts.push(
                 self.limits_rad
@@ -281,23 +381,27 @@ impl Compensator {
                     .collect(),
             );
         }
-        let nominal_only = Compensator {
-            joint_offsets: None,
-            calibrated: self.nominal.clone(),
-            ..self.clone()
-        };
-        let mut out = Vec::new();
-        for s in starts {
-            if let Some(sol) = nominal_only.solve(pos, rot, &s) {
-                out.push(sol.q);
+        let home = self.home();
+        let mut starts = starts.into_iter();
+        let mut any = false;
+        std::iter::from_fn(move || {
+            for s in starts.by_ref() {
+                if let Some(mut sol) = self.solve_on(Model::Nominal, pos, rot, &s) {
+                    any = true;
+                    // The solve may wander whole turns away: the same pose
+                    // nearer home, inside the limits when it can be.
+                    ik::turn_near(&mut sol.q, &home, &self.limits_rad);
+                    return Some(sol.q);
+                }
             }
-        }
-        if out.is_empty() {
-            // Let the calibrated solve try from home anyway: the nominal
-            // model may just miss a target at the edge of the workspace.
-            out.push(vec![0.0; n]);
-        }
-        out
+            if !any {
+                // Let the calibrated solve try from home anyway: the nominal
+                // model may just miss a target at the edge of the workspace.
+                any = true;
+                return Some(vec![0.0; n]);
+            }
+            None
+        })
     }
 
     /// Damped least squares on the calibrated model from `q0`.
@@ -307,16 +411,35 @@ impl Compensator {
         rot: Option<&Matrix3<f64>>,
         q0: &[f64],
     ) -> Option<Solution> {
+        self.solve_on(Model::Calibrated, pos, rot, q0)
+    }
+
+    /// Damped least squares on either model from `q0`.
+    fn solve_on(
+        &self,
+        model: Model,
+        pos: &Vector3<f64>,
+        rot: Option<&Matrix3<f64>>,
+        q0: &[f64],
+    ) -> Option<Solution> {
         let n = self.dof();
+        let (params, effective) = match model {
+            Model::Calibrated => (&self.calibrated, true),
+            Model::Nominal => (&self.nominal, false),
+        };
         let mut q = q0.to_vec();
         let mut jac = self.chain.new_jacobian();
         let m = if rot.is_some() { 6 } else { 3 };
         let mut lambda: f64 = 1e-6;
         let mut prev_err = f64::INFINITY;
         for it in 0..=self.max_iterations {
-            let qe = self.effective(&q);
+            let qe = if effective {
+                self.effective(&q)
+            } else {
+                q.clone()
+            };
             self.chain
-                .point_jacobian(&self.calibrated.values, &qe, OutputFrame::Base, &mut jac);
+                .point_jacobian(&params.values, &qe, OutputFrame::Base, &mut jac);
             let e_pos = pos - jac.point;
             let e_rot = rot
                 .map(|r| rotation_error(r, &jac.flange.r))
@@ -343,7 +466,7 @@ impl Compensator {
             let mut e = DVector::zeros(m);
             let axes = rot.map(|_| {
                 self.chain
-                    .joint_axes(&self.calibrated.values, &qe, OutputFrame::Base)
+                    .joint_axes(&params.values, &qe, OutputFrame::Base)
             });
             for c in 0..n {
                 let col = jac.d_params[5 * c + 3];
@@ -389,12 +512,40 @@ impl Compensator {
     }
 }
 
-/// Rotation vector taking `current` to `target` (small-angle accurate,
-/// exact direction), in the output frame.
+/// Rotation vector taking `current` to `target`, in the output frame.
+///
+/// The angle comes from `atan2(sin, cos)` of the relative rotation, so it
+/// stays exact (and finite) when the two agree to rounding: the `acos` of
+/// the trace, as in `Rotation3::angle`, is NaN there once rounding puts the
+/// cosine a hair above 1, which made a converging solve fail (and near a
+/// half turn, below -1).
 fn rotation_error(target: &Matrix3<f64>, current: &Matrix3<f64>) -> Vector3<f64> {
     let d = target * current.transpose();
-    let rot = nalgebra::Rotation3::from_matrix_unchecked(d);
-    rot.scaled_axis()
+    let v = 0.5
+        * Vector3::new(
+            d[(2, 1)] - d[(1, 2)],
+            d[(0, 2)] - d[(2, 0)],
+            d[(1, 0)] - d[(0, 1)],
+        );
+    let (s, c) = (v.norm(), 0.5 * (d.trace() - 1.0));
+    let angle = s.atan2(c);
+    if c < 0.0 {
+        // Beyond a quarter turn the axis comes from the symmetric part,
+        // `c I + (1 - c) n nᵀ`, which stays accurate up to a half turn.
+        let nn = (0.5 * (d + d.transpose()) - Matrix3::identity() * c) / (1.0 - c);
+        let k = (0..3)
+            .max_by(|&i, &j| nn[(i, i)].total_cmp(&nn[(j, j)]))
+            .unwrap_or(0);
+        let mut n = nn.column(k) / nn[(k, k)].sqrt();
+        if n.dot(&v) < 0.0 {
+            n = -n;
+        }
+        return n * angle;
+    }
+    if s == 0.0 {
+        return Vector3::zeros();
+    }
+    v * (angle / s)
 }
 
 /// Compensate a batch in order; one bad target never fails the others.
@@ -478,6 +629,36 @@ mod tests {
             assert!((p - want).norm() < 1e-3);
             assert!(rotation_error(&comp.nominal_pose(&q_nom).1, &rot).norm() < 1e-6);
         }
+    }
+
+    #[test]
+    fn rotation_error_is_finite_and_exact_near_zero_and_a_half_turn() {
+        let r = rpy_matrix(0.3, -0.2, 1.1);
+        for angle in [
+            0.0,
+            1e-12,
+            1e-9,
+            1e-6,
+            0.3,
+            3.0,
+            std::f64::consts::PI - 1e-9,
+        ] {
+            let axis = nalgebra::Unit::new_normalize(Vector3::new(0.2, -0.5, 0.8));
+            let d = nalgebra::Rotation3::from_axis_angle(&axis, angle);
+            let e = rotation_error(&(d.matrix() * r), &r);
+            assert!(e.iter().all(|v| v.is_finite()), "{angle}: {e:?}");
+            assert!(
+                (e - axis.into_inner() * angle).norm() < 1e-9 * (1.0 + angle),
+                "{angle}: {e:?}"
+            );
+        }
+        // A computed product that agrees to rounding (the old acos gave NaN).
+        let q = [0.3, -1.2, 1.4, -0.5, 1.1, 2.0];
+        let (nominal, _) = robots();
+        let comp = Compensator::new(&nominal, &nominal).unwrap();
+        let a = comp.nominal_pose(&q).1;
+        let b = rpy_matrix(0.0, 0.0, 1e-17) * a;
+        assert!(rotation_error(&a, &b).norm() < 1e-15);
     }
 
     #[test]

@@ -455,24 +455,30 @@ impl ClosedFormIk {
     }
 }
 
-/// Order closed-form solutions for use as seeds: each angle is moved by
-/// whole turns to the value nearest `reference` inside `limits` (rad; the
-/// same pose, so no clamp), duplicates are dropped, solutions inside the
-/// limits come first, then by squared distance to `reference`.
-pub fn order_near(solutions: &mut Vec<Vec<f64>>, reference: &[f64], limits: &[(f64, f64)]) {
+/// Move each angle of `q` by whole turns to the value nearest `reference`
+/// inside `limits` (rad): the same pose, so never a clamp. An angle with no
+/// turn inside its limits goes to the turn nearest `reference`.
+pub fn turn_near(q: &mut [f64], reference: &[f64], limits: &[(f64, f64)]) {
     let turn = 2.0 * PI;
+    for ((v, r), (lo, hi)) in q.iter_mut().zip(reference).zip(limits) {
+        let want = ((r - *v) / turn).round();
+        let k_min = ((lo - 1e-9 - *v) / turn).ceil();
+        let k_max = ((hi + 1e-9 - *v) / turn).floor();
+        let k = if k_min <= k_max {
+            want.clamp(k_min, k_max)
+        } else {
+            want
+        };
+        *v += k * turn;
+    }
+}
+
+/// Order closed-form solutions for use as seeds: each is moved by
+/// [`turn_near`], duplicates are dropped, solutions inside the limits come
+/// first, then by squared distance to `reference`.
+pub fn order_near(solutions: &mut Vec<Vec<f64>>, reference: &[f64], limits: &[(f64, f64)]) {
     for q in solutions.iter_mut() {
-        for ((v, r), (lo, hi)) in q.iter_mut().zip(reference).zip(limits) {
-            let want = ((r - *v) / turn).round();
-            let k_min = ((lo - 1e-9 - *v) / turn).ceil();
-            let k_max = ((hi + 1e-9 - *v) / turn).floor();
-            let k = if k_min <= k_max {
-                want.clamp(k_min, k_max)
-            } else {
-                want
-            };
-            *v += k * turn;
-        }
+        turn_near(q, reference, limits);
     }
     let key = |q: &Vec<f64>| {
         let outside = q
