@@ -291,3 +291,34 @@ fn per_pose_string_residuals_include_the_accepted_effects() {
         "string residual RMS {rms}"
     );
 }
+
+#[test]
+fn uncertainties_come_from_the_final_model_with_its_effects() {
+    // With the compliance left out the geometric fit's residual is about 4x
+    // the string noise, and so are its sigmas; the final model (geometry +
+    // compliance) must report the sigmas of its own, much tighter, fit.
+    let (robot, rig, data) = common::load("er3a_compliance_j2");
+    let geo = identify(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let fin = identify(
+        &robot,
+        &rig,
+        &data,
+        &IdentifyOptions::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(!fin.findings.is_empty());
+    let mut ratios: Vec<f64> = fin
+        .parameters
+        .iter()
+        .filter_map(|p| {
+            let g = geo.parameters.iter().find(|q| q.name == p.name)?;
+            assert!(p.sigma.is_finite() && p.sigma > 0.0, "{}", p.name);
+            Some(p.sigma / g.sigma)
+        })
+        .collect();
+    assert!(ratios.len() > 10);
+    ratios.sort_by(|a, b| a.total_cmp(b));
+    let median = ratios[ratios.len() / 2];
+    assert!(median < 0.5, "median sigma ratio final/geometric {median}");
+}

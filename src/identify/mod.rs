@@ -513,7 +513,7 @@ pub fn identify(
     let noise_floor_mm = session.noise_floor(string_sigma);
 
     let paper = paper::one_step(&session, &geo.before);
-    let (mut after_values, method, fixed_sel, sig) = match opts.method {
+    let (mut after_values, method, fixed_sel, mut sig) = match opts.method {
         Method::Lm => (
             geo.after.values.clone(),
             "lm",
@@ -547,6 +547,11 @@ pub fn identify(
                 &all,
             );
             after_values = an.final_params.values.clone();
+            // Uncertainties of the final model, not of the geometric fit
+            // it started from.
+            if let Some(s) = an.final_sigmas {
+                sig = s;
+            }
             accepted = Some((an.context, an.effects));
         }
         findings = an.findings;

@@ -130,6 +130,10 @@ pub struct Analysis {
     pub robot_side_share_noise: Option<f64>,
     /// Lines for the CLI summary: where the residual lives.
     pub notes: Vec<String>,
+    /// 1-sigma of the free geometric parameters from the final refit with
+    /// the accepted effects (None when nothing was accepted: the geometric
+    /// fit's own covariance stands).
+    pub final_sigmas: Option<Vec<f64>>,
 }
 
 /// One-sided z that the held-out error dropped: Wilcoxon signed-rank test
@@ -430,7 +434,9 @@ fn worst_region(ctx: &Context, train: &[usize], res: &[f64], rpp: usize) -> Stri
     let mut best: Option<(f64, String)> = None;
     for j in 0..ctx.n_joints {
         let mut order: Vec<usize> = (0..n_t).collect();
-        order.sort_by(|a, b| ctx.poses[train[*a]].q_rad[j].total_cmp(&ctx.poses[train[*b]].q_rad[j]));
+        order.sort_by(|a, b| {
+            ctx.poses[train[*a]].q_rad[j].total_cmp(&ctx.poses[train[*b]].q_rad[j])
+        });
         let lo = ctx.poses[train[order[0]]].q_rad[j];
         let hi = ctx.poses[train[order[n_t - 1]]].q_rad[j];
         if (hi - lo).to_degrees() < 5.0 {
@@ -510,8 +516,7 @@ fn pair_holds(
                 without.extend(c);
             }
         }
-        solve_subset(&a, &b, &without)
-            .is_some_and(|(d, _)| (d_full - d) / s2 > thresholds[mi])
+        solve_subset(&a, &b, &without).is_some_and(|(d, _)| (d_full - d) / s2 > thresholds[mi])
     })
 }
 
@@ -674,6 +679,7 @@ pub fn analyse(
     }
 
     let mut rejected: Vec<Kind> = Vec::new();
+    let mut final_sigmas = None;
     for round in 0..MAX_EFFECTS + 2 {
         if accepted.len() >= MAX_EFFECTS {
             break;
@@ -1016,6 +1022,7 @@ pub fn analyse(
             }
             p = p_new;
             accepted = eff_new;
+            final_sigmas = Some(fit.sigma_free.clone());
             progressed = true;
             break;
         }
@@ -1042,6 +1049,7 @@ pub fn analyse(
         robot_side_share: share,
         robot_side_share_noise: share_noise,
         notes,
+        final_sigmas,
     })
 }
 
@@ -1052,6 +1060,9 @@ pub struct FitInfo {
     /// Covariance of the effect coefficients (all effects of the refit, or
     /// one effect's block), internal units.
     pub cov_last: DMatrix<f64>,
+    /// 1-sigma of the free geometric parameters (in the order of the
+    /// geometric selection's `free`), internal units, from the same fit.
+    pub sigma_free: Vec<f64>,
 }
 
 impl FitInfo {
@@ -1066,6 +1077,7 @@ impl FitInfo {
                     0.0
                 }
             }),
+            sigma_free: vec![],
         }
     }
 }
@@ -1101,7 +1113,17 @@ fn refit(
         let (a, b) = (n - nc + i, n - nc + j);
         s2 * inv[(a, b)] / (d[a] * d[b])
     });
-    Ok((pn, en, FitInfo { cov_last }))
+    let sigma_free = (0..n - nc)
+        .map(|i| (s2 * inv[(i, i)]).max(0.0).sqrt() / d[i])
+        .collect();
+    Ok((
+        pn,
+        en,
+        FitInfo {
+            cov_last,
+            sigma_free,
+        },
+    ))
 }
 
 /// Scan the change point of an anchor step around `t0` over the train
@@ -1367,7 +1389,10 @@ fn unexplained(
         .map(|(name, key)| {
             let mut order: Vec<usize> = (0..key.len()).collect();
             order.sort_by(|a, b| key[*a].total_cmp(&key[*b]));
-            (name.clone(), order.windows(2).map(|w| (w[0], w[1])).collect())
+            (
+                name.clone(),
+                order.windows(2).map(|w| (w[0], w[1])).collect(),
+            )
         })
         .collect();
     pairings.push((
