@@ -6,7 +6,7 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use drawcal::compensate::Compensator;
+use drawcal::compensate::{CompensationStatus, Compensator};
 use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric, identify};
 use drawcal::kinematics::Params;
 use drawcal::kinematics::chain::{Chain, OutputFrame};
@@ -155,6 +155,47 @@ fn benches(c: &mut Criterion) {
     c.bench_function("compensate_one_joint_target_with_orientation", |b| {
         b.iter(|| comp.compensate(black_box(&t), true))
     });
+
+    // A Cartesian target: where the nominal model puts T and the flange at
+    // the same joints; seeded by the closed-form IK, and by the numerical
+    // seeds alone for comparison.
+    let q: Vec<f64> = [10.0f64, 20.0, 30.0, 40.0, 50.0, 60.0]
+        .iter()
+        .map(|v| v.to_radians())
+        .collect();
+    let (pos, rot) = comp.nominal_pose(&q);
+    let rpy = drawcal::kinematics::matrix_rpy(&rot).map(f64::to_degrees);
+    let cart = |rpy_deg: Option<[f64; 3]>| Target {
+        target: "c".into(),
+        kind: TargetKind::Cartesian {
+            xyz_mm: pos.into(),
+            rpy_deg,
+        },
+    };
+    let (with_rpy, position) = (cart(Some([rpy[0], rpy[1], rpy[2]])), cart(None));
+    let mut numeric = comp.clone();
+    numeric.closed_form = false;
+    for (name, c_, target) in [
+        (
+            "compensate_one_cartesian_target_with_orientation",
+            &comp,
+            &with_rpy,
+        ),
+        (
+            "compensate_one_cartesian_target_with_orientation_numeric_seeds",
+            &numeric,
+            &with_rpy,
+        ),
+        ("compensate_one_cartesian_target_position", &comp, &position),
+        (
+            "compensate_one_cartesian_target_position_numeric_seeds",
+            &numeric,
+            &position,
+        ),
+    ] {
+        assert_eq!(c_.compensate(target, false).status, CompensationStatus::Ok);
+        c.bench_function(name, |b| b.iter(|| c_.compensate(black_box(target), false)));
+    }
 }
 
 criterion_group!(engine, benches);
