@@ -7,13 +7,14 @@ use drawcal::physics::evaluate::{Sweep, score, sweep, table};
 fn blind_evaluation_headline() {
     let cfg = Sweep {
         robots: vec!["er3a".into(), "ur5".into(), "arm4_mdh".into()],
+        rig: None,
         sizes: vec![0.0, 3.0, 5.0],
         per_cell: 4,
         two_effects: 0.3,
         n_poses: 80,
         seed: 99,
     };
-    let outcomes = sweep(&cfg, |_| {});
+    let outcomes = sweep(&cfg, |_| {}).unwrap();
     let (_, s) = score(&outcomes);
     let text = table(&outcomes);
     assert!(outcomes.len() >= 30, "{text}");

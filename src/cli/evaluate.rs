@@ -9,6 +9,10 @@ pub struct EvaluateArgs {
     /// Robot presets, comma separated.
     #[arg(long, default_value = "er3a,ur5,arm4_mdh", value_delimiter = ',')]
     pub robots: Vec<String>,
+    /// rig.json to simulate every robot with (default: each preset's own
+    /// 4-string rig); e.g. a 3- or 5-string rig.
+    #[arg(long)]
+    pub rig: Option<String>,
     /// Effect sizes in multiples of the point noise (0 = effect-free).
     #[arg(long, default_value = "0,1,2,3,5,10", value_delimiter = ',')]
     pub sizes: Vec<f64>,
@@ -33,6 +37,7 @@ pub struct EvaluateArgs {
 pub fn run(args: EvaluateArgs) -> Result<(), Box<dyn std::error::Error>> {
     let cfg = Sweep {
         robots: args.robots,
+        rig: args.rig,
         sizes: args.sizes,
         per_cell: args.per_cell,
         two_effects: args.two_effects,
@@ -56,7 +61,7 @@ pub fn run(args: EvaluateArgs) -> Result<(), Box<dyn std::error::Error>> {
                 o.worse_3d
             );
         }
-    });
+    })?;
     print!("{}", evaluate::table(&outcomes));
     Ok(())
 }

@@ -102,6 +102,7 @@ pub fn draw_effect(rng: &mut Rng, joints: &[usize], n_strings: usize, size: f64)
 /// Simulate one dataset and analyse it blind.
 pub fn run_case(
     robot: &str,
+    rig: Option<&str>,
     seed: u64,
     effects: Vec<EffectSpec>,
     size: f64,
@@ -109,7 +110,7 @@ pub fn run_case(
 ) -> crate::Result<Outcome> {
     let spec = Spec {
         robot: robot.into(),
-        rig: None,
+        rig: rig.map(String::from),
         n_poses,
         test_fraction: 0.3,
         seed,
@@ -174,6 +175,8 @@ pub fn run_case(
 pub struct Sweep {
     /// Robot presets.
     pub robots: Vec<String>,
+    /// rig.json for every robot (default: each preset's own 4-string rig).
+    pub rig: Option<String>,
     /// Effect sizes (multiples of the point noise); 0 means effect-free.
     pub sizes: Vec<f64>,
     /// Datasets per robot and size.
@@ -186,13 +189,20 @@ pub struct Sweep {
     pub seed: u64,
 }
 
-/// Run a sweep; `on_case` sees every outcome as it comes.
-pub fn sweep(cfg: &Sweep, mut on_case: impl FnMut(&Outcome)) -> Vec<Outcome> {
+/// Run a sweep; `on_case` sees every outcome as it comes. Fails only on
+/// an unreadable `rig`.
+pub fn sweep(cfg: &Sweep, mut on_case: impl FnMut(&Outcome)) -> crate::Result<Vec<Outcome>> {
     let mut out = Vec::new();
     let mut rng = Rng::new(cfg.seed);
     for robot in &cfg.robots {
-        let Some((r, rig, _)) = simulate::preset(robot) else {
+        let Some((r, preset_rig, _)) = simulate::preset(robot) else {
             continue;
+        };
+        let rig = match &cfg.rig {
+            Some(path) => std::fs::read_to_string(path)
+                .map_err(|e| crate::Error::field(path.clone(), e.to_string()))
+                .and_then(|t| crate::model::Rig::from_json(&t))?,
+            None => preset_rig,
         };
         let joints = movable_joints(&r);
         for &size in &cfg.sizes {
@@ -213,7 +223,8 @@ pub fn sweep(cfg: &Sweep, mut on_case: impl FnMut(&Outcome)) -> Vec<Outcome> {
                 }
                 // Effects that cannot move anything on a robot (compliance
                 // of a vertical axis) are redrawn.
-                if let Ok(o) = run_case(robot, seed, effects, size, cfg.n_poses) {
+                if let Ok(o) = run_case(robot, cfg.rig.as_deref(), seed, effects, size, cfg.n_poses)
+                {
                     on_case(&o);
                     out.push(o);
                     done += 1;
@@ -221,7 +232,7 @@ pub fn sweep(cfg: &Sweep, mut on_case: impl FnMut(&Outcome)) -> Vec<Outcome> {
             }
         }
     }
-    out
+    Ok(out)
 }
 
 /// Per-effect tallies.
