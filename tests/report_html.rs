@@ -201,10 +201,10 @@ fn cli_report_holds_the_numbers_and_draws_the_plots() {
             "class=\"rms-after\" data-value=\"{}\"",
             f.test_rms_after_mm
         )));
-        let Some(ev) = &f.evidence_plot else {
-            assert_eq!(f.effect, "unexplained", "finding {i} has no evidence plot");
-            continue;
-        };
+        let ev = f
+            .evidence_plot
+            .as_ref()
+            .unwrap_or_else(|| panic!("finding {i} ({}) has no evidence plot", f.effect));
         n_evidence += 1;
         let p = plots(fig);
         assert_eq!(p.len(), 1, "one plot in the figure of finding {i}");
@@ -267,6 +267,47 @@ fn cli_report_holds_the_numbers_and_draws_the_plots() {
             .iter()
             .any(|(t, _)| t.starts_with("Held-out RMS before and after each finding"))
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The `unexplained` finding of the UR10 tracker session is drawn: its
+/// plot (train, test and the running mean, one dot per point) along the
+/// ordering that located the structure, captioned as a running mean, not
+/// a fitted effect.
+#[test]
+fn the_unexplained_finding_is_drawn_with_its_running_mean() {
+    let dir = tmpdir("unexplained");
+    let report_path = identify("real_ur10_ipa_random", &dir);
+    let html_path = dir.join("out.html");
+    run_report(&report_path, &html_path, None);
+    let html = std::fs::read_to_string(&html_path).unwrap();
+    let r: Report = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    let (i, f) = r
+        .findings
+        .iter()
+        .enumerate()
+        .find(|(_, f)| f.effect == "unexplained")
+        .expect("the UR10 tracker session leaves unexplained structure");
+    let ev = f.evidence_plot.as_ref().expect("its evidence plot");
+    assert!(!ev.points.is_empty());
+    let fig = html
+        .split(&format!("<figure class=\"evidence\" data-finding=\"{i}\""))
+        .nth(1)
+        .expect("the unexplained figure")
+        .split("</figure>")
+        .next()
+        .unwrap();
+    let p = plots(fig);
+    assert_eq!(p.len(), 1, "one plot in the unexplained figure");
+    assert_eq!(p[0].1, 2 * ev.points.len(), "{}", p[0].0);
+    assert!(fig.contains(&format!("data-n=\"{}\"", ev.points.len())));
+    assert!(fig.contains(&esc(&ev.x_label)), "{}", ev.x_label);
+    assert!(fig.contains(&esc(&ev.y_label)));
+    assert!(fig.contains("running mean"));
+    assert!(!fig.contains("fitted effect"));
+    assert!(fig.contains("residual on its dominant direction"));
+    let c = ev.correlation.expect("a correlation");
+    assert!(fig.contains(&format!("class=\"corr\" data-value=\"{c}\"")));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

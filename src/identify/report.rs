@@ -193,8 +193,11 @@ pub struct Finding {
     #[serde(default)]
     pub parameters: serde_json::Value,
     /// The plot that is the finding's evidence: per pose, the residual the
-    /// effect explains against what drives it, beside the fitted effect.
-    /// `None` for `unexplained` and for reports written before it existed.
+    /// effect explains against what drives it, beside the fitted effect
+    /// (for `unexplained`: the final model's residual along the ordering
+    /// that located the structure, beside its running mean; see
+    /// `physics::evidence::unexplained_plot`). `None` for reports written
+    /// before it existed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub evidence_plot: Option<EvidencePlot>,
 }

@@ -1402,7 +1402,8 @@ fn unexplained(
     let alpha = 1e-3 / pairings.len() as f64;
     let zcrit = normal_quantile(1.0 - alpha);
     let mut best: Option<(f64, String)> = None;
-    for (name, pairs) in &pairings {
+    let mut zs = vec![f64::NAN; pairings.len()];
+    for (pk, (name, pairs)) in pairings.iter().enumerate() {
         let (mut s, mut v) = (0.0, 0.0);
         for &(i, k) in pairs {
             let d: f64 = (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
@@ -1413,11 +1414,13 @@ fn unexplained(
             continue;
         }
         let z = s / v.sqrt();
+        zs[pk] = z;
         if z > zcrit && best.as_ref().is_none_or(|b| z > b.0) {
             best = Some((z, name.clone()));
         }
     }
     let (z, name) = best?;
+    let winner = pairings.iter().position(|(nm, _)| *nm == name)?;
     let region = worst_region(ctx, &session.train, &res, rpp);
     let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
     let test = rms(&errors_with_effects(
@@ -1441,6 +1444,6 @@ fn unexplained(
         test_rms_before_mm: test,
         test_rms_after_mm: test,
         parameters: serde_json::json!({"ordering": name, "z": z}),
-        evidence_plot: None,
+        evidence_plot: super::evidence::unexplained_plot(session, ctx, p, effects, winner, &zs),
     })
 }

@@ -12,6 +12,10 @@
 //! other effects absorb; where the effect is real, the points follow the
 //! model.
 //!
+//! The `unexplained` finding has no effect to leave out: its plot
+//! ([`unexplained_plot`]) is the final model's residual along the ordering
+//! that located the structure, beside the running mean of its neighbours.
+//!
 //! Size: at most [`EvidencePlot::MAX_POINTS`] points per plot. Poses are
 //! kept by a fixed stride in visiting order (`ceil(points / MAX_POINTS)`),
 //! so the choice is deterministic and spread over the whole session.
@@ -342,6 +346,201 @@ pub fn evidence_plot(
         y_unit: "mm".into(),
         correlation: pearson(&ys, &ms),
         n_total,
+        stride,
+        points,
+    })
+}
+
+/// What the `unexplained` plot puts on x.
+enum OrderKey {
+    Joint(usize),
+    Time,
+    Temperature,
+}
+
+/// The evidence plot of the `unexplained` finding: the structure the
+/// locator found, along the ordering that found it.
+///
+/// `winner` is the index of the winning ordering and `z[k]` the z of
+/// ordering `k` (NaN where it had none), the orderings in the order
+/// `unexplained` builds them: joint 1..n angles, time, temperature (when
+/// every pose has one, i.e. `z.len() == n + 3`), and last the nearest
+/// neighbour in joint space.
+///
+/// - x: the winning key per pose: the joint angle (deg), hours since the
+///   session began (the pose index in visiting order without a `time_s`
+///   column), or the temperature (°C). For the joint-space neighbours,
+///   which have no single axis, the joint whose own 1-D ordering had the
+///   largest z (time where no joint has one); `x_label` says so.
+/// - y: each pose's 3-D error (measured minus the final model: geometry
+///   and the accepted effects, sensor-side ones applied to the readings
+///   before the point is located again, as [`errors_with_effects`] has it)
+///   projected on the residuals' dominant direction: the first principal
+///   direction (largest eigenvector of `Σ e eᵀ` over the train poses, base
+///   frame, sign such that its largest component is positive). The 3-D
+///   error rather than the string residual vector for string data too:
+///   the same quantity for point and string data and for test poses, and
+///   one direction means the same displacement of T at every pose (a
+///   direction in reading space would not, the strings' directions change
+///   with the pose).
+/// - model: a smooth of y along x, the leave-one-out running mean of the
+///   `k = round(sqrt(train poses))` train poses nearest in x (the pose
+///   itself left out, so that on pure noise y and model are uncorrelated;
+///   test poses get the running mean of the train poses around them).
+///   `correlation` measures how much of y the neighbours along x predict.
+///
+/// Same bound and stride rule as [`evidence_plot`]; train and test poses
+/// marked. `None` without train poses or with an unknown `winner`.
+pub fn unexplained_plot(
+    session: &Session,
+    ctx: &Context,
+    p: &[f64],
+    effects: &[EffectModel],
+    winner: usize,
+    z: &[f64],
+) -> Option<EvidencePlot> {
+    let nj = ctx.n_joints;
+    let n = session.data.poses.len();
+    if winner >= z.len() || z.len() < nj + 2 || session.train.is_empty() {
+        return None;
+    }
+    let with_temp = z.len() == nj + 3;
+    let (key, located_by) = match winner {
+        j if j < nj => (OrderKey::Joint(j), None),
+        j if j == nj => (OrderKey::Time, None),
+        j if with_temp && j == nj + 1 => (OrderKey::Temperature, None),
+        _ => {
+            let best = (0..nj)
+                .filter(|&j| z[j].is_finite())
+                .max_by(|a, b| z[*a].total_cmp(&z[*b]));
+            (
+                best.map_or(OrderKey::Time, OrderKey::Joint),
+                Some(
+                    best.map_or("no joint ordering had a z, time shown".to_string(), |j| {
+                        format!("the joint whose own ordering agreed most, z = {:.1}", z[j])
+                    }),
+                ),
+            )
+        }
+    };
+    let has_time = session.data.poses.iter().all(|p| p.time_s.is_some());
+    let t0 = ctx.poses.first().map_or(0.0, |p| p.time_s);
+    let key_value = |i: usize| match key {
+        OrderKey::Joint(j) => ctx.poses[i].q_rad[j].to_degrees(),
+        OrderKey::Time if has_time => (ctx.poses[i].time_s - t0) / 3600.0,
+        OrderKey::Time => i as f64,
+        OrderKey::Temperature => session.data.poses[i].temp_c.unwrap_or(f64::NAN),
+    };
+    let (mut x_label, x_unit) = match key {
+        OrderKey::Joint(j) => (format!("joint {} angle", j + 1), "deg"),
+        OrderKey::Time if has_time => ("hours since the session began".to_string(), "h"),
+        OrderKey::Time => ("visiting order (no time column)".to_string(), "pose"),
+        OrderKey::Temperature => ("temperature".to_string(), "°C"),
+    };
+    if let Some(why) = located_by {
+        x_label = format!("{x_label} (located by nearest neighbours in joint space; {why})");
+    }
+
+    // Errors of the final model at every pose, measured minus model.
+    let all: Vec<usize> = (0..n).collect();
+    let err: Vec<Vector3<f64>> = errors_with_effects(session, ctx, p, effects, &all)
+        .into_iter()
+        .map(|e| -e)
+        .collect();
+    let ok = |i: usize| err[i].iter().all(|v| v.is_finite()) && key_value(i).is_finite();
+    let mut m2 = Matrix3::zeros();
+    for &i in session.train.iter().filter(|&&i| ok(i)) {
+        m2 += err[i] * err[i].transpose();
+    }
+    let eig = nalgebra::SymmetricEigen::new(m2);
+    let top = (0..3).max_by(|a, b| eig.eigenvalues[*a].total_cmp(&eig.eigenvalues[*b]))?;
+    let mut u: Vector3<f64> = eig.eigenvectors.column(top).into_owned();
+    let big = (0..3).max_by(|a, b| u[*a].abs().total_cmp(&u[*b].abs()))?;
+    if u[big] < 0.0 {
+        u = -u;
+    }
+    if !(u.norm() > 0.5) {
+        return None;
+    }
+    let y = |i: usize| err[i].dot(&u);
+
+    // Train poses sorted by (x, pose): the running mean's neighbours.
+    let mut sorted: Vec<(f64, usize, f64)> = session
+        .train
+        .iter()
+        .filter(|&&i| ok(i))
+        .map(|&i| (key_value(i), i, y(i)))
+        .collect();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let len = sorted.len();
+    let k = ((len as f64).sqrt().round() as usize).clamp(1, len.saturating_sub(1).max(1));
+    let smooth = |x: f64, i: usize| -> f64 {
+        let pos = sorted.partition_point(|s| s.0.total_cmp(&x).then(s.1.cmp(&i)).is_lt());
+        let (mut lo, mut hi) = (pos, pos);
+        if hi < len && sorted[hi].1 == i {
+            hi += 1;
+        }
+        let (mut sum, mut count) = (0.0, 0usize);
+        while count < k && (lo > 0 || hi < len) {
+            let take = if lo == 0 {
+                hi
+            } else if hi == len || x - sorted[lo - 1].0 <= sorted[hi].0 - x {
+                lo - 1
+            } else {
+                hi
+            };
+            if take == hi {
+                hi += 1;
+            } else {
+                lo -= 1;
+            }
+            sum += sorted[take].2;
+            count += 1;
+        }
+        if count == 0 {
+            f64::NAN
+        } else {
+            sum / count as f64
+        }
+    };
+
+    let stride = n.div_ceil(EvidencePlot::MAX_POINTS).max(1);
+    let test: std::collections::HashSet<usize> = session.test.iter().copied().collect();
+    let mut points = Vec::new();
+    for i in (0..n).step_by(stride) {
+        if !ok(i) {
+            continue;
+        }
+        let (x, yi) = (key_value(i), y(i));
+        let model = smooth(x, i);
+        if !(yi.is_finite() && model.is_finite()) {
+            continue;
+        }
+        points.push(EvidencePoint {
+            pose: session.data.poses[i].id.clone(),
+            split: if test.contains(&i) {
+                Split::Test
+            } else {
+                Split::Train
+            },
+            sensor: None,
+            x,
+            y: yi,
+            model,
+        });
+    }
+    let ys: Vec<f64> = points.iter().map(|q| q.y).collect();
+    let ms: Vec<f64> = points.iter().map(|q| q.model).collect();
+    Some(EvidencePlot {
+        x_label,
+        x_unit: x_unit.into(),
+        y_label: format!(
+            "error (measured minus the final model) along the residuals' dominant direction ({:.3}, {:.3}, {:.3}) in the base frame; model: running mean of the {k} train poses nearest in x, the pose itself left out",
+            u[0], u[1], u[2]
+        ),
+        y_unit: "mm".into(),
+        correlation: pearson(&ys, &ms),
+        n_total: n,
         stride,
         points,
     })

@@ -282,7 +282,7 @@ fn evidence_figure(out: &mut String, i: usize, f: &Finding) {
             r#"<figure class="evidence" data-finding="{i}"><figcaption><b>{}</b>: {rms}; no evidence plot ({}).</figcaption></figure>"#,
             esc(&name),
             if f.effect == "unexplained" {
-                "no effect is modelled; see its evidence text"
+                "the report predates evidence plots of unexplained structure; see its evidence text"
             } else {
                 "the report predates evidence plots"
             }
@@ -301,8 +301,16 @@ fn evidence_figure(out: &mut String, i: usize, f: &Finding) {
         points: vec![],
         dot: 0.0,
     };
+    // `unexplained` has no fitted effect: its model is the running mean of
+    // the residual along the ordering that located the structure.
+    let unexplained = f.effect == "unexplained";
+    let model_name = if unexplained {
+        "running mean"
+    } else {
+        "fitted effect"
+    };
     let mut model = Series {
-        label: "fitted effect",
+        label: model_name,
         color: "#000",
         points: vec![],
         dot: 2.0,
@@ -323,7 +331,11 @@ fn evidence_figure(out: &mut String, i: usize, f: &Finding) {
             f.test_rms_before_mm, f.test_rms_after_mm
         ),
         &format!("{} ({})", ev.x_label, ev.x_unit),
-        &format!("residual on the effect ({})", ev.y_unit),
+        &if unexplained {
+            format!("residual on its dominant direction ({})", ev.y_unit)
+        } else {
+            format!("residual on the effect ({})", ev.y_unit)
+        },
         &[tr, te, model],
     );
     let corr = match ev.correlation {
@@ -342,7 +354,7 @@ fn evidence_figure(out: &mut String, i: usize, f: &Finding) {
     };
     let _ = write!(
         out,
-        r#"<figure class="evidence" data-finding="{i}" data-n="{n}">{plot}<figcaption><b>{}</b>: {rms}; correlation of residual and fitted effect {corr}; {sub}. y: {}.</figcaption></figure>"#,
+        r#"<figure class="evidence" data-finding="{i}" data-n="{n}">{plot}<figcaption><b>{}</b>: {rms}; correlation of residual and {model_name} {corr}; {sub}. y: {}.</figcaption></figure>"#,
         esc(&name),
         esc(&ev.y_label),
         n = ev.points.len(),
