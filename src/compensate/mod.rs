@@ -13,6 +13,17 @@
 //! branch, those inside the joint limits and nearest a reference first;
 //! then, for any arm, from a numerical inverse kinematics on the nominal
 //! model tried from several seeds. Joint limits are checked, never clamped.
+//!
+//! Thermal expansion: when the physics analysis accepted it with the
+//! temperature as its driver, the calibrated geometry holds at the
+//! session's reference temperature (the first pose's) and every nominal a
+//! and d grows by `k · (T - T_ref)` times its value at temperature T.
+//! [`Compensator::from_report`] compensates at the reference temperature
+//! (the behaviour without a temperature); [`Compensator::at_temperature`]
+//! gives the compensator for the temperature the robot runs at. A thermal
+//! effect driven by time (no temperature was recorded) depends on how long
+//! the robot has been warming up since the session began, which nothing at
+//! run time knows: it is left out of compensation.
 
 use std::sync::Arc;
 
@@ -79,6 +90,10 @@ pub struct Compensator {
     calibrated: Params,
     limits_rad: Vec<(f64, f64)>,
     joint_offsets: Option<JointOffsets>,
+    /// Temperature-driven thermal expansion accepted by the analysis.
+    thermal: Option<Arc<Thermal>>,
+    /// The temperature `calibrated` holds at (°C), with `thermal`.
+    temp_c: Option<f64>,
     /// The nominal arm's closed-form inverse kinematics, if it has one.
     ik: Option<Arc<ClosedFormIk>>,
     /// Seed Cartesian targets with the closed form when there is one
@@ -98,6 +113,84 @@ impl std::fmt::Debug for Compensator {
             .field("joints", &self.chain.layout.n_joints)
             .finish()
     }
+}
+
+/// Lowest and highest temperature (°C) a compensation is asked for.
+pub const TEMP_C_RANGE: (f64, f64) = (-50.0, 150.0);
+
+/// A run-time temperature (°C) checked: finite and within
+/// [`TEMP_C_RANGE`]; the error names `field`.
+pub fn check_temp_c(field: &str, temp_c: f64) -> Result<f64> {
+    let (lo, hi) = TEMP_C_RANGE;
+    if temp_c.is_finite() && (lo..=hi).contains(&temp_c) {
+        Ok(temp_c)
+    } else {
+        Err(Error::field(
+            field,
+            format!("a temperature in degrees C from {lo} to {hi}, got {temp_c}"),
+        ))
+    }
+}
+
+/// Thermal expansion driven by the temperature, as the analysis accepted it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ThermalInfo {
+    /// Growth of every nominal a and d per kelvin (1/K).
+    pub coef_per_k: f64,
+    /// The temperature the calibrated geometry holds at (°C): the first
+    /// pose's of the calibration session.
+    pub reference_temp_c: f64,
+}
+
+/// What a compensator needs to move its geometry to a temperature.
+#[derive(Debug)]
+struct Thermal {
+    info: ThermalInfo,
+    /// `(parameter index, nominal value)` of the lengths that grow
+    /// ([`crate::physics::effects::nominal_lengths`]).
+    lengths: Vec<(usize, f64)>,
+    /// Calibrated parameters at the reference temperature.
+    reference_values: Vec<f64>,
+}
+
+/// The temperature-driven thermal expansion a report's findings accepted
+/// (with the reference temperature that reports since it was recorded
+/// carry), if any.
+fn thermal_of(report: &Report) -> Option<ThermalInfo> {
+    use crate::physics::effects::{Kind, ThermalDriver};
+    report.findings.iter().find_map(|f| {
+        let e: crate::physics::EffectModel = serde_json::from_value(f.parameters.clone()).ok()?;
+        if !matches!(
+            e.kind,
+            Kind::ThermalExpansion {
+                driver: ThermalDriver::Temperature
+            }
+        ) {
+            return None;
+        }
+        let coef_per_k = *e.coef.first()?;
+        let reference_temp_c = f.parameters.get("reference_temp_c")?.as_f64()?;
+        (coef_per_k.is_finite() && reference_temp_c.is_finite()).then_some(ThermalInfo {
+            coef_per_k,
+            reference_temp_c,
+        })
+    })
+}
+
+/// True when the report accepted a thermal expansion driven by time (not
+/// compensated: see the module documentation).
+pub fn has_time_thermal(report: &Report) -> bool {
+    use crate::physics::effects::{Kind, ThermalDriver};
+    crate::physics::effects_of(&report.findings)
+        .iter()
+        .any(|e| {
+            matches!(
+                e.kind,
+                Kind::ThermalExpansion {
+                    driver: ThermalDriver::Time
+                }
+            )
+        })
 }
 
 /// Which model a solve runs on.
@@ -134,6 +227,8 @@ impl Compensator {
                 .map(|j| (j.q_min_deg.to_radians(), j.q_max_deg.to_radians()))
                 .collect(),
             joint_offsets: None,
+            thermal: None,
+            temp_c: None,
             ik: ClosedFormIk::from_robot(nominal).map(Arc::new),
             closed_form: true,
             tolerance_mm: 1e-3,
@@ -144,8 +239,20 @@ impl Compensator {
 
     /// From a calibration report, with the robot-side effects its physics
     /// analysis accepted (a compliant joint's correction depends on the pose).
+    /// A temperature-driven thermal expansion is kept and applied at its
+    /// reference temperature (multiplier 0, the geometry as calibrated):
+    /// use [`Compensator::at_temperature`] for the temperature the robot
+    /// runs at. A time-driven one is left out (see the module docs).
     pub fn from_report(report: &Report) -> Result<Self> {
-        let comp = Self::new(&report.nominal_robot, &report.calibrated_robot)?;
+        let mut comp = Self::new(&report.nominal_robot, &report.calibrated_robot)?;
+        if let Some(info) = thermal_of(report) {
+            comp.thermal = Some(Arc::new(Thermal {
+                info,
+                lengths: crate::physics::effects::nominal_lengths(&report.nominal_robot),
+                reference_values: comp.calibrated.values.clone(),
+            }));
+            comp.temp_c = Some(info.reference_temp_c);
+        }
         let has_joint_effects = crate::physics::effects_of(&report.findings)
             .iter()
             .any(|e| e.kind.joint().is_some());
@@ -163,6 +270,35 @@ impl Compensator {
     pub fn with_joint_offsets(mut self, f: JointOffsets) -> Self {
         self.joint_offsets = Some(f);
         self
+    }
+
+    /// The accepted temperature-driven thermal expansion, if any.
+    pub fn thermal(&self) -> Option<ThermalInfo> {
+        self.thermal.as_ref().map(|t| t.info)
+    }
+
+    /// The temperature (°C) this compensator compensates at: `None` without
+    /// a temperature-driven thermal effect.
+    pub fn temperature_c(&self) -> Option<f64> {
+        self.temp_c
+    }
+
+    /// This compensator with the robot at `temp_c` (°C): every nominal a
+    /// and d of the calibrated geometry grows by `k · (temp_c - T_ref)`
+    /// times its nominal value. Without a temperature-driven thermal
+    /// effect, an unchanged copy. A clone of the parameter vectors; no
+    /// other work.
+    pub fn at_temperature(&self, temp_c: f64) -> Compensator {
+        let mut c = self.clone();
+        if let Some(t) = &self.thermal {
+            let m = t.info.coef_per_k * (temp_c - t.info.reference_temp_c);
+            c.calibrated.values.copy_from_slice(&t.reference_values);
+            for &(i, v) in &t.lengths {
+                c.calibrated.values[i] += m * v;
+            }
+            c.temp_c = Some(temp_c);
+        }
+        c
     }
 
     /// Number of joints.

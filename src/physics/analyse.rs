@@ -992,11 +992,17 @@ pub fn analyse(
                         "units".into(),
                         "internal: angles rad, lengths mm; compliance rad/(N*m) with masses, rad/m per unit-mass regressor without; thermal per K or per hour".into(),
                     );
-                    if let Kind::ThermalExpansion { .. } = e.kind {
+                    if let Kind::ThermalExpansion { driver } = e.kind {
                         o.insert(
                             "reference".into(),
                             "driver zero at the first pose (temperature or time)".into(),
                         );
+                        // The temperature compensation scales from.
+                        if let (super::effects::ThermalDriver::Temperature, Some(t)) =
+                            (driver, ctx.temp_ref_c)
+                        {
+                            o.insert("reference_temp_c".into(), t.into());
+                        }
                     }
                 }
                 findings.push(Finding {

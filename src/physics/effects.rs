@@ -248,6 +248,16 @@ pub struct EffectModel {
     pub coef: Vec<f64>,
 }
 
+impl EffectModel {
+    /// The effect with every coefficient zero (a candidate before its fit).
+    pub fn zero(kind: Kind) -> Self {
+        EffectModel {
+            coef: vec![0.0; kind.n_coef()],
+            kind,
+        }
+    }
+}
+
 /// What the effects need to know about one pose.
 #[derive(Debug, Clone)]
 pub struct PoseContext {
@@ -282,8 +292,12 @@ pub struct Context {
     pub has_masses: bool,
     /// Thermal driver used.
     pub thermal_driver: ThermalDriver,
-    /// `(parameter index, nominal value)` of every a and d.
+    /// `(parameter index, nominal value)` of every nonzero a and d
+    /// ([`nominal_lengths`]).
     pub lengths: Vec<(usize, f64)>,
+    /// The temperature (°C) at which the thermal driver is zero (the first
+    /// pose's), when the driver is [`ThermalDriver::Temperature`].
+    pub temp_ref_c: Option<f64>,
     /// Centre of the poses' points (rig frame): the pivot of rig rotations,
     /// so that their coefficients are not mostly translation.
     pub centre_rig: Vector3<f64>,
@@ -301,6 +315,26 @@ pub struct PoseInput<'a> {
     pub temp_c: Option<f64>,
     /// T in the rig frame (true or located).
     pub point_rig: Vector3<f64>,
+}
+
+/// `(parameter index, nominal value)` of every nonzero a and d of `robot`:
+/// the lengths thermal expansion scales. A thermal multiplier `m` adds
+/// `m · value` to parameter `index` (of any parameter vector with the
+/// joint layout of [`Params`], nominal or calibrated). One implementation
+/// for the analysis, the simulator and compensation.
+pub fn nominal_lengths(robot: &Robot) -> Vec<(usize, f64)> {
+    let nominal = Params::of_robot(robot);
+    let l = nominal.layout;
+    let mut lengths = Vec::new();
+    for j in 0..robot.dof() {
+        for jp in [JointParam::A, JointParam::D] {
+            let i = l.joint(j, jp);
+            if nominal.values[i] != 0.0 {
+                lengths.push((i, nominal.values[i]));
+            }
+        }
+    }
+    lengths
 }
 
 /// Direction each joint last moved, from the row order: the sign of the
@@ -361,16 +395,7 @@ impl Context {
         let t_ref = poses.first().and_then(|p| p.time_s).unwrap_or(0.0);
         let qs: Vec<&[f64]> = poses.iter().map(|p| p.q_rad).collect();
         let dirs = approach_directions(&qs);
-        let l = nominal.layout;
-        let mut lengths = Vec::new();
-        for j in 0..n {
-            for jp in [JointParam::A, JointParam::D] {
-                let i = l.joint(j, jp);
-                if nominal.values[i] != 0.0 {
-                    lengths.push((i, nominal.values[i]));
-                }
-            }
-        }
+        let lengths = nominal_lengths(robot);
         let ctx_poses = poses
             .iter()
             .zip(dirs)
@@ -434,6 +459,7 @@ impl Context {
             has_masses: masses.is_some(),
             thermal_driver,
             lengths,
+            temp_ref_c: use_temp.then_some(temp_ref),
             centre_rig,
             poses: ctx_poses,
         }

@@ -40,8 +40,9 @@ pub fn effects_of(findings: &[Finding]) -> Vec<EffectModel> {
 /// Assumptions: backlash takes the approach direction as positive (joint
 /// arrives moving in +q, as most teach programs finish with a positive
 /// approach); use [`joint_offsets_rad_with_direction`] when the direction is
-/// known. Thermal expansion is not a joint-angle effect and is left out (it
-/// needs the temperature). Compliance without link masses uses the
+/// known. Thermal expansion is not a joint-angle effect and is left out
+/// here: it changes the lengths and needs the temperature the robot runs at
+/// (`Compensator::at_temperature`). Compliance without link masses uses the
 /// unit-mass regressors stored in the finding.
 pub fn joint_offsets_rad(findings: &[Finding], robot: &Robot, q_rad: &[f64]) -> Vec<f64> {
     joint_offsets_rad_with_direction(findings, robot, q_rad, &vec![1.0; q_rad.len()])
