@@ -134,3 +134,92 @@ fn locate_compares_closed_form_and_least_squares() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("paper closed form vs least squares"), "{err}");
 }
+
+/// `compensate --temp-c` on a calibration that accepted thermal expansion
+/// (simulated, temperature-driven): the note without it, different joints
+/// with it, refused out of range, and a note that it is unused without the
+/// effect.
+#[test]
+fn compensate_at_a_temperature() {
+    use drawcal::identify::{IdentifyOptions, NoProgress, identify};
+    let dir = std::env::temp_dir().join(format!("drawcal-cli-temp-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let spec: drawcal::physics::simulate::Spec = serde_json::from_value(serde_json::json!({
+        "robot": "er3a",
+        "n_poses": 120,
+        "seed": 777,
+        "effects": [{"effect": "thermal_expansion", "size_x_noise": 10}]
+    }))
+    .unwrap();
+    let sim = drawcal::physics::simulate::generate(&spec).unwrap();
+    let rep = identify(
+        &sim.robot,
+        &sim.rig,
+        &sim.dataset,
+        &IdentifyOptions::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    let t_ref = sim.dataset.poses[0].temp_c.unwrap();
+    let mut json = serde_json::to_value(&rep).unwrap();
+    let report = dir.join("thermal.json");
+    std::fs::write(&report, json.to_string()).unwrap();
+    json["findings"] = serde_json::json!([]);
+    let plain = dir.join("plain.json");
+    std::fs::write(&plain, json.to_string()).unwrap();
+    let targets = dir.join("targets.csv");
+    std::fs::write(
+        &targets,
+        "target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\nt1,10,20,30,40,50,60\n",
+    )
+    .unwrap();
+    let run = |report: &PathBuf, extra: &[&str]| {
+        let out = bin()
+            .arg("compensate")
+            .arg("--calibration")
+            .arg(report)
+            .arg("--targets")
+            .arg(&targets)
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (ok, at_ref, err) = run(&report, &[]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("thermal expansion")
+            && err.contains("reference temperature")
+            && err.contains("--temp-c"),
+        "{err}"
+    );
+    let warm = format!("{}", t_ref + 30.0);
+    let (ok, at_warm, err) = run(&report, &["--temp-c", &warm]);
+    assert!(ok, "{err}");
+    assert!(err.contains("compensating at"), "{err}");
+    assert!(at_warm.contains(",ok,") && at_ref.contains(",ok,"));
+    assert_ne!(at_warm, at_ref, "the temperature changes the joints");
+    let (ok, same, _) = run(&report, &[&format!("--temp-c={t_ref}")]);
+    assert!(ok);
+    assert_eq!(same, at_ref, "at the reference nothing changes");
+    // Negative temperatures parse as values.
+    let (ok, _, err) = run(&report, &["--temp-c", "-10"]);
+    assert!(ok, "{err}");
+    for bad in ["500", "NaN", "-60"] {
+        let (ok, _, err) = run(&report, &[&format!("--temp-c={bad}")]);
+        assert!(!ok, "{bad} accepted");
+        assert!(err.contains("--temp-c"), "{bad}: {err}");
+    }
+    let (ok, plain_out, err) = run(&plain, &["--temp-c", "40"]);
+    assert!(ok, "{err}");
+    assert!(err.contains("--temp-c is not used"), "{err}");
+    assert_eq!(
+        plain_out, at_ref,
+        "without the effect: the geometry as calibrated"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

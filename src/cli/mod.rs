@@ -152,6 +152,12 @@ pub struct CompensateArgs {
     /// Also hold the flange orientation (nominal for joint targets).
     #[arg(long)]
     pub orientation: bool,
+    /// Temperature the robot runs at (°C, -50 to 150), for a calibration
+    /// whose physics analysis accepted thermal expansion driven by the
+    /// temperature (default: the calibration session's reference
+    /// temperature, i.e. the geometry as calibrated).
+    #[arg(long, allow_negative_numbers = true)]
+    pub temp_c: Option<f64>,
 }
 
 /// `drawcal locate`.
@@ -244,6 +250,7 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
             source: crate::Error::field("report", e.to_string()),
         })?;
     let comp = core(&a.calibration, Compensator::from_report(&report))?;
+    let comp = at_temperature(comp, &report, a.temp_c)?;
     let file = File::open(&a.targets).map_err(|source| CliError::Io {
         path: a.targets.clone(),
         source,
@@ -279,6 +286,48 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
         })?,
     }
     Ok(())
+}
+
+/// The compensator at `--temp-c`, with a note on stderr when the
+/// temperature matters but is not given, or is given but does not matter.
+fn at_temperature(
+    comp: Compensator,
+    report: &Report,
+    temp_c: Option<f64>,
+) -> Result<Compensator, CliError> {
+    if let Some(t) = temp_c {
+        compensate::check_temp_c("--temp-c", t).map_err(|e| CliError::Other(e.to_string()))?;
+    }
+    if compensate::has_time_thermal(report) {
+        eprintln!(
+            "note: the calibration's thermal expansion is driven by time (no temperature was recorded in its session); it cannot be compensated at run time and is left out"
+        );
+    }
+    match (comp.thermal(), temp_c) {
+        (Some(th), None) => {
+            eprintln!(
+                "note: the calibration models thermal expansion ({:.2} ppm/K); compensating at its reference temperature {:.2} C. Give --temp-c with the temperature the robot runs at",
+                th.coef_per_k * 1e6,
+                th.reference_temp_c
+            );
+            Ok(comp)
+        }
+        (Some(th), Some(t)) => {
+            eprintln!(
+                "compensating at {t:.2} C (thermal expansion {:.2} ppm/K from the reference {:.2} C)",
+                th.coef_per_k * 1e6,
+                th.reference_temp_c
+            );
+            Ok(comp.at_temperature(t))
+        }
+        (None, Some(_)) => {
+            eprintln!(
+                "note: --temp-c is not used: the calibration has no thermal expansion driven by the temperature"
+            );
+            Ok(comp)
+        }
+        (None, None) => Ok(comp),
+    }
 }
 
 fn run_locate(a: LocateArgs) -> Result<(), CliError> {
