@@ -126,3 +126,31 @@ fn a_rig_drift_is_named_on_another_arm() {
         "{fitted:?} vs {truth:?}"
     );
 }
+
+#[test]
+fn the_rig_step_sign_follows_the_rig_not_the_model() {
+    // Independent of the effect's own basis: an effect-free recording whose
+    // tracker was moved by +v after t0 (so every point after it reads v
+    // less in the rig frame). The fitted translation must be +v: the
+    // coefficients are the rig's own motion.
+    let mut s = spec("er3a", "rig_step", 33);
+    s.effects.clear();
+    let sim = simulate::generate(&s).unwrap();
+    let (rig, mut data) = as_point_data(&sim);
+    let last = data.poses.last().unwrap().time_s.unwrap();
+    let t0 = 0.5 * last;
+    let v = nalgebra::Vector3::new(0.3, -0.2, 0.25);
+    for p in data.poses.iter_mut().filter(|p| p.time_s.unwrap() > t0) {
+        if let drawcal::model::Measurement::Point(x) = &mut p.measurement {
+            *x -= v;
+        }
+    }
+    let a = analyse(&sim, &rig, &data);
+    assert_eq!(named(&a), vec!["rig_step"], "{:#?}", a.findings);
+    let e = &physics::effects_of(std::slice::from_ref(&a.findings[0]))[0];
+    for c in 0..3 {
+        assert!((e.coef[c] - v[c]).abs() < 0.05, "{:?} vs {v:?}", e.coef);
+    }
+    // No rotation was put in (mrad).
+    assert!(e.coef[3..].iter().all(|w| w.abs() < 0.1), "{:?}", e.coef);
+}

@@ -74,6 +74,11 @@ fn parse_opt(
     }
 }
 
+/// Largest |time_s| accepted (s).
+const MAX_TIME_S: f64 = 1e12;
+/// Largest |x|, |y|, |z| of a measured point accepted (mm).
+const MAX_COORD_MM: f64 = 1e7;
+
 impl Dataset {
     /// Parse poses.csv for this robot and rig. Every row is checked before
     /// anything is returned; the first problem is reported with its row
@@ -203,6 +208,13 @@ impl Dataset {
                 let mut p = [0.0; 3];
                 for (c, name) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
                     p[c] = super::parse_cell(row, name, rec.get(xyz[c].unwrap()).unwrap_or(""))?;
+                    if p[c].abs() > MAX_COORD_MM {
+                        return Err(Error::cell(
+                            row,
+                            *name,
+                            format!("{} mm: a measured point more than 10 km away", p[c]),
+                        ));
+                    }
                 }
                 Measurement::Point(Vector3::from(p))
             };
@@ -218,12 +230,30 @@ impl Dataset {
                     ));
                 }
             };
+            let time_s = parse_opt(row, time_col, &rec)?;
+            if let Some(t) = time_s.filter(|t| t.abs() > MAX_TIME_S) {
+                // Differences of times must stay finite (drifts are per hour
+                // since the first pose); epoch seconds are far inside this.
+                return Err(Error::cell(
+                    row,
+                    "time_s",
+                    format!("{t} s is not a plausible time (more than 10^12 s)"),
+                ));
+            }
+            let temp_c = parse_opt(row, temp_col, &rec)?;
+            if let Some(t) = temp_c.filter(|t| !(-100.0..=300.0).contains(t)) {
+                return Err(Error::cell(
+                    row,
+                    "temp_c",
+                    format!("{t} °C is outside -100..300 °C"),
+                ));
+            }
             poses.push(PoseRecord {
                 id,
                 q_rad,
                 measurement,
-                time_s: parse_opt(row, time_col, &rec)?,
-                temp_c: parse_opt(row, temp_col, &rec)?,
+                time_s,
+                temp_c,
                 payload_kg: parse_opt(row, payload_col, &rec)?,
                 split,
             });
@@ -255,6 +285,23 @@ mod tests {
             r#"{"anchors_mm":[[0,0,0],[0,900,0],[1200,0,0]],"r_mm":35,"sensor":{"range_mm":2000}}"#,
         )
         .unwrap()
+    }
+
+    #[test]
+    fn implausible_time_and_temperature_are_refused_with_row_and_column() {
+        for (cells, col) in [
+            ("1e308,20", "time_s"),
+            ("5,1e9", "temp_c"),
+            ("5,-300", "temp_c"),
+        ] {
+            let csv = format!(
+                "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm,time_s,temp_c\n1,10,20,100,200,300,{cells}\n"
+            );
+            let e = Dataset::from_csv(csv.as_bytes(), &robot(), &rig())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(col) && e.contains("row 1"), "{e}");
+        }
     }
 
     #[test]

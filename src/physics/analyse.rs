@@ -336,19 +336,35 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
         .saturating_sub(1)
         .min(SCAN_EFFECTIVE_MAX)
         .div_ceil(STEP_GRID - 1);
-    if times.len() > 2 {
+    // The rig's motion is a matter of clock time: without a recorded time
+    // (row order only) it is not proposed.
+    let timed = session.data.poses.iter().all(|p| p.time_s.is_some());
+    if timed && times.len() > 2 {
         push(
             Kind::RigDrift,
             1,
             "a steady motion of the whole rig over the session".into(),
         );
     }
-    for &t0 in &change_points {
-        push(
-            Kind::RigStep { t0_s: t0 },
-            scanned_per_point,
-            format!("a move of the whole rig at {t0:.0} s"),
-        );
+    for (g, &t0) in change_points.iter().enumerate() {
+        // A kept step was refined within its grid neighbours: that bracket
+        // is taken (another step elsewhere in the session is not).
+        let lo = if g > 0 {
+            change_points[g - 1]
+        } else {
+            f64::NEG_INFINITY
+        };
+        let hi = change_points.get(g + 1).copied().unwrap_or(f64::INFINITY);
+        let kept_here = accepted
+            .iter()
+            .any(|e| matches!(e.kind, Kind::RigStep { t0_s } if t0_s > lo && t0_s < hi));
+        if timed && !kept_here {
+            push(
+                Kind::RigStep { t0_s: t0 },
+                scanned_per_point,
+                format!("a move of the whole rig at {t0:.0} s"),
+            );
+        }
     }
     if m > 0 {
         for k in 0..m {
@@ -401,8 +417,10 @@ fn same_slot(a: &Kind, b: &Kind) -> bool {
 }
 
 /// Each train pose (position in `train`) paired with its nearest other
-/// train pose in joint space. Above 12,000 poses a deterministic stride
-/// subsample bounds this quadratic search (0.1 s at that size).
+/// train pose in joint space, each pair once (mutual neighbours would
+/// otherwise count twice and inflate the agreement statistic). Above
+/// 12,000 poses a deterministic stride subsample bounds this quadratic
+/// search.
 fn nearest_in_joint_space(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)> {
     let stride = train.len().div_ceil(12_000).max(1);
     let pick: Vec<usize> = (0..train.len()).step_by(stride).collect();
@@ -416,8 +434,10 @@ fn nearest_in_joint_space(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)>
                     (d, b)
                 })
                 .min_by(|x, y| x.0.total_cmp(&y.0))
-                .map(|(_, b)| (a, b))
+                .map(|(_, b)| (a.min(b), a.max(b)))
         })
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
         .collect()
 }
 
@@ -463,6 +483,32 @@ fn worst_region(ctx: &Context, train: &[usize], res: &[f64], rpp: usize) -> Stri
     }
 }
 
+/// Normal equations of the train poses, linearised at `p` with the
+/// accepted effects at their fitted values and `extra` effects appended at
+/// zero (their columns are what a candidate would add).
+fn train_normals(
+    session: &Session,
+    ctx: &Context,
+    p: &[f64],
+    free: &[usize],
+    accepted: &[EffectModel],
+    extra: impl IntoIterator<Item = Kind>,
+    fold_of: &[usize],
+) -> Normals {
+    let mut effects = accepted.to_vec();
+    effects.extend(extra.into_iter().map(EffectModel::zero));
+    let problem = EffectProblem {
+        chain: session.chain,
+        ctx,
+        data: session.data,
+        poses: session.train.clone(),
+        full: p.to_vec(),
+        free: free.to_vec(),
+        effects,
+    };
+    normals(&problem, &problem.x0(), fold_of)
+}
+
 /// Each member of a pair significant given the other (chi-square of its
 /// columns over its threshold), linearised at the current parameters.
 fn pair_holds(
@@ -474,21 +520,15 @@ fn pair_holds(
     pair: &[Candidate],
     thresholds: &[f64],
 ) -> bool {
-    let mut all = accepted.to_vec();
-    all.extend(pair.iter().map(|c| EffectModel {
-        coef: vec![0.0; c.kind.n_coef()],
-        kind: c.kind.clone(),
-    }));
-    let problem = EffectProblem {
-        chain: session.chain,
+    let nm = train_normals(
+        session,
         ctx,
-        data: session.data,
-        poses: session.train.clone(),
-        full: p.to_vec(),
-        free: free.to_vec(),
-        effects: all,
-    };
-    let nm = normals(&problem, &problem.x0(), &vec![0; session.train.len()]);
+        p,
+        free,
+        accepted,
+        pair.iter().map(|c| c.kind.clone()),
+        &vec![0; session.train.len()],
+    );
     let (a, b, rr) = nm.total();
     let n_acc: usize = accepted.iter().map(|e| e.kind.n_coef()).sum();
     let base: Vec<usize> = (0..free.len() + n_acc).collect();
@@ -680,6 +720,7 @@ pub fn analyse(
 
     let mut rejected: Vec<Kind> = Vec::new();
     let mut final_sigmas = None;
+    let mut final_fit: Option<FitInfo> = None;
     for round in 0..MAX_EFFECTS + 2 {
         if accepted.len() >= MAX_EFFECTS {
             break;
@@ -692,22 +733,15 @@ pub fn analyse(
         if cands.is_empty() {
             break;
         }
-        let mut all = accepted.clone();
-        all.extend(cands.iter().map(|c| EffectModel {
-            coef: vec![0.0; c.kind.n_coef()],
-            kind: c.kind.clone(),
-        }));
-        let problem = EffectProblem {
-            chain: session.chain,
-            ctx: &ctx,
-            data: session.data,
-            poses: session.train.clone(),
-            full: p.clone(),
-            free: free.clone(),
-            effects: all,
-        };
-        let x = problem.x0();
-        let nm = normals(&problem, &x, &fold_of);
+        let nm = train_normals(
+            session,
+            &ctx,
+            &p,
+            &free,
+            &accepted,
+            cands.iter().map(|c| c.kind.clone()),
+            &fold_of,
+        );
         let (a, b, rr) = nm.total();
         let n_acc: usize = accepted.iter().map(|e| e.kind.n_coef()).sum();
         let base: Vec<usize> = (0..free.len() + n_acc).collect();
@@ -827,7 +861,9 @@ pub fn analyse(
                 continue;
             }
             // Refine a scanned change point between its grid neighbours,
-            // with the partner (if any) fitted alongside.
+            // with the partner (if any) fitted alongside. A rejection is
+            // recorded on the grid's kind, which is what comes back.
+            let grid: Vec<Kind> = cs.iter().map(|c| c.kind.clone()).collect();
             for i in 0..cs.len() {
                 if let Some(t0_s) = cs[i].kind.change_time_s() {
                     let mut ctx_eff = accepted.clone();
@@ -835,10 +871,7 @@ pub fn analyse(
                         cs.iter()
                             .enumerate()
                             .filter(|(j, _)| *j != i)
-                            .map(|(_, c)| EffectModel {
-                                coef: vec![0.0; c.kind.n_coef()],
-                                kind: c.kind.clone(),
-                            }),
+                            .map(|(_, c)| EffectModel::zero(c.kind.clone())),
                     );
                     let t0 = refine_step(session, &ctx, &p, &free, &ctx_eff, &cs[i].kind, t0_s);
                     cs[i].kind = cs[i].kind.with_change_time(t0);
@@ -866,19 +899,16 @@ pub fn analyse(
             let cv1 = cv_sse(&nm, &a, &b, &cv_cols);
             if cv1 >= cv0 {
                 if single {
-                    rejected.push(cs[0].kind.clone());
+                    rejected.push(grid[0].clone());
                 }
                 continue;
             }
             // Nonlinear refit of geometry, accepted effects and the new ones.
             let mut trial = accepted.clone();
-            trial.extend(cs.iter().map(|c| EffectModel {
-                coef: vec![0.0; c.kind.n_coef()],
-                kind: c.kind.clone(),
-            }));
+            trial.extend(cs.iter().map(|c| EffectModel::zero(c.kind.clone())));
             let Ok((p_new, eff_new, fit)) = refit(session, &ctx, &p, &free, &trial) else {
                 if single {
-                    rejected.push(cs[0].kind.clone());
+                    rejected.push(grid[0].clone());
                 }
                 continue;
             };
@@ -903,7 +933,7 @@ pub fn analyse(
                     gain_z
                 ));
                 if single {
-                    rejected.push(cs[0].kind.clone());
+                    rejected.push(grid[0].clone());
                 }
                 continue;
             }
@@ -973,7 +1003,7 @@ pub fn analyse(
                     s.threshold,
                     n_tests,
                     if c.scanned > 1 {
-                        ", change point scanned"
+                        ", change point scanned; figures at the nearest grid point, before refinement"
                     } else {
                         ""
                     },
@@ -1029,11 +1059,34 @@ pub fn analyse(
             p = p_new;
             accepted = eff_new;
             final_sigmas = Some(fit.sigma_free.clone());
+            final_fit = Some(fit);
             progressed = true;
             break;
         }
         if !progressed {
             break;
+        }
+    }
+    // Later rounds refit the earlier effects: every finding reports its
+    // effect as the final model has it (coefficients for compensation,
+    // magnitude and sigma, evidence plot), not as the round that kept it.
+    if let Some(fit) = &final_fit {
+        for f in findings.iter_mut() {
+            let Some(k) = super::effects_of(std::slice::from_ref(f))
+                .first()
+                .and_then(|em| accepted.iter().position(|e| e.kind == em.kind))
+            else {
+                continue;
+            };
+            let e = &accepted[k];
+            let at: usize = accepted[..k].iter().map(|e| e.kind.n_coef()).sum();
+            let (mag, sig, _) = magnitude(&ctx, session, e, &fit.block(at, e.kind.n_coef()));
+            f.magnitude = mag;
+            f.sigma = sig;
+            if let Some(o) = f.parameters.as_object_mut() {
+                o.insert("coef".into(), serde_json::json!(e.coef));
+            }
+            f.evidence_plot = super::evidence::evidence_plot(session, &ctx, &p, &accepted, k);
         }
     }
 
@@ -1160,21 +1213,15 @@ fn refine_step(
     let mut at = lo;
     while at <= hi {
         let t = 0.5 * (times[at - 1] + times[at]);
-        let mut all = accepted.to_vec();
-        all.push(EffectModel {
-            kind: kind.with_change_time(t),
-            coef: vec![0.0; kind.n_coef()],
-        });
-        let problem = EffectProblem {
-            chain: session.chain,
+        let nm = train_normals(
+            session,
             ctx,
-            data: session.data,
-            poses: session.train.clone(),
-            full: p.to_vec(),
-            free: free.to_vec(),
-            effects: all,
-        };
-        let nm = normals(&problem, &problem.x0(), &fold0);
+            p,
+            free,
+            accepted,
+            [kind.with_change_time(t)],
+            &fold0,
+        );
         let (a, b, _) = nm.total();
         let mut cols = base.clone();
         let nb = base.len();
