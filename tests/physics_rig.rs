@@ -99,6 +99,15 @@ fn a_rig_step_is_named_with_its_time_on_strings_and_on_points() {
             f.test_rms_before_mm,
             f.test_rms_after_mm
         );
+        // The same quantity as the simulator's truth states (RMS
+        // displacement of T after the move), within 10 % (train poses only
+        // here, every pose there).
+        let m_true = sim.truth["effects"][0]["magnitude"].as_f64().unwrap();
+        assert!(
+            (f.magnitude / m_true - 1.0).abs() < 0.1,
+            "{what}: {} vs truth {m_true}",
+            f.magnitude
+        );
         // The robot is unchanged: no joint offsets for compensation.
         let q = vec![0.2; sim.robot.dof()];
         assert!(

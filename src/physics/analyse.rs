@@ -1280,30 +1280,9 @@ fn magnitude(
             Box::new(|c: &[f64]| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
         }
         Kind::RigStep { .. } | Kind::RigDrift => {
-            // RMS displacement of T the rig motion causes over the train
-            // poses (step: those after the move; drift: over the session).
             let kind = e.kind.clone();
             let train = session.train.clone();
-            Box::new(move |c: &[f64]| {
-                let mut buf = super::effects::Basis::default();
-                let (mut s, mut n) = (0.0, 0usize);
-                for &i in &train {
-                    ctx.basis(&kind, i, &mut buf);
-                    let d = (0..3)
-                        .map(|r| {
-                            (0..6)
-                                .map(|k| c[k] * buf.dp[k * 3 + r])
-                                .sum::<f64>()
-                                .powi(2)
-                        })
-                        .sum::<f64>();
-                    if buf.dp.iter().any(|v| *v != 0.0) {
-                        s += d;
-                        n += 1;
-                    }
-                }
-                (s / n.max(1) as f64).sqrt()
-            })
+            Box::new(move |c: &[f64]| ctx.rigid_rms_mm(&kind, c, &train))
         }
     };
     let unit = match &e.kind {

@@ -568,6 +568,32 @@ impl Context {
         }
     }
 
+    /// RMS displacement of T (mm) a rig effect with coefficients `coef`
+    /// causes over the given poses that it affects (a step: those after
+    /// the move; a drift: all but the first). The magnitude the analysis
+    /// reports and the simulator's truth states, so the two compare.
+    pub fn rigid_rms_mm(&self, kind: &Kind, coef: &[f64], poses: &[usize]) -> f64 {
+        let mut buf = Basis::default();
+        let (mut s, mut n) = (0.0, 0usize);
+        for &i in poses {
+            self.basis(kind, i, &mut buf);
+            if buf.dp.iter().all(|v| *v == 0.0) {
+                continue;
+            }
+            s += (0..3)
+                .map(|r| {
+                    coef.iter()
+                        .enumerate()
+                        .map(|(k, c)| c * buf.dp[k * 3 + r])
+                        .sum::<f64>()
+                        .powi(2)
+                })
+                .sum::<f64>();
+            n += 1;
+        }
+        (s / n.max(1) as f64).sqrt()
+    }
+
     /// A rigid motion of the rig relative to the base, scaled by `w`:
     /// T moves by `-(v + ω × (T - centre))` relative to the rig (the rig
     /// moving by +v makes T appear to move by -v, so the coefficients are

@@ -17,7 +17,8 @@
 //! that located the structure, beside the running mean of its neighbours.
 //!
 //! Size: at most [`EvidencePlot::MAX_POINTS`] points per plot. Poses are
-//! kept by a fixed stride in visiting order (`ceil(points / MAX_POINTS)`),
+//! kept by a fixed stride in visiting order (`ceil(poses / (MAX_POINTS /
+//! points per pose))`),
 //! so the choice is deterministic and spread over the whole session.
 
 use nalgebra::{Matrix3, Vector3};
@@ -218,7 +219,10 @@ pub fn evidence_plot(
     };
     let per_pose = strings.len();
     let n_total = n * per_pose;
-    let stride = n_total.div_ceil(EvidencePlot::MAX_POINTS).max(1);
+    // Whole poses are kept, so the bound is on poses: MAX_POINTS / per_pose.
+    let stride = n
+        .div_ceil((EvidencePlot::MAX_POINTS / per_pose.max(1)).max(1))
+        .max(1);
     let idx: Vec<usize> = (0..n).step_by(stride).collect();
     let test: std::collections::HashSet<usize> = session.test.iter().copied().collect();
     let split = |i: usize| {

@@ -828,7 +828,7 @@ fn effect_model(
 }
 
 /// The magnitude as reported (same units as the analysis's findings).
-pub fn report_magnitude(e: &EffectModel, _ctx: &Context) -> (f64, &'static str) {
+pub fn report_magnitude(e: &EffectModel, ctx: &Context) -> (f64, &'static str) {
     let deg = 180.0 / std::f64::consts::PI;
     let c = &e.coef;
     match e.kind {
@@ -840,8 +840,14 @@ pub fn report_magnitude(e: &EffectModel, _ctx: &Context) -> (f64, &'static str) 
         Kind::SensorOffset { .. } => (c[0], "mm"),
         Kind::CableSag => (c[0], "mm/m^3"),
         Kind::AnchorStep { .. } => ((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt(), "mm"),
-        Kind::RigStep { .. } => (c[..3].iter().map(|v| v * v).sum::<f64>().sqrt(), "mm"),
-        Kind::RigDrift => (c[..3].iter().map(|v| v * v).sum::<f64>().sqrt(), "mm/h"),
+        Kind::RigStep { .. } => (
+            ctx.rigid_rms_mm(&e.kind, c, &(0..ctx.poses.len()).collect::<Vec<_>>()),
+            "mm (RMS displacement of T after the move)",
+        ),
+        Kind::RigDrift => (
+            ctx.rigid_rms_mm(&e.kind, c, &(0..ctx.poses.len()).collect::<Vec<_>>()),
+            "mm (RMS displacement of T over the session)",
+        ),
     }
 }
 
