@@ -81,7 +81,8 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
         return Err("--job-lease-secs must be at least 1".into());
     }
     init_tracing(args.log_format);
-    eprintln!(
+    // Through the log (not eprintln) so that JSON logs are JSON throughout.
+    tracing::info!(
         "drawcal serve: listen={} database={} workers={} max_upload_bytes={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
         args.listen,
         redact(&args.database),
@@ -110,7 +111,7 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
         let service = Service::start(&cfg, engine_job_fn())
             .await
             .map_err(|e| e.to_string())?;
-        eprintln!("drawcal serve: listening on http://{}", service.addr);
+        tracing::info!("drawcal serve: listening on http://{}", service.addr);
         service
             .run(shutdown_signal())
             .await
