@@ -198,5 +198,47 @@ fn benches(c: &mut Criterion) {
     }
 }
 
-criterion_group!(engine, benches);
+/// Compensation with temperature-driven thermal expansion: the cached
+/// compensator (at its reference temperature) against a copy moved to the
+/// running temperature per request, as `POST /compensate` with `temp_c`
+/// does. Filter: `cargo bench --bench engine -- thermal`.
+fn thermal(c: &mut Criterion) {
+    let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
+        "robot": "er3a", "n_poses": 120, "seed": 777,
+        "effects": [{"effect": "thermal_expansion", "size_x_noise": 10}]
+    }))
+    .unwrap();
+    let sim = simulate::generate(&spec).unwrap();
+    let report = identify(
+        &sim.robot,
+        &sim.rig,
+        &sim.dataset,
+        &IdentifyOptions::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    let comp = Compensator::from_report(&report).unwrap();
+    let t_run = comp.thermal().expect("thermal accepted").reference_temp_c + 30.0;
+    let t = Target {
+        target: "t".into(),
+        kind: TargetKind::Joints {
+            q_deg: vec![10.0, -20.0, 30.0, 0.0, 40.0, 0.0],
+        },
+    };
+    assert_eq!(comp.compensate(&t, false).status, CompensationStatus::Ok);
+    c.bench_function("thermal_compensator_at_temperature", |b| {
+        b.iter(|| comp.at_temperature(black_box(t_run)))
+    });
+    c.bench_function("thermal_compensate_one_joint_target_at_reference", |b| {
+        b.iter(|| comp.compensate(black_box(&t), false))
+    });
+    c.bench_function("thermal_compensate_one_joint_target_at_temperature", |b| {
+        b.iter(|| {
+            comp.at_temperature(black_box(t_run))
+                .compensate(black_box(&t), false)
+        })
+    });
+}
+
+criterion_group!(engine, thermal, benches);
 criterion_main!(engine);

@@ -6,6 +6,12 @@
 //! threads, a large batch split across the cores. Targets arrive as JSON or
 //! targets.csv; the answer is JSON or compensated.csv (`Accept: text/csv`),
 //! written by the engine's own [`crate::compensate::write_csv`].
+//!
+//! A calibration that accepted thermal expansion driven by the temperature
+//! is compensated at `temp_c` when the request gives one (default: the
+//! calibration's reference temperature): the cached compensator stays at
+//! the reference and each such request works on a copy moved to its
+//! temperature (a clone of a few parameter vectors).
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -75,6 +81,12 @@ pub struct CompensateRequest {
     /// A batch of up to 10,000 targets (answered in order).
     #[serde(default)]
     pub targets: Option<Vec<TargetIn>>,
+    /// Temperature the robot runs at (°C, -50 to 150). Used when the
+    /// calibration accepted thermal expansion driven by the temperature
+    /// (default: its reference temperature, the geometry as calibrated);
+    /// ignored otherwise (`temp_c_used` is then null).
+    #[serde(default)]
+    pub temp_c: Option<f64>,
 }
 
 /// Outcome of one target.
@@ -133,6 +145,11 @@ pub struct CompensateResponse {
     pub calibration_id: i64,
     /// Its version.
     pub version: i64,
+    /// Temperature (°C) the calibrated geometry was taken at: the request's
+    /// `temp_c`, else the calibration's reference temperature, when the
+    /// calibration has thermal expansion driven by the temperature; null
+    /// when it has none (the temperature does not matter).
+    pub temp_c_used: Option<f64>,
     /// Targets with status `ok`.
     pub n_ok: usize,
     /// One per target, in order.
@@ -301,11 +318,18 @@ pub struct CompensateQuery {
     pub calibration_id: Option<i64>,
     /// Also hold the flange orientation (default false).
     pub orientation: Option<bool>,
+    /// Temperature the robot runs at (°C, -50 to 150), for a calibration
+    /// with thermal expansion driven by the temperature (default: its
+    /// reference temperature).
+    pub temp_c: Option<f64>,
 }
 
 impl CompensateQuery {
     fn is_empty(&self) -> bool {
-        self.robot_id.is_none() && self.calibration_id.is_none() && self.orientation.is_none()
+        self.robot_id.is_none()
+            && self.calibration_id.is_none()
+            && self.orientation.is_none()
+            && self.temp_c.is_none()
     }
 }
 
@@ -354,7 +378,8 @@ fn wants_csv(headers: &HeaderMap) -> bool {
 /// the query string). The answer is JSON unless `Accept` prefers `text/csv`:
 /// then it is compensated.csv, in request order, with the calibration that
 /// produced it in the `X-Calibration-Id` and `X-Calibration-Version`
-/// headers. Errors are always JSON.
+/// headers (and `X-Temp-C-Used` when the calibration has thermal expansion
+/// driven by the temperature). Errors are always JSON.
 #[utoipa::path(post, path = "/compensate", tag = "compensation",
     params(CompensateQuery),
     request_body(
@@ -369,13 +394,14 @@ fn wants_csv(headers: &HeaderMap) -> bool {
                 (String = "text/csv")),
             headers(
                 ("x-calibration-id" = i64, description = "Calibration used (on text/csv answers; JSON has it in the body)"),
-                ("x-calibration-version" = i64, description = "Its version (on text/csv answers)"))),
+                ("x-calibration-version" = i64, description = "Its version (on text/csv answers)"),
+                ("x-temp-c-used" = f64, description = "Temperature (°C) the geometry was taken at, on text/csv answers when the calibration has thermal expansion driven by the temperature (JSON: `temp_c_used`)"))),
         (status = 400, description = "Malformed JSON or query string", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody),
         (status = 409, description = "The robot has no active calibration", body = ErrorBody),
         (status = 413, description = "Body too large", body = ErrorBody),
         (status = 415, description = "Neither application/json nor text/csv", body = ErrorBody),
-        (status = 422, description = "Invalid target (row = 1-based position or CSV row), too many targets, a calibration of another robot, or robot_id missing with a CSV body", body = ErrorBody)))]
+        (status = 422, description = "Invalid target (row = 1-based position or CSV row), too many targets, temp_c not a temperature from -50 to 150 C, a calibration of another robot, or robot_id missing with a CSV body", body = ErrorBody)))]
 pub async fn compensate(
     State(app): State<AppState>,
     headers: HeaderMap,
@@ -383,12 +409,13 @@ pub async fn compensate(
     body: RawBody,
 ) -> ApiResult<Response> {
     let csv_out = wants_csv(&headers);
-    let (robot_id, calibration_id, orientation, inputs) = match body.content_type.as_deref() {
+    let (robot_id, calibration_id, orientation, temp_c, inputs) = match body.content_type.as_deref()
+    {
         ct if is_json(ct) => {
             if !query.is_empty() {
                 return Err(ApiError::invalid(
                     "robot_id",
-                    "with a JSON body, robot_id, calibration_id and orientation go in the body, not the query string",
+                    "with a JSON body, robot_id, calibration_id, orientation and temp_c go in the body, not the query string",
                 ));
             }
             let req: CompensateRequest = parse_json(&body.bytes)?;
@@ -413,6 +440,7 @@ pub async fn compensate(
                 req.robot_id,
                 req.calibration_id,
                 req.orientation,
+                req.temp_c,
                 Inputs::Json { targets, batch },
             )
         }
@@ -427,6 +455,7 @@ pub async fn compensate(
                 robot_id,
                 query.calibration_id,
                 query.orientation.unwrap_or(false),
+                query.temp_c,
                 Inputs::Csv(body.bytes),
             )
         }
@@ -437,6 +466,9 @@ pub async fn compensate(
             )));
         }
     };
+    if let Some(t) = temp_c {
+        crate::compensate::check_temp_c("temp_c", t)?;
+    }
     let active = active_calibration(&app, robot_id).await?;
     let calibration_id = match calibration_id {
         Some(c) => c,
@@ -475,12 +507,22 @@ pub async fn compensate(
             targets
         }
     };
-    let results = solve(&app, cached.clone(), targets, orientation).await?;
+    // The cached compensator holds the reference temperature; another
+    // temperature gets its own copy (only with a thermal effect).
+    let adjusted = match (cached.compensator.thermal(), temp_c) {
+        (Some(_), Some(t)) => Some(cached.compensator.at_temperature(t)),
+        _ => None,
+    };
+    let temp_c_used = adjusted
+        .as_ref()
+        .unwrap_or(&cached.compensator)
+        .temperature_c();
+    let results = solve(&app, cached.clone(), adjusted, targets, orientation).await?;
     if csv_out {
         let mut out = Vec::with_capacity(64 + results.len() * (16 + 14 * dof));
         crate::compensate::write_csv(&mut out, dof, &results)
             .map_err(|e| ApiError::Internal(format!("writing compensated.csv: {e}")))?;
-        return Ok((
+        let mut resp = (
             [
                 (CONTENT_TYPE, HeaderValue::from_static("text/csv")),
                 (
@@ -494,7 +536,12 @@ pub async fn compensate(
             ],
             out,
         )
-            .into_response());
+            .into_response();
+        if let Some(v) = temp_c_used.and_then(|t| HeaderValue::from_str(&t.to_string()).ok()) {
+            resp.headers_mut()
+                .insert(HeaderName::from_static("x-temp-c-used"), v);
+        }
+        return Ok(resp);
     }
     let results: Vec<CompensatedOut> = results.into_iter().map(Into::into).collect();
     let n_ok = results.iter().filter(|r| r.status == StatusOut::Ok).count();
@@ -502,6 +549,7 @@ pub async fn compensate(
         robot_id,
         calibration_id: cached.calibration_id,
         version: cached.version,
+        temp_c_used,
         n_ok,
         results,
     })
@@ -570,22 +618,27 @@ fn runs_inline(targets: &[Target]) -> bool {
 
 /// Compensate `targets` in order: inline when tiny (see
 /// [`INLINE_MAX_JOINT_TARGETS`]), else on the compute threads.
+/// `adjusted` replaces the cached compensator (another temperature).
 async fn solve(
     app: &AppState,
     cached: Arc<Cached>,
+    adjusted: Option<Compensator>,
     targets: Vec<Target>,
     orientation: bool,
 ) -> ApiResult<Vec<Compensated>> {
     if runs_inline(&targets) {
         return Ok(crate::compensate::compensate_all(
-            &cached.compensator,
+            adjusted.as_ref().unwrap_or(&cached.compensator),
             &targets,
             orientation,
         ));
     }
     let threads = solve_threads(targets.len());
     app.compute
-        .run(move || solve_all(&cached.compensator, &targets, orientation, threads))
+        .run(move || {
+            let comp = adjusted.as_ref().unwrap_or(&cached.compensator);
+            solve_all(comp, &targets, orientation, threads)
+        })
         .await
         .ok_or_else(|| ApiError::Internal("compensation failed (see the log)".into()))
 }
