@@ -501,7 +501,19 @@ pub async fn compensate(
         Inputs::Json { targets, batch } => json_targets(targets, dof, batch)?,
         Inputs::Csv(bytes) => {
             // targets.csv is parsed here, on the runtime: a few µs per row,
-            // like the JSON parse of the same targets.
+            // like the JSON parse of the same targets. An oversized batch is
+            // refused by its line count first, before any parsing (a header
+            // and MAX_COMPENSATE_TARGETS rows have at most MAX + 1 newlines).
+            let newlines = bytes.iter().filter(|&&b| b == b'\n').count();
+            if newlines > MAX_COMPENSATE_TARGETS + 1 {
+                return Err(ApiError::invalid(
+                    "targets",
+                    format!(
+                        "{} rows: at most {MAX_COMPENSATE_TARGETS} targets per request",
+                        newlines - 1
+                    ),
+                ));
+            }
             let targets = targets_from_csv(&bytes[..], dof)?;
             check_count(targets.len())?;
             targets
@@ -600,14 +612,13 @@ fn json_targets(inputs: Vec<TargetIn>, dof: usize, batch: bool) -> ApiResult<Vec
 /// threads": the rule is there so that solves cannot stall the runtime, and
 /// a joint target is one short Newton solve from the taught angles — 2.7 µs
 /// (position) or 4.7 µs (with orientation) in `cargo bench --bench engine`,
-/// at most 50 iterations (about 50 µs) when it does not converge. That is
-/// the cost of parsing the request's JSON, far under the ~100 µs a task may
-/// run between awaits, while the hand-off to a compute thread and back (two
+/// at most 50 iterations (about 50 µs) when it does not converge, so two
+/// targets stay within the ~100 µs a task may run between awaits, while the hand-off to a compute thread and back (two
 /// thread wake-ups) costs more than the solve and was the largest part of
 /// the single-target latency under load (BENCHMARKS.md). A Cartesian target
 /// runs up to 12 inverse-kinematics seeds (up to about a millisecond), so it
 /// never runs inline.
-pub const INLINE_MAX_JOINT_TARGETS: usize = 4;
+pub const INLINE_MAX_JOINT_TARGETS: usize = 2;
 
 fn runs_inline(targets: &[Target]) -> bool {
     targets.len() <= INLINE_MAX_JOINT_TARGETS

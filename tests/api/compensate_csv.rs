@@ -220,6 +220,19 @@ async fn bad_csv_targets_are_refused_in_json_naming_row_and_column() {
     .await;
     assert_eq!(e["field"], "q2_deg");
     assert_eq!(e["row"], 2);
+    // More than 10,000 rows: refused by the line count, before parsing.
+    let mut big = String::from("target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n");
+    for i in 0..10_001 {
+        big.push_str(&format!("t{i},1,2,3,4,5,6\n"));
+    }
+    let e = err_json(
+        post(&app, &url, "text/csv", None, big).await,
+        422,
+        "invalid_input",
+    )
+    .await;
+    assert_eq!(e["field"], "targets");
+    assert!(e["message"].as_str().unwrap().contains("10001 rows"), "{e}");
     // Wrong number of joints for the robot.
     let e = err_json(
         post(
