@@ -146,46 +146,32 @@ fn stats_table(out: &mut String, id: &str, caption: &str, s: &Stats) {
 }
 
 fn stats_plot(s: &Stats) -> String {
-    let groups = ["x", "y", "z", "3-D"];
-    let rms = |e: &ErrorStats| [e.x.rms_mm, e.y.rms_mm, e.z.rms_mm, e.rms_mm];
-    let cols = [
-        rms(&s.train.before),
-        rms(&s.train.after),
-        rms(&s.test.before),
-        rms(&s.test.after),
-    ];
-    let values: Vec<Vec<f64>> = (0..4)
-        .map(|g| cols.iter().map(|c| c[g]).collect())
-        .collect();
-    svg::bars(
-        "RMS error per axis (Tables 3/4)",
-        "RMS (mm)",
-        &groups,
-        &[
-            ("train before", GREY),
-            ("train after", TRAIN),
-            ("test before", BEFORE_TEST),
-            ("test after", TEST),
-        ],
-        &values,
-    )
+    axis_bars(s, "RMS error per axis (Tables 3/4)", "RMS (mm)", |e| {
+        [e.x.rms_mm, e.y.rms_mm, e.z.rms_mm, e.rms_mm]
+    })
 }
 
 fn max_plot(s: &Stats) -> String {
+    axis_bars(s, "Max error per axis (Tables 3/4)", "max |e| (mm)", |e| {
+        [e.x.max_abs_mm, e.y.max_abs_mm, e.z.max_abs_mm, e.max_mm]
+    })
+}
+
+/// One figure per axis (x, y, z, 3-D) of train/test before/after bars.
+fn axis_bars(s: &Stats, title: &str, y_label: &str, of: fn(&ErrorStats) -> [f64; 4]) -> String {
     let groups = ["x", "y", "z", "3-D"];
-    let mx = |e: &ErrorStats| [e.x.max_abs_mm, e.y.max_abs_mm, e.z.max_abs_mm, e.max_mm];
     let cols = [
-        mx(&s.train.before),
-        mx(&s.train.after),
-        mx(&s.test.before),
-        mx(&s.test.after),
+        of(&s.train.before),
+        of(&s.train.after),
+        of(&s.test.before),
+        of(&s.test.after),
     ];
     let values: Vec<Vec<f64>> = (0..4)
         .map(|g| cols.iter().map(|c| c[g]).collect())
         .collect();
     svg::bars(
-        "Max error per axis (Tables 3/4)",
-        "max |e| (mm)",
+        title,
+        y_label,
         &groups,
         &[
             ("train before", GREY),

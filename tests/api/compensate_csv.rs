@@ -2,8 +2,6 @@
 //! compensated.csv answers (`Accept: text/csv`), equal to the JSON answers
 //! and to the engine's own writer.
 
-use std::time::Duration;
-
 use drawcal::compensate::{Compensator, compensate_all, write_csv};
 use drawcal::identify::report::Report;
 use drawcal::model::targets::targets_from_csv;
@@ -16,40 +14,9 @@ use crate::openapi::validate_response;
 async fn calibrated(app: &TestApp) -> (i64, i64) {
     let ds = "er3a_paper_like";
     let (_, robot, _, session) = app.setup(ds, "CSV-1").await;
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{session}/poses"),
-            Some("text/csv"),
-            read(ds, "poses.csv"),
-        )
-        .await,
-        200,
-    )
-    .await;
-    let job = ok_json(
-        app.post_raw(
-            &format!("/sessions/{session}/jobs"),
-            Some("application/json"),
-            "{}",
-        )
-        .await,
-        202,
-    )
-    .await;
-    let done = app
-        .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(600))
+    let cal = app
+        .calibrate_and_activate(robot, session, read(ds, "poses.csv"), "csv")
         .await;
-    assert_eq!(done["state"], "succeeded", "{done}");
-    let cal = done["calibration_id"].as_i64().unwrap();
-    ok_json(
-        app.post_json(
-            &format!("/robots/{robot}/activate"),
-            &json!({"calibration_id": cal, "by": "test", "reason": "csv"}),
-        )
-        .await,
-        200,
-    )
-    .await;
     (robot, cal)
 }
 

@@ -60,40 +60,9 @@ async fn thermal_calibration(app: &TestApp) -> (i64, i64, f64) {
     .await["id"]
         .as_i64()
         .unwrap();
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{session}/poses"),
-            Some("text/csv"),
-            read("poses.csv"),
-        )
-        .await,
-        200,
-    )
-    .await;
-    let job = ok_json(
-        app.post_raw(
-            &format!("/sessions/{session}/jobs"),
-            Some("application/json"),
-            "{}",
-        )
-        .await,
-        202,
-    )
-    .await;
-    let done = app
-        .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(600))
+    let cal = app
+        .calibrate_and_activate(robot, session, read("poses.csv"), "thermal")
         .await;
-    assert_eq!(done["state"], "succeeded", "{done}");
-    let cal = done["calibration_id"].as_i64().unwrap();
-    ok_json(
-        app.post_json(
-            &format!("/robots/{robot}/activate"),
-            &json!({"calibration_id": cal, "by": "test", "reason": "thermal"}),
-        )
-        .await,
-        200,
-    )
-    .await;
     (robot, cal, t_ref)
 }
 

@@ -193,6 +193,52 @@ impl TestApp {
         )
     }
 
+    /// Upload poses.csv to a session, run its identification job to
+    /// success and activate the result; returns the calibration id.
+    pub async fn calibrate_and_activate(
+        &self,
+        robot: i64,
+        session: i64,
+        poses_csv: String,
+        reason: &str,
+    ) -> i64 {
+        ok_json(
+            self.post_raw(
+                &format!("/sessions/{session}/poses"),
+                Some("text/csv"),
+                poses_csv,
+            )
+            .await,
+            200,
+        )
+        .await;
+        let job = ok_json(
+            self.post_raw(
+                &format!("/sessions/{session}/jobs"),
+                Some("application/json"),
+                "{}",
+            )
+            .await,
+            202,
+        )
+        .await;
+        let done = self
+            .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(600))
+            .await;
+        assert_eq!(done["state"], "succeeded", "{done}");
+        let cal = done["calibration_id"].as_i64().unwrap();
+        ok_json(
+            self.post_json(
+                &format!("/robots/{robot}/activate"),
+                &serde_json::json!({"calibration_id": cal, "by": "test", "reason": reason}),
+            )
+            .await,
+            200,
+        )
+        .await;
+        cal
+    }
+
     /// Poll a job until it ends (bounded by a generous number of polls).
     pub async fn wait_job(&self, job_id: i64, max_wait: Duration) -> Value {
         let polls = (max_wait.as_millis() / 100).max(1);
