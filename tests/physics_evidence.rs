@@ -5,23 +5,12 @@
 //! `unexplained` finding's plot shows the structure along the ordering
 //! that located it.
 
+mod common;
+
 use drawcal::identify::report::{EvidencePlot, Finding};
 use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric};
-use drawcal::model::{Dataset, Rig, Robot, Split};
+use drawcal::model::Split;
 use drawcal::physics::{self, Kind, effects::Basis};
-
-fn load(dir: &str) -> (Robot, Rig, Dataset) {
-    let robot =
-        Robot::from_json(&std::fs::read_to_string(format!("{dir}/robot.json")).unwrap()).unwrap();
-    let rig = Rig::from_json(&std::fs::read_to_string(format!("{dir}/rig.json")).unwrap()).unwrap();
-    let data = Dataset::from_csv(
-        std::fs::File::open(format!("{dir}/poses.csv")).unwrap(),
-        &robot,
-        &rig,
-    )
-    .unwrap();
-    (robot, rig, data)
-}
 
 fn pearson(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len() as f64;
@@ -34,7 +23,7 @@ fn pearson(a: &[f64], b: &[f64]) -> f64 {
 
 #[test]
 fn compliance_evidence_is_the_torque_and_the_residual_follows_the_model() {
-    let (robot, rig, data) = load("tests/data/er3a_compliance_j2");
+    let (robot, rig, data) = common::load("er3a_compliance_j2");
     let opts = IdentifyOptions::default();
     let s = Session::new(&robot, &rig, &data, &opts).unwrap();
     let g = geometric(&s, &opts, &NoProgress).unwrap();
@@ -234,7 +223,7 @@ fn compliance_evidence_is_the_torque_and_the_residual_follows_the_model() {
 /// 0, the running mean leaving the pose itself out.
 #[test]
 fn unexplained_evidence_shows_the_structure_along_its_ordering() {
-    let (robot, rig, data) = load("tests/data/real_ur10_ipa_random");
+    let (robot, rig, data) = common::load("real_ur10_ipa_random");
     let opts = IdentifyOptions::default();
     let s = Session::new(&robot, &rig, &data, &opts).unwrap();
     let g = geometric(&s, &opts, &NoProgress).unwrap();

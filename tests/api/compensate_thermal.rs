@@ -4,8 +4,6 @@
 //! (`X-Temp-C-Used` on compensated.csv); a temperature out of range is
 //! refused naming the field; without a thermal effect `temp_c_used` is null.
 
-use std::time::Duration;
-
 use serde_json::{Value, json};
 
 use crate::helpers::{TestApp, err_json, fresh_dir, ok_json};
@@ -211,28 +209,8 @@ async fn temp_c_used_is_null_without_a_thermal_effect() {
     let app = TestApp::spawn("compnothermal").await;
     let ds = "er3a_paper_like";
     let (_, robot, _, session) = app.setup(ds, "NOTHERMAL-1").await;
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{session}/poses"),
-            Some("text/csv"),
-            crate::helpers::read(ds, "poses.csv"),
-        )
-        .await,
-        200,
-    )
-    .await;
-    let job = ok_json(
-        app.post_raw(
-            &format!("/sessions/{session}/jobs"),
-            Some("application/json"),
-            "{}",
-        )
-        .await,
-        202,
-    )
-    .await;
     let done = app
-        .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(600))
+        .identify_session(session, crate::helpers::read(ds, "poses.csv"))
         .await;
     let cal = done["calibration_id"].as_i64().unwrap();
     let target = json!({"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]});

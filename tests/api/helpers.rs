@@ -193,15 +193,9 @@ impl TestApp {
         )
     }
 
-    /// Upload poses.csv to a session, run its identification job to
-    /// success and activate the result; returns the calibration id.
-    pub async fn calibrate_and_activate(
-        &self,
-        robot: i64,
-        session: i64,
-        poses_csv: String,
-        reason: &str,
-    ) -> i64 {
+    /// Upload poses.csv to a session and run its identification job to
+    /// success; returns the finished job.
+    pub async fn identify_session(&self, session: i64, poses_csv: String) -> Value {
         ok_json(
             self.post_raw(
                 &format!("/sessions/{session}/poses"),
@@ -226,6 +220,19 @@ impl TestApp {
             .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(600))
             .await;
         assert_eq!(done["state"], "succeeded", "{done}");
+        done
+    }
+
+    /// [`Self::identify_session`], then activate the result; returns the
+    /// calibration id.
+    pub async fn calibrate_and_activate(
+        &self,
+        robot: i64,
+        session: i64,
+        poses_csv: String,
+        reason: &str,
+    ) -> i64 {
+        let done = self.identify_session(session, poses_csv).await;
         let cal = done["calibration_id"].as_i64().unwrap();
         ok_json(
             self.post_json(
