@@ -7,6 +7,7 @@ use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::effects::{Basis, Context, EffectModel, Kind, PoseInput};
+use super::problem::EffectProblem;
 use crate::error::{Error, Result};
 use crate::kinematics::chain::{Chain, OutputFrame};
 use crate::kinematics::{JointParam, Params};
@@ -569,11 +570,7 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
     let mut buf = Basis::default();
     let true_t: Vec<Vector3<f64>> = (0..qs.len())
         .map(|i| {
-            let d = ctx0.apply(&robot_eff, i, &mut buf);
-            let mut pp = truth_p.values.clone();
-            ctx0.apply_thermal(&mut pp, d.thermal);
-            let q: Vec<f64> = q_rad[i].iter().zip(&d.dq).map(|(a, b)| a + b).collect();
-            chain.point(&pp, &q, OutputFrame::Rig).1 + d.dp
+            EffectProblem::model_point(&chain, &ctx0, &truth_p.values, &robot_eff, i, &q_rad[i]).0
         })
         .collect();
     let ctx1 = make_ctx(&true_t);
@@ -868,10 +865,7 @@ pub fn effect_rms(
         let d = ctx.apply(one, i, &mut buf);
         let t0 = chain.point(p, q, OutputFrame::Rig).1;
         if e.kind.robot_side() {
-            let mut pp = p.to_vec();
-            ctx.apply_thermal(&mut pp, d.thermal);
-            let qq: Vec<f64> = q.iter().zip(&d.dq).map(|(a, b)| a + b).collect();
-            s += (chain.point(&pp, &qq, OutputFrame::Rig).1 + d.dp - t0).norm_squared();
+            s += (EffectProblem::model_point(chain, ctx, p, one, i, q).0 - t0).norm_squared();
         } else {
             let mut gtg = Matrix3::zeros();
             let mut gtr = Vector3::zeros();
