@@ -298,7 +298,7 @@ pub struct Context {
     /// The temperature (°C) at which the thermal driver is zero (the first
     /// pose's), when the driver is [`ThermalDriver::Temperature`].
     pub temp_ref_c: Option<f64>,
-    /// Centre of the poses' points (rig frame): the pivot of rig rotations,
+    /// Centre of the poses' points (rig frame, mm): the pivot of rig rotations,
     /// so that their coefficients are not mostly translation.
     pub centre_rig: Vector3<f64>,
     /// Per pose, in visiting order.
@@ -595,7 +595,9 @@ impl Context {
     }
 
     /// A rigid motion of the rig relative to the base, scaled by `w`:
-    /// T moves by `-(v + ω × (T - centre))` relative to the rig (the rig
+    /// T moves by `-(v + ω × (T - centre))` relative to the rig, with T the
+    /// pose's `point_rig` (true point in the simulator, located point in the
+    /// analysis; the lever arm needs no better) (the rig
     /// moving by +v makes T appear to move by -v, so the coefficients are
     /// the rig's own motion; rotations in mrad).
     fn rigid_basis(&self, pc: &PoseContext, w: f64, out: &mut Basis) {

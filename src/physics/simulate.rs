@@ -206,7 +206,7 @@ pub struct EffectSpec {
     #[serde(default)]
     pub direction: Option<[f64; 3]>,
     /// When an `anchor_step` or `rig_step` happens, as a fraction of the
-    /// session (default random in 0.2-0.8).
+    /// session (default random in 0.2-0.8); other effects ignore it.
     #[serde(default)]
     pub at_fraction: Option<f64>,
     /// Magnitude in report units: compliance deg/(N*m), backlash deg (half
