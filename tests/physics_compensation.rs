@@ -105,6 +105,7 @@ fn compensation_with_compliance_beats_geometry_only() {
                 q_rad: q,
                 time_s: None,
                 temp_c: None,
+                payload_kg: None,
                 point_rig: Vector3::zeros(),
             }],
         );

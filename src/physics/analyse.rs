@@ -175,6 +175,7 @@ pub fn session_context(session: &Session, p: &Params) -> Context {
             q_rad: &pose.q_rad,
             time_s: pose.time_s,
             temp_c: pose.temp_c,
+            payload_kg: pose.payload_kg,
             point_rig: *m,
         })
         .collect();
@@ -1022,6 +1023,11 @@ pub fn analyse(
                         "units".into(),
                         "internal: angles rad, lengths mm; compliance rad/(N*m) with masses, rad/m per unit-mass regressor without; thermal per K or per hour".into(),
                     );
+                    // The payload the compliance was fitted around: what
+                    // compensation assumes the robot carries.
+                    if let (Kind::JointCompliance { .. }, Some(p)) = (&e.kind, ctx.payload_ref_kg) {
+                        o.insert("reference_payload_kg".into(), p.into());
+                    }
                     if let Kind::ThermalExpansion { driver } = e.kind {
                         o.insert(
                             "reference".into(),

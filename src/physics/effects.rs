@@ -40,14 +40,17 @@ pub enum ThermalDriver {
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Kind {
     /// Joint `joint_index` deflects in proportion to the gravity torque on
-    /// it. With link masses: one coefficient (rad/(N·m)). Without: one
-    /// coefficient per regressor, a unit mass at the origin of link frame
-    /// `regressors[r]` (index n = the tool point), coefficient in rad/m.
+    /// it, the payload hanging at T included (`payload_kg`). With link
+    /// masses: one coefficient (rad/(N·m)). Without: one coefficient per
+    /// regressor, a unit mass at the origin of link frame `regressors[r]`
+    /// (index n = the tool point, n + 1 = the payload at the tool point:
+    /// the tool's lever times `payload_kg`), coefficient in rad/m.
     JointCompliance {
         /// 0-based joint.
         joint_index: usize,
         /// Empty when the robot's link masses are used; else the link
-        /// frames (0-based, n = tool point) carrying the unit masses.
+        /// frames (0-based, n = tool point, n + 1 = payload) carrying the
+        /// unit masses.
         #[serde(default)]
         regressors: Vec<usize>,
     },
@@ -272,8 +275,9 @@ pub struct PoseContext {
     /// The point T in the rig frame used by sensor-side effects (true point
     /// in the simulator, located point in the analysis).
     pub point_rig: Vector3<f64>,
-    /// Per joint: gravity torque (N·m, from masses) or the unit-mass
-    /// regressors (m) of every link frame origin 0..n and the tool (n).
+    /// Per joint: gravity torque (N·m, from masses and payload) or the
+    /// unit-mass regressors (m) of every link frame origin 0..n, the tool
+    /// (n) and the payload (n + 1, the tool's times `payload_kg`).
     torque: Vec<Vec<f64>>,
 }
 
@@ -298,6 +302,9 @@ pub struct Context {
     /// The temperature (°C) at which the thermal driver is zero (the first
     /// pose's), when the driver is [`ThermalDriver::Temperature`].
     pub temp_ref_c: Option<f64>,
+    /// The session's median payload (kg) when any pose recorded one: what
+    /// compensation assumes the robot carries unless told otherwise.
+    pub payload_ref_kg: Option<f64>,
     /// Centre of the poses' points (rig frame, mm): the pivot of rig rotations,
     /// so that their coefficients are not mostly translation.
     pub centre_rig: Vector3<f64>,
@@ -313,6 +320,8 @@ pub struct PoseInput<'a> {
     pub time_s: Option<f64>,
     /// Temperature (°C), if recorded.
     pub temp_c: Option<f64>,
+    /// Payload at the tool point (kg), if recorded; none counts as 0.
+    pub payload_kg: Option<f64>,
     /// T in the rig frame (true or located).
     pub point_rig: Vector3<f64>,
 }
@@ -404,6 +413,7 @@ impl Context {
                 let frames = chain.link_frames(&nominal.values, p.q_rad, OutputFrame::Base);
                 let axes = chain.joint_axes(&nominal.values, p.q_rad, OutputFrame::Base);
                 let (_, tool) = chain.point(&nominal.values, p.q_rad, OutputFrame::Base);
+                let payload = p.payload_kg.unwrap_or(0.0);
                 let torque = (0..n)
                     .map(|j| {
                         let (z, o) = axes[j];
@@ -416,12 +426,15 @@ impl Context {
                                     let x = frames[k].apply(&c);
                                     tau += lm.mass_kg * g_base.norm() * lever(&x);
                                 }
+                                tau += payload * g_base.norm() * lever(&tool);
                                 vec![tau]
                             }
-                            None => (0..=n)
+                            None => (0..=n + 1)
                                 .map(|k| {
                                     if k < j {
                                         0.0
+                                    } else if k == n + 1 {
+                                        payload * lever(&tool)
                                     } else if k == n {
                                         lever(&tool)
                                     } else {
@@ -447,6 +460,9 @@ impl Context {
                 }
             })
             .collect();
+        let mut payloads: Vec<f64> = poses.iter().filter_map(|p| p.payload_kg).collect();
+        payloads.sort_by(f64::total_cmp);
+        let payload_ref_kg = (!payloads.is_empty()).then(|| payloads[payloads.len() / 2]);
         let centre_rig = poses
             .iter()
             .fold(Vector3::zeros(), |acc, p| acc + p.point_rig)
@@ -460,6 +476,7 @@ impl Context {
             thermal_driver,
             lengths,
             temp_ref_c: use_temp.then_some(temp_ref),
+            payload_ref_kg,
             centre_rig,
             poses: ctx_poses,
         }
@@ -473,8 +490,12 @@ impl Context {
         let n = self.n_joints;
         let mut kept: Vec<Vec<f64>> = Vec::new();
         let mut idx = Vec::new();
-        // Farthest first: the tool and the distal frames carry the lever.
-        for k in (j..=n).rev() {
+        // Farthest first: the tool, the payload (dropped as a multiple of
+        // the tool's when it never changes) and the distal frames.
+        for k in std::iter::once(n)
+            .chain(std::iter::once(n + 1))
+            .chain((j..n).rev())
+        {
             let mut v: Vec<f64> = poses.iter().map(|&i| self.poses[i].torque[j][k]).collect();
             let norm0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
             if norm0 < 1e-6 * (poses.len() as f64).sqrt() {

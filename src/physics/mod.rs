@@ -43,7 +43,10 @@ pub fn effects_of(findings: &[Finding]) -> Vec<EffectModel> {
 /// known. Thermal expansion is not a joint-angle effect and is left out
 /// here: it changes the lengths and needs the temperature the robot runs at
 /// (`Compensator::at_temperature`). Compliance without link masses uses the
-/// unit-mass regressors stored in the finding.
+/// unit-mass regressors stored in the finding; compliance is evaluated with
+/// the payload the calibration session carried (its median,
+/// `reference_payload_kg` of the finding; none when the session recorded no
+/// `payload_kg`).
 pub fn joint_offsets_rad(findings: &[Finding], robot: &Robot, q_rad: &[f64]) -> Vec<f64> {
     joint_offsets_rad_with_direction(findings, robot, q_rad, &vec![1.0; q_rad.len()])
 }
@@ -64,7 +67,10 @@ pub fn joint_offsets_rad_with_direction(
     if effects.is_empty() {
         return vec![0.0; n];
     }
-    let ctx = Context::new(
+    let payload_kg = findings
+        .iter()
+        .find_map(|f| f.parameters.get("reference_payload_kg")?.as_f64());
+    let mut ctx = Context::new(
         robot,
         vec![],
         0.0,
@@ -73,10 +79,10 @@ pub fn joint_offsets_rad_with_direction(
             q_rad,
             time_s: None,
             temp_c: None,
+            payload_kg,
             point_rig: nalgebra::Vector3::zeros(),
         }],
     );
-    let mut ctx = ctx;
     ctx.poses[0].direction = direction.to_vec();
     let mut buf = effects::Basis::default();
     ctx.apply(&effects, 0, &mut buf).dq

@@ -150,6 +150,11 @@ pub struct SessionSpec {
     /// Time constant of the rise (s).
     #[serde(default = "tau")]
     pub temp_tau_s: f64,
+    /// Payloads (kg) carried at the tool point, in turn, in equal blocks of
+    /// the session (test weights swapped part-way); empty: no payload and
+    /// no `payload_kg` column.
+    #[serde(default)]
+    pub payload_kg: Vec<f64>,
 }
 
 fn speed() -> f64 {
@@ -176,6 +181,7 @@ impl Default for SessionSpec {
             temp_start_c: temp0(),
             temp_rise_c: rise(),
             temp_tau_s: tau(),
+            payload_kg: Vec::new(),
         }
     }
 }
@@ -495,6 +501,12 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
         let tc = ss.temp_start_c + ss.temp_rise_c * (1.0 - (-t / ss.temp_tau_s.max(1.0)).exp());
         temp.push((tc * 1e4).round() / 1e4);
     }
+    let payload: Vec<Option<f64>> = (0..qs.len())
+        .map(|i| {
+            (!ss.payload_kg.is_empty())
+                .then(|| ss.payload_kg[i * ss.payload_kg.len() / qs.len().max(1)])
+        })
+        .collect();
     let q_rad: Vec<Vec<f64>> = qs
         .iter()
         .map(|q| q.iter().map(|v| v.to_radians()).collect())
@@ -510,6 +522,7 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
                 q_rad: &q_rad[i],
                 time_s: Some(time[i]),
                 temp_c: Some(temp[i]),
+                payload_kg: payload[i],
                 point_rig: pts[i],
             })
             .collect();
@@ -588,7 +601,11 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
     let mut header = vec!["pose".to_string()];
     header.extend((1..=n).map(|j| format!("q{j}_deg")));
     header.extend((1..=m).map(|k| format!("l{k}_mm")));
-    header.extend(["time_s", "temp_c", "split"].map(String::from));
+    header.extend(["time_s", "temp_c"].map(String::from));
+    if !ss.payload_kg.is_empty() {
+        header.push("payload_kg".into());
+    }
+    header.push("split".into());
     rows.push(header.join(","));
     for i in 0..qs.len() {
         let d = ctx1.apply(&sensor_eff, i, &mut buf);
@@ -623,6 +640,9 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
         row.extend(readings.iter().map(|v| format!("{v:.6}")));
         row.push(format!("{:.3}", time[i]));
         row.push(format!("{:.4}", temp[i]));
+        if let Some(p) = payload[i] {
+            row.push(format!("{p}"));
+        }
         row.push(if is_test[i] { "test" } else { "train" }.into());
         rows.push(row.join(","));
     }
