@@ -8,7 +8,10 @@
 //! after among them), activation, and compensation to CSV. Then the UR10
 //! grid (11,911 poses), identified through the API: its calibration view's
 //! first draw is measured and printed (not asserted; recorded in
-//! docs/UI.md) and its evidence plots are bounded and drew.
+//! docs/UI.md) and its evidence plots are bounded and drew, the
+//! `unexplained` finding's among them (the grid leaves structure no effect
+//! of the catalogue explains; its plot is required, labelled as
+//! unexplained, with the running mean the engine computed).
 //!
 //! Needs `chromium` and `chromedriver` (Debian `chromium`,
 //! `chromium-driver`; `.ci/run` installs them). Without them the test says
@@ -243,13 +246,14 @@ impl Driver {
     }
 
     /// Screenshot of the window (1280x1000) with the element `css`
-    /// scrolled to the top, to docs/ui/NAME.png when asked for.
+    /// scrolled to the top (12 px below it), to docs/ui/NAME.png when
+    /// asked for.
     async fn screenshot_of(&self, name: &str, css: &str) {
         if std::env::var_os("DRAWCAL_UI_SCREENSHOTS").is_none() {
             return;
         }
         self.js(&format!(
-            "document.querySelector({css:?}).scrollIntoView(); return 0"
+            "document.querySelector({css:?}).scrollIntoView(); window.scrollBy(0, -12); return 0"
         ))
         .await;
         let b64 = self.s(reqwest::Method::GET, "/screenshot", None).await;
@@ -519,39 +523,7 @@ async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
     // Each finding with the plot that is its evidence (drawn: train and
     // test points and the fitted effect, one dot per point of the report)
     // and the held-out RMS before and after it, as the API gave them.
-    let mut n_evidence = 0;
-    for (i, f) in rep["findings"].as_array().unwrap().iter().enumerate() {
-        let got = d
-            .js(&format!(
-                "const f = document.querySelector('#report figure.evidence[data-finding=\"{i}\"]'); if (!f) return null; const s = f.querySelector('svg.plot'); const paths = s ? [...s.querySelectorAll('path.series')] : []; const b = s ? s.getBBox() : {{width: 0, height: 0}}; return {{before: f.querySelector('.rms-before').dataset.value, after: f.querySelector('.rms-after').dataset.value, w: b.width, h: b.height, n: paths.map(p => +p.dataset.n), drawn: paths.map(p => p.getBBox().width * p.getBBox().height)}};"
-            ))
-            .await;
-        assert!(!got.is_null(), "no evidence figure for finding {i}");
-        assert_eq!(num(&got["before"]), num(&f["test_rms_before_mm"]));
-        assert_eq!(num(&got["after"]), num(&f["test_rms_after_mm"]));
-        let Some(pts) = f["evidence_plot"]["points"].as_array() else {
-            assert_eq!(
-                f["effect"], "unexplained",
-                "finding {i} has no evidence plot"
-            );
-            continue;
-        };
-        n_evidence += 1;
-        assert!(
-            num(&got["w"]) > 100.0 && num(&got["h"]) > 100.0,
-            "evidence plot {i} did not draw: {got}"
-        );
-        let n: Vec<f64> = got["n"].as_array().unwrap().iter().map(num).collect();
-        let n_test = pts.iter().filter(|p| p["split"] == "test").count() as f64;
-        let all = pts.len() as f64;
-        assert_eq!(n, vec![all - n_test, n_test, all], "evidence plot {i}");
-        for (k, a) in got["drawn"].as_array().unwrap().iter().enumerate() {
-            assert!(
-                n[k] == 0.0 || num(a) > 0.0,
-                "evidence plot {i}: series {k} has no extent: {got}"
-            );
-        }
-    }
+    let (n_evidence, _) = check_evidence(&d, rep["findings"].as_array().unwrap(), ds).await;
     assert!(n_evidence >= 1, "the compliance finding's evidence plot");
     let ms = d
         .wait("document.querySelector('#report').dataset.drawMs", 10)
@@ -678,18 +650,18 @@ async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
             .await;
         times.push((num(&v[0]), num(&v[1])));
     }
-    for (i, f) in gfind.iter().enumerate() {
-        let Some(pts) = f["evidence_plot"]["points"].as_array() else {
-            continue;
-        };
-        assert!(pts.len() <= 2000, "finding {i}: {} points", pts.len());
-        let n = d
-            .js(&format!(
-                "const s = document.querySelector('#report figure.evidence[data-finding=\"{i}\"] svg.plot'); return s ? [...s.querySelectorAll('path.series')].reduce((a, p) => a + (+p.dataset.n), 0) : 0"
-            ))
-            .await;
-        assert_eq!(num(&n), 2.0 * pts.len() as f64, "grid finding {i}");
-    }
+    // Every evidence plot of the grid drew, bounded; among them the
+    // unexplained finding's (the structure no effect of the catalogue
+    // explains), against the ordering that located it.
+    let (_, unexplained) = check_evidence(&d, &gfind, grid).await;
+    let u = unexplained.expect("the UR10 grid leaves unexplained structure");
+    let uplot = &gfind[u]["evidence_plot"];
+    eprintln!(
+        "UR10 grid: the unexplained finding's evidence plot drew {} points against {} ({})",
+        uplot["points"].as_array().unwrap().len(),
+        uplot["x_label"].as_str().unwrap(),
+        uplot["x_unit"].as_str().unwrap()
+    );
     eprintln!(
         "UR10 grid calibration view, 3 loads: report drawn {} ms after it was asked for, {} ms after navigation start ({} findings with evidence plots)",
         times
@@ -710,9 +682,103 @@ async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
     d.screenshot("calibration-ur10-grid").await;
     d.screenshot_of("calibration-ur10-grid-evidence", "#report #evidence")
         .await;
+    d.screenshot_of(
+        "calibration-ur10-grid-unexplained",
+        &format!("#report figure.evidence[data-finding=\"{u}\"]"),
+    )
+    .await;
 
     d.quit().await;
     app.stop().await;
+}
+
+/// Each finding's figure in the calibration view against the API's report
+/// `findings`: the held-out RMS before and after it as the API gave them,
+/// and the plot that is its evidence drawn from the report's points: one
+/// dot per point for train, test and the fitted effect (for `unexplained`,
+/// which has no fitted effect, the running mean the engine computed), each
+/// series with an extent, the axis the report names and its correlation.
+/// Every finding must carry plot data: an `unexplained` one too. Returns
+/// the number of evidence plots checked and the index of the
+/// `unexplained` finding, if there is one.
+async fn check_evidence(d: &Driver, findings: &[Value], what: &str) -> (usize, Option<usize>) {
+    let mut unexplained = None;
+    for (i, f) in findings.iter().enumerate() {
+        let effect = f["effect"].as_str().unwrap();
+        let got = d
+            .js(&format!(
+                "const f = document.querySelector('#report figure.evidence[data-finding=\"{i}\"]'); if (!f) return null; const s = f.querySelector('svg.plot'); const paths = s ? [...s.querySelectorAll('path.series')] : []; const b = s ? s.getBBox() : {{width: 0, height: 0}}; const c = f.querySelector('.corr'); return {{effect: f.dataset.effect, before: f.querySelector('.rms-before').dataset.value, after: f.querySelector('.rms-after').dataset.value, w: b.width, h: b.height, title: s ? s.querySelector('title').textContent : '', text: s ? s.textContent : '', caption: f.querySelector('figcaption').innerText, corr: c ? c.dataset.value : null, labels: paths.map(p => p.dataset.label), n: paths.map(p => +p.dataset.n), drawn: paths.map(p => p.getBBox().width * p.getBBox().height)}};"
+            ))
+            .await;
+        assert!(!got.is_null(), "{what}: no evidence figure for finding {i}");
+        assert_eq!(got["effect"], effect, "{what}: finding {i}");
+        assert_eq!(num(&got["before"]), num(&f["test_rms_before_mm"]));
+        assert_eq!(num(&got["after"]), num(&f["test_rms_after_mm"]));
+        let ev = &f["evidence_plot"];
+        let pts = ev["points"]
+            .as_array()
+            .filter(|p| !p.is_empty())
+            .unwrap_or_else(|| {
+                panic!("{what}: finding {i} ({effect}) has no evidence plot in the report")
+            });
+        assert!(
+            pts.len() <= 2000,
+            "{what}: finding {i}: {} points",
+            pts.len()
+        );
+        assert!(
+            num(&got["w"]) > 100.0 && num(&got["h"]) > 100.0,
+            "{what}: evidence plot {i} ({effect}) did not draw: {got}"
+        );
+        let n: Vec<f64> = got["n"].as_array().unwrap().iter().map(num).collect();
+        let n_test = pts.iter().filter(|p| p["split"] == "test").count() as f64;
+        let all = pts.len() as f64;
+        assert_eq!(
+            n,
+            vec![all - n_test, n_test, all],
+            "{what}: evidence plot {i} ({effect})"
+        );
+        for (k, a) in got["drawn"].as_array().unwrap().iter().enumerate() {
+            assert!(
+                n[k] == 0.0 || num(a) > 0.0,
+                "{what}: evidence plot {i} ({effect}): series {k} has no extent: {got}"
+            );
+        }
+        let model = if effect == "unexplained" {
+            "running mean"
+        } else {
+            "fitted effect"
+        };
+        assert_eq!(
+            got["labels"],
+            json!(["train", "test", model]),
+            "{what}: evidence plot {i} ({effect})"
+        );
+        let x_label = ev["x_label"].as_str().unwrap();
+        let text = got["text"].as_str().unwrap();
+        assert!(
+            text.contains(x_label),
+            "{what}: evidence plot {i} ({effect}) is not against {x_label}: {text}"
+        );
+        match ev["correlation"].as_f64() {
+            Some(c) => assert_eq!(num(&got["corr"]), c, "{what}: finding {i}"),
+            None => assert!(got["corr"].is_null(), "{what}: finding {i}"),
+        }
+        if effect == "unexplained" {
+            // Labelled as what it is: unexplained, a running mean rather
+            // than a fitted effect.
+            let title = got["title"].as_str().unwrap();
+            let caption = got["caption"].as_str().unwrap();
+            assert!(title.contains("unexplained"), "{what}: {title}");
+            assert!(
+                caption.contains("unexplained") && caption.contains("running mean"),
+                "{what}: {caption}"
+            );
+            assert!(!caption.contains("fitted effect"), "{what}: {caption}");
+            unexplained = Some(i);
+        }
+    }
+    (findings.len(), unexplained)
 }
 
 fn num_eq(a: &Value, b: &Value) -> bool {

@@ -250,24 +250,36 @@ fn finding_row(out: &mut String, i: usize, f: &Finding) {
 }
 
 /// One finding's evidence plot (from the report's `evidence_plot`) with the
-/// held-out RMS before and after it.
+/// held-out RMS before and after it. The `unexplained` finding is labelled
+/// as such: it has no fitted effect, its black dots are the running mean
+/// the engine computed, and its held-out RMS is the same before and after.
 fn evidence_figure(out: &mut String, i: usize, f: &Finding) {
+    // `unexplained` has no fitted effect: its model is the running mean of
+    // the residual along the ordering that located the structure.
+    let unexplained = f.effect == "unexplained";
     let name = match (f.joint, f.sensor) {
+        _ if unexplained => "unexplained structure".to_string(),
         (Some(j), _) => format!("{} j{j}", f.effect),
         (None, Some(s)) => format!("{} s{s}", f.effect),
         _ => f.effect.clone(),
     };
     let rms = format!(
-        r#"held-out RMS <span class="rms-before" data-value="{b}">{b:.4}</span> → <span class="rms-after" data-value="{a}">{a:.4}</span> mm"#,
+        r#"held-out RMS <span class="rms-before" data-value="{b}">{b:.4}</span> → <span class="rms-after" data-value="{a}">{a:.4}</span> mm{}"#,
+        if unexplained {
+            " (nothing modelled: no effect of the catalogue explains it)"
+        } else {
+            ""
+        },
         b = f.test_rms_before_mm,
         a = f.test_rms_after_mm
     );
     let Some(ev) = &f.evidence_plot else {
         let _ = write!(
             out,
-            r#"<figure class="evidence" data-finding="{i}"><figcaption><b>{}</b>: {rms}; no evidence plot ({}).</figcaption></figure>"#,
+            r#"<figure class="evidence" data-finding="{i}" data-effect="{}"><figcaption><b>{}</b>: {rms}; no evidence plot ({}).</figcaption></figure>"#,
+            esc(&f.effect),
             esc(&name),
-            if f.effect == "unexplained" {
+            if unexplained {
                 "the report predates evidence plots of unexplained structure; see its evidence text"
             } else {
                 "the report predates evidence plots"
@@ -287,9 +299,6 @@ fn evidence_figure(out: &mut String, i: usize, f: &Finding) {
         points: vec![],
         dot: 0.0,
     };
-    // `unexplained` has no fitted effect: its model is the running mean of
-    // the residual along the ordering that located the structure.
-    let unexplained = f.effect == "unexplained";
     let model_name = if unexplained {
         "running mean"
     } else {
@@ -311,11 +320,19 @@ fn evidence_figure(out: &mut String, i: usize, f: &Finding) {
         .push((p.x, p.y));
         model.points.push((p.x, p.model));
     }
-    let plot = svg::scatter(
-        &format!(
+    let title = if unexplained {
+        format!(
+            "{name}: held-out RMS {:.4} mm, left unexplained",
+            f.test_rms_after_mm
+        )
+    } else {
+        format!(
             "{name}: held-out RMS {:.4} → {:.4} mm",
             f.test_rms_before_mm, f.test_rms_after_mm
-        ),
+        )
+    };
+    let plot = svg::scatter(
+        &title,
         &format!("{} ({})", ev.x_label, ev.x_unit),
         &if unexplained {
             format!("residual on its dominant direction ({})", ev.y_unit)
@@ -340,7 +357,8 @@ fn evidence_figure(out: &mut String, i: usize, f: &Finding) {
     };
     let _ = write!(
         out,
-        r#"<figure class="evidence" data-finding="{i}" data-n="{n}">{plot}<figcaption><b>{}</b>: {rms}; correlation of residual and {model_name} {corr}; {sub}. y: {}.</figcaption></figure>"#,
+        r#"<figure class="evidence" data-finding="{i}" data-effect="{}" data-n="{n}">{plot}<figcaption><b>{}</b>: {rms}; correlation of residual and {model_name} {corr}; {sub}. y: {}.</figcaption></figure>"#,
+        esc(&f.effect),
         esc(&name),
         esc(&ev.y_label),
         n = ev.points.len(),
@@ -552,7 +570,7 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
             &values,
         ));
         o.push_str("</div>");
-        o.push_str(r#"<h3 id="evidence">Evidence of each finding</h3><p class="muted">Per pose, the residual with the effect left out of the fitted model, on the effect's own signature (robot side: the error along the displacement the effect causes; sensor side: the string's reading error), against what drives the effect; black: the fitted effect along the same direction. Where the effect is real the points follow it.</p><div class="plots">"#);
+        o.push_str(r#"<h3 id="evidence">Evidence of each finding</h3><p class="muted">Per pose, the residual with the effect left out of the fitted model, on the effect's own signature (robot side: the error along the displacement the effect causes; sensor side: the string's reading error), against what drives the effect; black: the fitted effect along the same direction. Where the effect is real the points follow it. An <b>unexplained</b> finding has no fitted effect: its plot is the final model's error along the residuals' dominant direction against the ordering that located the structure (a joint angle, time, temperature), and in black the running mean of its train neighbours along that ordering.</p><div class="plots">"#);
         for (i, f) in r.findings.iter().enumerate() {
             evidence_figure(&mut o, i, f);
         }
