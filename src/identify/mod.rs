@@ -483,7 +483,13 @@ pub fn pose_rms(problem: &CalibrationProblem, p: &[f64]) -> Vec<f64> {
 /// 1-sigma of every free parameter from `σ² (JᵀWJ)⁻¹`, in internal units.
 pub fn sigmas(jtj: &DMatrix<f64>, sigma: f64) -> Vec<f64> {
     let n = jtj.nrows();
-    let d: Vec<f64> = (0..n).map(|i| jtj[(i, i)].sqrt().max(1e-300)).collect();
+    // Scale 1 for a zero column: its sigma comes out infinite, not NaN.
+    let d: Vec<f64> = (0..n)
+        .map(|i| match jtj[(i, i)] {
+            v if v > 0.0 && v.is_finite() => v.sqrt(),
+            _ => 1.0,
+        })
+        .collect();
     let scaled = DMatrix::from_fn(n, n, |i, j| jtj[(i, j)] / (d[i] * d[j]));
     match scaled.cholesky() {
         Some(ch) => {

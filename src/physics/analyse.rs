@@ -49,6 +49,10 @@ const FOLDS: usize = 5;
 const MAX_EFFECTS: usize = 6;
 /// Change-point grid of the anchor-step scan (coarse, then refined).
 const STEP_GRID: usize = 12;
+/// Train poses a change point leaves on each side at least: a rig move
+/// has six coefficients, and a segment of a pose or two would let it fit
+/// those poses' noise (or an unrelated error) exactly.
+const MIN_SEGMENT_POSES: usize = 8;
 /// Cap on the look-elsewhere count of one scanned change-point family.
 const SCAN_EFFECTIVE_MAX: usize = 100;
 /// Leading candidates for which a jointly tested partner is sought.
@@ -317,10 +321,9 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
     times.dedup();
     let change_points: Vec<f64> = if times.len() >= 2 * STEP_GRID {
         (1..STEP_GRID)
-            .map(|g| {
-                let at = g * times.len() / STEP_GRID;
-                0.5 * (times[at - 1] + times[at])
-            })
+            .map(|g| g * times.len() / STEP_GRID)
+            .filter(|&at| at >= MIN_SEGMENT_POSES && times.len() - at >= MIN_SEGMENT_POSES)
+            .map(|at| 0.5 * (times[at - 1] + times[at]))
             .collect()
     } else {
         vec![]
@@ -618,7 +621,25 @@ fn normals(problem: &EffectProblem, x: &[f64], fold_of: &[usize]) -> Normals {
 }
 
 /// `min |r + J δ|²` over the columns `cols`: the SSE drop `bᵀA⁻¹b` and `δ`.
+/// A column no row supports (all zero, e.g. a backlash's unknown-approach
+/// offset when cross-validation holds out the poses it covers) stays at 0.
 fn solve_subset(a: &DMatrix<f64>, b: &[f64], cols: &[usize]) -> Option<(f64, Vec<f64>)> {
+    if cols.iter().any(|&i| a[(i, i)] == 0.0) {
+        let live: Vec<usize> = cols.iter().copied().filter(|&i| a[(i, i)] != 0.0).collect();
+        let (drop, d) = solve_subset(a, b, &live)?;
+        let mut it = d.into_iter();
+        let full = cols
+            .iter()
+            .map(|&i| {
+                if a[(i, i)] == 0.0 {
+                    0.0
+                } else {
+                    it.next().unwrap_or(0.0)
+                }
+            })
+            .collect();
+        return Some((drop, full));
+    }
     let k = cols.len();
     if k == 0 {
         return Some((0.0, vec![]));
@@ -1169,11 +1190,23 @@ fn refit(
     let dof = (problem.n_residuals() as f64 - n as f64).max(1.0);
     let s2 = 2.0 * res.cost / dof;
     let nc = problem.n_coef();
-    let d: Vec<f64> = (0..n).map(|i| res.jtj[(i, i)].sqrt().max(1e-300)).collect();
+    // A coefficient no train pose supports (a backlash's unknown-approach
+    // offset whose poses are all held out) has a zero column: scale 1 keeps
+    // NaN out of the SVD, which does not terminate on NaN.
+    let d: Vec<f64> = (0..n)
+        .map(|i| match res.jtj[(i, i)] {
+            v if v > 0.0 && v.is_finite() => v.sqrt(),
+            _ => 1.0,
+        })
+        .collect();
     let scaled = DMatrix::from_fn(n, n, |i, j| res.jtj[(i, j)] / (d[i] * d[j]));
-    let inv = scaled
-        .pseudo_inverse(1e-12)
-        .unwrap_or_else(|_| DMatrix::zeros(n, n));
+    let inv = if scaled.iter().all(|v| v.is_finite()) {
+        scaled
+            .pseudo_inverse(1e-12)
+            .unwrap_or_else(|_| DMatrix::zeros(n, n))
+    } else {
+        DMatrix::zeros(n, n)
+    };
     let cov_last = DMatrix::from_fn(nc, nc, |i, j| {
         let (a, b) = (n - nc + i, n - nc + j);
         s2 * inv[(a, b)] / (d[a] * d[b])
@@ -1208,8 +1241,11 @@ fn refine_step(
     let n = times.len();
     let pos = times.iter().position(|&t| t > t0).unwrap_or(n - 1);
     let span = n / STEP_GRID + 1;
-    let lo = pos.saturating_sub(span).max(1);
-    let hi = (pos + span).min(n - 1);
+    let lo = pos.saturating_sub(span).max(MIN_SEGMENT_POSES);
+    let hi = (pos + span).min(n.saturating_sub(MIN_SEGMENT_POSES));
+    if lo > hi {
+        return t0;
+    }
     // At most 24 evaluations: a finer grid inside the bracket.
     let stride = ((hi - lo) / 24).max(1);
     let mut best = (f64::NEG_INFINITY, t0);

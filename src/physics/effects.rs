@@ -54,7 +54,12 @@ pub enum Kind {
         #[serde(default)]
         regressors: Vec<usize>,
     },
-    /// Half the dead band of joint `joint_index`: `dq = b · sign(last move)`.
+    /// Half the dead band of joint `joint_index`: `dq = b · sign(last move)`
+    /// (coefficient 0). The recording does not say how the joint arrived
+    /// at the poses before its first move: there `dq` is a free offset
+    /// (coefficient 1), so that an unknown approach neither biases `b` nor
+    /// leaves a residual for another effect to explain. Compensation knows
+    /// the approach and uses `b` alone.
     Backlash {
         /// 0-based joint.
         joint_index: usize,
@@ -181,7 +186,7 @@ impl Kind {
     pub fn n_coef(&self) -> usize {
         match self {
             Kind::JointCompliance { regressors, .. } => regressors.len().max(1),
-            Kind::JointPeriodic { .. } => 2,
+            Kind::JointPeriodic { .. } | Kind::Backlash { .. } => 2,
             Kind::AnchorStep { .. } => 3,
             Kind::RigStep { .. } | Kind::RigDrift => 6,
             _ => 1,
@@ -543,7 +548,11 @@ impl Context {
                 }
             }
             Kind::Backlash { joint_index } => {
-                out.dq[*joint_index] = pc.direction[*joint_index];
+                let j = *joint_index;
+                out.dq[j] = pc.direction[j];
+                if pc.direction[j] == 0.0 {
+                    out.dq[n + j] = 1.0;
+                }
             }
             Kind::JointPeriodic {
                 joint_index,

@@ -548,7 +548,7 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
     // Effects: coefficients from magnitudes or sizes.
     let mut effects = Vec::new();
     for (ei, es) in spec.effects.iter().enumerate() {
-        let e = effect_model(es, &ctx0, n, m, &time, &mut rng)
+        let e = effect_model(es, &ctx0, &home_deg, &time, &mut rng)
             .map_err(|msg| Error::field(format!("spec.effects[{ei}]"), msg))?;
         let e = match es.size_x_noise {
             Some(size) => {
@@ -723,11 +723,11 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
 fn effect_model(
     es: &EffectSpec,
     ctx: &Context,
-    n: usize,
-    m: usize,
+    home_deg: &[f64],
     time: &[f64],
     rng: &mut Rng,
 ) -> std::result::Result<EffectModel, String> {
+    let (n, m) = (ctx.n_joints, ctx.anchors.len());
     let joint = || -> std::result::Result<usize, String> {
         match es.joint {
             Some(j) if (1..=n).contains(&j) => Ok(j - 1),
@@ -755,12 +755,16 @@ fn effect_model(
                 vec![rad],
             )
         }
-        "backlash" => (
-            Kind::Backlash {
-                joint_index: joint()?,
-            },
-            vec![rad],
-        ),
+        "backlash" => {
+            // The tour starts at home: the first pose's approach is the move
+            // from there (the file does not carry it).
+            let j = joint()?;
+            let first = ctx.poses.first().map_or(0.0, |p| {
+                let d = p.q_rad[j].to_degrees() - home_deg[j];
+                if d.abs() > 1e-7 { d.signum() } else { 0.0 }
+            });
+            (Kind::Backlash { joint_index: j }, vec![rad, rad * first])
+        }
         "joint_periodic" => {
             let ph = es
                 .phase_deg
