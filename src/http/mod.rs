@@ -301,7 +301,12 @@ impl Service {
     ) -> std::io::Result<()> {
         let app = router(self.state.clone(), self.max_upload_bytes);
         tracing::info!(addr = %self.addr, "listening");
-        let served = axum::serve(self.listener, app)
+        // Answers are one small write each; without TCP_NODELAY a client
+        // that writes its request in two segments can wait on Nagle.
+        let listener = axum::serve::ListenerExt::tap_io(self.listener, |tcp| {
+            let _ = tcp.set_nodelay(true);
+        });
+        let served = axum::serve(listener, app)
             .with_graceful_shutdown(shutdown)
             .await;
         tracing::info!("HTTP server stopped; stopping job workers");

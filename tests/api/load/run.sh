@@ -9,12 +9,17 @@
 #   2. POST /compensate, 10,000 targets per request (batch throughput);
 #   3. upload + identification of a 2000-pose session, end to end
 #      (the first 2000 poses of tests/data/real_ur10_ipa_random).
+#   4. (PARTS=rate, needs oha: `cargo install oha`) POST /compensate, one
+#      joint target per request, 64 connections, at a fixed arrival rate
+#      RATE (default 20000/s; open loop, latency corrected for coordinated
+#      omission): latency at a given load rather than at saturation.
 # PARTS selects (default "single batch identify"); DUR the wrk duration;
 # LOG_LEVEL the server's RUST_LOG (default warn), LOG_FORMAT its log format.
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
 BIN=${1:-target/release/drawcal}
 DUR=${DUR:-15s}
+WRK_THREADS=${WRK_THREADS:-2}
 PORT=${PORT:-18080}
 PARTS=${PARTS:-single batch identify}
 has() { [[ " $PARTS " == *" $1 "* ]]; }
@@ -58,13 +63,19 @@ json.dump({"robot_id": robot, "targets": [{"target": f"t{i}", "q_deg": q()} for 
 PY
 if has single; then
   echo "### single target, 64 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
-  BODY=$WORK/one.json wrk -t2 -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
+  BODY=$WORK/one.json wrk -t$WRK_THREADS -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
 fi
 if has batch; then
   echo "### batch of 10,000 targets, 2 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
   BODY=$WORK/batch.json wrk -t2 -c2 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
   curl -sS -H 'content-type: application/json' --data-binary @$WORK/batch.json $BASE/compensate |
     python3 -c 'import json,sys; r=json.load(sys.stdin); print("batch statuses:", {s: sum(1 for x in r["results"] if x["status"]==s) for s in ("ok","unreachable","joint_limit")})'
+fi
+if has rate; then
+  echo "### single target, 64 connections, ${RATE:-20000} requests/s offered (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
+  ${OHA:-oha} --no-tui -z $DUR -c 64 -q ${RATE:-20000} --latency-correction -m POST \
+    -H 'content-type: application/json' -D $WORK/one.json $BASE/compensate |
+    grep -E 'Success rate|Requests/sec|Slowest|Average|50.00%|90.00%|99.00%|99.90%|\[[0-9]+\] [0-9]+ responses'
 fi
 has identify || exit 0
 
