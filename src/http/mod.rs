@@ -301,8 +301,9 @@ impl Service {
     ) -> std::io::Result<()> {
         let app = router(self.state.clone(), self.max_upload_bytes);
         tracing::info!(addr = %self.addr, "listening");
-        // Answers are one small write each; without TCP_NODELAY a client
-        // that writes its request in two segments can wait on Nagle.
+        // An answer that leaves in more than one segment (a large batch, or
+        // headers and body flushed apart) must not wait on Nagle for the
+        // client's delayed ACK (up to 40 ms).
         let listener = axum::serve::ListenerExt::tap_io(self.listener, |tcp| {
             let _ = tcp.set_nodelay(true);
         });
