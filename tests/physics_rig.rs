@@ -163,3 +163,38 @@ fn the_rig_step_sign_follows_the_rig_not_the_model() {
     // No rotation was put in (mrad).
     assert!(e.coef[3..].iter().all(|w| w.abs() < 0.1), "{:?}", e.coef);
 }
+
+#[test]
+fn without_a_clock_a_rig_step_is_placed_in_the_row_order() {
+    // The same kind of recording with no time_s (nor temp_c): the rig's
+    // move is still one rig_step, not an anchor_step on every string, and
+    // it is placed by row, not in seconds.
+    let sim = simulate::generate(&spec("er3a", "rig_step", 34)).unwrap();
+    let t_true = sim.effects[0].kind.change_time_s().unwrap();
+    let row_true = sim
+        .dataset
+        .poses
+        .iter()
+        .position(|p| p.time_s.unwrap() > t_true)
+        .unwrap();
+    let mut data = sim.dataset.clone();
+    for p in &mut data.poses {
+        p.time_s = None;
+        p.temp_c = None;
+    }
+    let a = analyse(&sim, &sim.rig, &data);
+    assert_eq!(named(&a), vec!["rig_step"], "{:#?}", a.findings);
+    let f = &a.findings[0];
+    assert!(f.explanation.contains("around row"), "{}", f.explanation);
+    assert!(!f.explanation.contains(" s,"), "{}", f.explanation);
+    // The change point is a row index: within a few rows of the true one.
+    let t0 = physics::effects_of(std::slice::from_ref(f))[0]
+        .kind
+        .change_time_s()
+        .unwrap();
+    assert!(
+        (t0 - row_true as f64).abs() < 5.0,
+        "change at row index {t0}, truth {row_true}"
+    );
+    assert!(f.test_rms_after_mm < 0.6 * f.test_rms_before_mm);
+}

@@ -340,10 +340,10 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
         .saturating_sub(1)
         .min(SCAN_EFFECTIVE_MAX)
         .div_ceil(STEP_GRID - 1);
-    // The rig's motion is a matter of clock time: without a recorded time
-    // (row order only) it is not proposed.
-    let timed = session.data.poses.iter().all(|p| p.time_s.is_some());
-    if timed && times.len() > 2 {
+    // A drift is a rate: it needs a recorded clock. A step is a place in
+    // the session, which the row order gives too (else a rig that moved is
+    // only seen as every anchor stepping at once).
+    if ctx.timed && times.len() > 2 {
         push(
             Kind::RigDrift,
             1,
@@ -362,11 +362,11 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
         let kept_here = accepted
             .iter()
             .any(|e| matches!(e.kind, Kind::RigStep { t0_s } if t0_s > lo && t0_s < hi));
-        if timed && !kept_here {
+        if !kept_here {
             push(
                 Kind::RigStep { t0_s: t0 },
                 scanned_per_point,
-                format!("a move of the whole rig at {t0:.0} s"),
+                format!("a move of the whole rig {}", ctx.when(t0)),
             );
         }
     }
@@ -392,7 +392,7 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
                         t0_s: t0,
                     },
                     scanned_per_point,
-                    format!("a change at {t0:.0} s on string {}", k + 1),
+                    format!("a change {} on string {}", ctx.when(t0), k + 1),
                 );
             }
         }
@@ -898,8 +898,8 @@ pub fn analyse(
                     let t0 = refine_step(session, &ctx, &p, &free, &ctx_eff, &cs[i].kind, t0_s);
                     cs[i].kind = cs[i].kind.with_change_time(t0);
                     cs[i].what = match cs[i].kind.sensor() {
-                        Some(k) => format!("a change at {t0:.0} s on string {}", k + 1),
-                        None => format!("a move of the whole rig at {t0:.0} s"),
+                        Some(k) => format!("a change {} on string {}", ctx.when(t0), k + 1),
+                        None => format!("a move of the whole rig {}", ctx.when(t0)),
                     };
                 }
             }
@@ -1069,7 +1069,7 @@ pub fn analyse(
                     magnitude: mag,
                     sigma: sig,
                     unit,
-                    explanation: e.kind.explanation(),
+                    explanation: e.kind.explanation(&ctx),
                     evidence,
                     test_rms_before_mm: stage_rms[stage],
                     test_rms_after_mm: stage_rms[stage + 1],

@@ -193,8 +193,9 @@ impl Kind {
         }
     }
 
-    /// The physics in one sentence.
-    pub fn explanation(&self) -> String {
+    /// The physics in one sentence (`ctx` words a change point in seconds
+    /// or, without a recorded clock, in rows).
+    pub fn explanation(&self, ctx: &Context) -> String {
         match self {
             Kind::JointCompliance { joint_index, .. } => format!(
                 "joint {} deflects in proportion to the gravity torque on it, like an elastic gearbox carrying the arm's own weight",
@@ -232,12 +233,13 @@ impl Kind {
                 "the strings hang under their own weight and read longer than the straight distance, more so the longer their horizontal span (catenary)".into()
             }
             Kind::AnchorStep { sensor_index, t0_s } => format!(
-                "the anchor of string {} moved during the session, at about {:.0} s",
+                "the anchor of string {} moved during the session, {}",
                 sensor_index + 1,
-                t0_s
+                ctx.when(*t0_s)
             ),
             Kind::RigStep { t0_s } => format!(
-                "the whole measuring rig (anchors or tracker) moved relative to the robot base at about {t0_s:.0} s, e.g. knocked or re-set up"
+                "the whole measuring rig (anchors or tracker) moved relative to the robot base {}, e.g. knocked or re-set up",
+                ctx.when(*t0_s)
             ),
             Kind::RigDrift => {
                 "the measuring rig (anchors or tracker) crept steadily relative to the robot base during the session (a settling stand, a floor or a tracker drifting)".into()
@@ -307,6 +309,9 @@ pub struct Context {
     /// The temperature (°C) at which the thermal driver is zero (the first
     /// pose's), when the driver is [`ThermalDriver::Temperature`].
     pub temp_ref_c: Option<f64>,
+    /// Every pose has a recorded `time_s`. Otherwise the row index stands
+    /// in for the clock (change points are then places in the row order).
+    pub timed: bool,
     /// The session's median payload (kg) when any pose recorded one: what
     /// compensation assumes the robot carries unless told otherwise.
     pub payload_ref_kg: Option<f64>,
@@ -481,9 +486,32 @@ impl Context {
             thermal_driver,
             lengths,
             temp_ref_c: use_temp.then_some(temp_ref),
+            timed: poses.iter().all(|p| p.time_s.is_some()),
             payload_ref_kg,
             centre_rig,
             poses: ctx_poses,
+        }
+    }
+
+    /// A change point `t0_s` (seconds, or a row index without `time_s`)
+    /// in words: "at about 1131 s" or "around row 46 (...)".
+    pub fn when(&self, t0_s: f64) -> String {
+        if self.timed {
+            format!("at about {t0_s:.0} s")
+        } else {
+            format!(
+                "around row {} (row order: the file has no time_s)",
+                t0_s.round() as i64 + 1
+            )
+        }
+    }
+
+    /// The axis of time-driven evidence: (label, unit).
+    pub fn time_axis(&self) -> (&'static str, &'static str) {
+        if self.timed {
+            ("time since the session began", "s")
+        } else {
+            ("row in the file (no time_s)", "row")
         }
     }
 

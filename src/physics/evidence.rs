@@ -88,11 +88,14 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
         Kind::SensorScale { sensor_index } => {
             d(format!("length of string {}", sensor_index + 1), "mm")
         }
-        Kind::SensorOffset { .. } => d("time since the session began".into(), "s"),
-        Kind::AnchorStep { t0_s, .. } => d(
-            format!("time since the session began (step at {t0_s:.0} s)"),
-            "s",
-        ),
+        Kind::SensorOffset { .. } => {
+            let (label, unit) = ctx.time_axis();
+            d(label.into(), unit)
+        }
+        Kind::AnchorStep { t0_s, .. } => {
+            let (label, unit) = ctx.time_axis();
+            d(format!("{label} (step {})", ctx.when(*t0_s)), unit)
+        }
         Kind::CableSag => Driver {
             label: "horizontal span of the string".into(),
             unit: "m".into(),
@@ -101,8 +104,13 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
         // Effects added to the catalogue later: time as the driver.
         #[allow(unreachable_patterns)]
         _ => Driver {
-            label: "hours since the session began".into(),
-            unit: "h".into(),
+            label: if ctx.timed {
+                "hours since the session began"
+            } else {
+                ctx.time_axis().0
+            }
+            .into(),
+            unit: if ctx.timed { "h" } else { "row" }.into(),
             per_string: !kind.robot_side() && kind.sensor().is_none(),
         },
     }
@@ -131,6 +139,7 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
         Kind::SensorScale { sensor_index } => {
             (pc.point_rig - ctx.anchors[*sensor_index]).norm() - ctx.r_mm
         }
+        Kind::SensorOffset { .. } | Kind::AnchorStep { .. } if !ctx.timed => pc.time_s + 1.0,
         Kind::SensorOffset { .. } | Kind::AnchorStep { .. } => pc.time_s,
         Kind::CableSag => {
             let v = pc.point_rig - ctx.anchors[k];
@@ -138,6 +147,7 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
             (v.norm_squared() - vert * vert).max(0.0).sqrt() * 1e-3
         }
         #[allow(unreachable_patterns)]
+        _ if !ctx.timed => pc.time_s + 1.0,
         _ => (pc.time_s - ctx.poses.first().map_or(0.0, |p| p.time_s)) / 3600.0,
     }
 }

@@ -659,7 +659,7 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
                 "effect": e.kind.name(),
                 "magnitude": mag,
                 "unit": unit,
-                "description": e.kind.explanation(),
+                "description": e.kind.explanation(&ctx0),
                 "effect_rms_mm": effect_rms(&chain, &truth_p.values, &ctx0, &q_rad, &anchors, e),
                 "model": e,
             });
