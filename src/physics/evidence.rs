@@ -59,6 +59,13 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
                 format!("gravity torque on joint {}", joint_index + 1),
                 "N*m",
             ),
+            Some(&k) if k == ctx.n_joints + 1 => d(
+                format!(
+                    "gravity lever on joint {} of the payload at the tool point",
+                    joint_index + 1
+                ),
+                "kg*m",
+            ),
             Some(&k) if k == ctx.n_joints => d(
                 format!(
                     "gravity lever on joint {} of a unit mass at the tool point",
