@@ -340,33 +340,57 @@ enum Inputs {
     Csv(axum::body::Bytes),
 }
 
-/// Does the client ask for compensated.csv? True when `text/csv` comes
-/// before any JSON (or wildcard) media range in `Accept`; JSON otherwise.
-/// Errors are always JSON.
+/// Does the client ask for compensated.csv? Each of CSV and JSON gets the
+/// quality (`q`, default 1) of the most specific media range that covers it
+/// in `Accept` (`text/csv` over `text/*` over `*/*`; `application/json` or
+/// `+json` over `application/*` over `*/*`); CSV when its quality is
+/// positive and higher than JSON's, or equal and listed first. JSON
+/// otherwise (also with no `Accept`). Errors are always JSON.
 fn wants_csv(headers: &HeaderMap) -> bool {
+    // (specificity, q, position) of the best match so far.
+    type Best = Option<(u8, f64, usize)>;
+    let mut csv: Best = None;
+    let mut json: Best = None;
+    let mut pos = 0;
+    let better = |best: &mut Best, spec: u8, q: f64, pos: usize| {
+        if best.is_none_or(|(s, _, _)| spec > s) {
+            *best = Some((spec, q, pos));
+        }
+    };
     for value in headers.get_all(ACCEPT) {
         let Ok(value) = value.to_str() else { continue };
         for range in value.split(',') {
             let mut parts = range.split(';');
             let media = parts.next().unwrap_or("").trim().to_ascii_lowercase();
-            let refused = parts.any(|p| {
-                let p = p.trim();
-                p.strip_prefix("q=")
-                    .and_then(|q| q.trim().parse::<f64>().ok())
-                    .is_some_and(|q| q <= 0.0)
-            });
-            if refused {
-                continue;
-            }
+            let q = parts
+                .filter_map(|p| p.trim().strip_prefix("q=")?.trim().parse::<f64>().ok())
+                .next_back()
+                .unwrap_or(1.0);
             match media.as_str() {
-                "text/csv" => return true,
-                "application/json" | "*/*" | "application/*" => return false,
-                m if m.ends_with("+json") => return false,
+                "text/csv" => better(&mut csv, 3, q, pos),
+                "text/*" => better(&mut csv, 2, q, pos),
+                "application/json" => better(&mut json, 3, q, pos),
+                m if m.starts_with("application/") && m.ends_with("+json") => {
+                    better(&mut json, 3, q, pos)
+                }
+                "application/*" => better(&mut json, 2, q, pos),
+                "*/*" => {
+                    better(&mut csv, 1, q, pos);
+                    better(&mut json, 1, q, pos);
+                }
                 _ => {}
             }
+            pos += 1;
         }
     }
-    false
+    match (csv, json) {
+        // Only an explicit CSV range (not a wildcard alone) asks for CSV.
+        (Some((spec, qc, pc)), json) if spec >= 2 && qc > 0.0 => match json {
+            None => true,
+            Some((_, qj, pj)) => qc > qj || (qc == qj && pc < pj),
+        },
+        _ => false,
+    }
 }
 
 /// Compensate targets for a robot with its active calibration (or a named
@@ -731,5 +755,13 @@ mod tests {
         assert!(!wants_csv(&h("text/csv;q=0, */*")));
         assert!(!wants_csv(&h("*/*")));
         assert!(!wants_csv(&HeaderMap::new()));
+        // Quality, not order, decides.
+        assert!(wants_csv(&h("application/json;q=0.5, text/csv")));
+        assert!(!wants_csv(&h("text/csv;q=0.4, application/json;q=0.8")));
+        assert!(wants_csv(&h("text/csv, application/json")));
+        // The most specific range sets the quality.
+        assert!(!wants_csv(&h("text/*, text/csv;q=0")));
+        assert!(wants_csv(&h("*/*;q=0.1, text/csv")));
+        assert!(!wants_csv(&h("text/csv;q=0.1, */*")));
     }
 }
