@@ -1,6 +1,7 @@
 //! Engine benchmarks: one pose's point with its full Jacobian, an
 //! identification of 50 and of 2000 string poses, the 11,911-pose tracker
-//! grid, the physics analysis of 2000 string poses, one compensation. Run:
+//! grid, the physics analysis of 2000 string poses, one compensation (joint
+//! and Cartesian targets, reachable and unreachable). Run:
 //! `cargo bench --bench engine`.
 
 use std::hint::black_box;
@@ -195,6 +196,49 @@ fn benches(c: &mut Criterion) {
     ] {
         assert_eq!(c_.compensate(target, false).status, CompensationStatus::Ok);
         c.bench_function(name, |b| b.iter(|| c_.compensate(black_box(target), false)));
+    }
+
+    // Unreachable Cartesian targets: T 5 m away from the 0.72 m ER3A (beyond
+    // the arm's reach ball), and T 700 or 600 mm from the shoulder with the
+    // flange turned back towards the base, which would put the wrist centre
+    // 830 or 730 mm out, past the 593 mm the upper arm and forearm reach.
+    // At 700 mm the flange itself is beyond what joints 1-5 reach (the ball
+    // with the orientation); at 600 mm no bound tells, only the solves.
+    let far = Target {
+        target: "far".into(),
+        kind: TargetKind::Cartesian {
+            xyz_mm: [5000.0, 0.0, 0.0],
+            rpy_deg: None,
+        },
+    };
+    let u = nalgebra::Vector3::new(30f64.to_radians().cos(), 30f64.to_radians().sin(), 0.0);
+    let back = nalgebra::Rotation3::face_towards(&-u, &nalgebra::Vector3::z());
+    let back_rpy = drawcal::kinematics::matrix_rpy(back.matrix()).map(f64::to_degrees);
+    let turned_back = |r: f64| Target {
+        target: "back".into(),
+        kind: TargetKind::Cartesian {
+            xyz_mm: (nalgebra::Vector3::new(0.0, 0.0, 330.0) + r * u).into(),
+            rpy_deg: Some([back_rpy[0], back_rpy[1], back_rpy[2]]),
+        },
+    };
+    for (name, target) in [
+        ("compensate_unreachable_cartesian_target_5m_away", far),
+        (
+            "compensate_unreachable_cartesian_target_turned_back_700mm",
+            turned_back(700.0),
+        ),
+        (
+            "compensate_unreachable_cartesian_target_turned_back_600mm",
+            turned_back(600.0),
+        ),
+    ] {
+        assert_eq!(
+            comp.compensate(&target, false).status,
+            CompensationStatus::Unreachable
+        );
+        c.bench_function(name, |b| {
+            b.iter(|| comp.compensate(black_box(&target), false))
+        });
     }
 }
 

@@ -222,10 +222,124 @@ fn a_reference_picks_the_nearest_branch() {
         assert!(far < 0.05, "{got:?} from reference {b:?}");
         assert!(row.iterations <= 5, "{}", row.iterations);
     }
-    // A reference of the wrong length is an error, not a panic.
-    let row = comp.compensate_near(&target, false, Some(&[0.0; 3]));
+}
+
+/// A reference or a joint target of the wrong length breaks
+/// `compensate_near`'s precondition (the CLI and HTTP layers check lengths
+/// first): debug builds panic, release builds answer without joints and say
+/// the input is malformed, never that the target is out of reach.
+#[test]
+fn input_of_the_wrong_length_is_malformed_not_unreachable() {
+    let (nom, cal) = with_truth("ur5_geometric");
+    let comp = Compensator::new(&nom, &cal).unwrap();
+    let (t, _) = comp.nominal_pose(&[0.3, -1.2, 1.4, -0.5, 1.1, 2.0]);
+    let cartesian = Target {
+        target: "c".into(),
+        kind: TargetKind::Cartesian {
+            xyz_mm: t.into(),
+            rpy_deg: None,
+        },
+    };
+    let joints = |n: usize| Target {
+        target: "j".into(),
+        kind: TargetKind::Joints {
+            q_deg: vec![10.0; n],
+        },
+    };
+    for (target, reference, says) in [
+        (
+            &cartesian,
+            Some(&[0.0; 3][..]),
+            "a reference of 3 joint angles",
+        ),
+        (&joints(5), None, "5 joint angles for a 6-joint robot"),
+        (&joints(7), Some(&[0.0; 6][..]), "7 joint angles"),
+    ] {
+        let got = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            comp.compensate_near(target, false, reference)
+        }));
+        if cfg!(debug_assertions) {
+            let panic = got.expect_err("debug builds check the precondition");
+            let text = panic.downcast_ref::<String>().unwrap();
+            assert!(text.contains(says), "{text}");
+            continue;
+        }
+        let row = got.unwrap();
+        assert!(row.q_deg.is_none() && row.residual_mm.is_none());
+        assert_eq!(row.iterations, 0);
+        let message = row.message.unwrap();
+        assert!(message.starts_with("malformed input: "), "{message}");
+        assert!(message.contains(says), "{message}");
+        assert!(!message.contains("cannot put T"), "{message}");
+    }
+    // The right lengths are answered as ever; a joint target ignores the
+    // reference.
+    let ok = comp.compensate_near(&cartesian, false, Some(&[0.0; 6]));
+    assert_eq!(ok.status, CompensationStatus::Ok, "{ok:?}");
+    let ok = comp.compensate_near(&joints(6), false, Some(&[0.0; 2]));
+    assert_eq!(ok.status, CompensationStatus::Ok, "{ok:?}");
+}
+
+/// Unreachable Cartesian targets are given up early: beyond the calibrated
+/// arm's reach (for T, or for the flange at the target's orientation) at
+/// once, and otherwise after a few iterations per seed instead of the full
+/// 50.
+#[test]
+fn unreachable_targets_are_given_up_early() {
+    let (nom, cal) = with_truth("er3a_paper_like");
+    let comp = Compensator::new(&nom, &cal).unwrap();
+    let far = Target {
+        target: "far".into(),
+        kind: TargetKind::Cartesian {
+            xyz_mm: [5000.0, 0.0, 0.0],
+            rpy_deg: None,
+        },
+    };
+    let row = comp.compensate(&far, false);
     assert_eq!(row.status, CompensationStatus::Unreachable);
-    assert!(row.message.unwrap().contains("reference"));
+    assert_eq!(row.iterations, 0);
+    let message = row.message.unwrap();
+    assert!(
+        message.starts_with("the calibrated model cannot put T on the target")
+            && message.contains("beyond the 72"),
+        "{message}"
+    );
+    // The flange turned back towards the base, T 700 or 600 mm from the
+    // shoulder: the wrist centre would be 830 or 730 mm out, past the 593
+    // mm the upper arm and forearm reach. At 700 mm the flange itself (60
+    // mm behind T) is beyond what joints 1-5 reach: answered at once. At
+    // 600 mm only the solves can tell; each gives up early.
+    let u = Vector3::new(30f64.to_radians().cos(), 30f64.to_radians().sin(), 0.0);
+    let back = nalgebra::Rotation3::face_towards(&-u, &Vector3::z());
+    let a = matrix_rpy(back.matrix()).map(f64::to_degrees);
+    let turned_back = |r: f64| Target {
+        target: "back".into(),
+        kind: TargetKind::Cartesian {
+            xyz_mm: (Vector3::new(0.0, 0.0, 330.0) + r * u).into(),
+            rpy_deg: Some([a[0], a[1], a[2]]),
+        },
+    };
+    let row = comp.compensate(&turned_back(700.0), false);
+    assert_eq!(row.status, CompensationStatus::Unreachable, "{row:?}");
+    assert_eq!(row.iterations, 0);
+    assert!(
+        row.message
+            .as_ref()
+            .unwrap()
+            .contains("with the flange at that orientation, joint 6's axis"),
+        "{row:?}"
+    );
+    let mut numeric = comp.clone();
+    numeric.closed_form = false;
+    for c in [&comp, &numeric] {
+        let row = c.compensate(&turned_back(600.0), false);
+        assert_eq!(row.status, CompensationStatus::Unreachable, "{row:?}");
+        assert!(!row.message.as_ref().unwrap().contains("beyond"), "{row:?}");
+        // The iterations count the calibrated solves only (the closed form
+        // has no branch here, so one, from the numerical fallback), each
+        // stopping well before the 50 it used to run.
+        assert!(row.iterations > 0 && row.iterations < 50, "{row:?}");
+    }
 }
 
 #[test]

@@ -13,6 +13,12 @@
 //! branch, those inside the joint limits and nearest a reference first;
 //! then, for any arm, from a numerical inverse kinematics on the nominal
 //! model tried from several seeds. Joint limits are checked, never clamped.
+//! An unreachable target is given up early: a Cartesian target beyond what
+//! the calibrated arm reaches with any joints is answered at once, and a
+//! solve stops as soon as it cannot converge from where it is (at a
+//! stationary point of its error, or with the damping grown so large that
+//! it can no longer get back below its best error; see
+//! `Compensator::solve_on`).
 //!
 //! Thermal expansion: when the physics analysis accepted it with the
 //! temperature as its driver, the calibrated geometry holds at the
@@ -25,17 +31,17 @@
 //! the robot has been warming up since the session began, which nothing at
 //! run time knows: it is left out of compensation.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::identify::report::Report;
 use crate::kinematics::chain::{Chain, OutputFrame};
 use crate::kinematics::ik::{self, ClosedFormIk};
-use crate::kinematics::{Params, rpy_matrix};
-use crate::model::{Robot, Target, TargetKind};
+use crate::kinematics::{JointParam, Params, rpy_matrix};
+use crate::model::{Convention, Robot, Target, TargetKind};
 use crate::rng::Rng;
 
 /// Outcome of one target.
@@ -96,6 +102,12 @@ pub struct Compensator {
     temp_c: Option<f64>,
     /// The nominal arm's closed-form inverse kinematics, if it has one.
     ik: Option<Arc<ClosedFormIk>>,
+    /// Where the nominal arm's T can be, whatever the joints.
+    reach_nominal: Reach,
+    /// Where the calibrated arm's T can be: computed when first needed
+    /// (emptied when `calibrated` changes), so that `at_temperature` stays
+    /// a copy.
+    reach_calibrated: OnceLock<Reach>,
     /// Seed Cartesian targets with the closed form when there is one
     /// (default); `false` leaves only the numerical seeds (for comparison).
     pub closed_form: bool,
@@ -208,6 +220,130 @@ struct Solution {
     iterations: usize,
 }
 
+/// A solve that did not converge: the iterations it ran before it gave up.
+struct NotConverged {
+    iterations: usize,
+}
+
+/// A ball that holds T for every joint angle (limits ignored): a true upper
+/// bound on the arm's reach, for either convention, tool point included.
+///
+/// Every joint is revolute and only `a`, `d` and the tool point translate,
+/// so the arm is a chain of rigid segments, each joining a point on one
+/// joint axis to a point on the next (the last one joins it to T); a joint
+/// turns everything after its axis without moving the axis. Each segment
+/// keeps its length whatever the joints, so T is never farther from the
+/// first point (on joint 1's axis, fixed in the base frame) than the sum of
+/// the lengths, by the triangle inequality.
+///
+/// - DH, `Rz(q+θ) Tz(d) Tx(a) Rx(α) Ry(β)`: the points are `P_j = o_j +
+///   d_{j+1} z_j` (on axis j+1, which is `z_j`), from `P_0 = (0, 0, d_1)`;
+///   `P_j - P_{j-1} = R (a_j x + Rx(α_j) Ry(β_j) d_{j+1} z)` with `R =
+///   R_{j-1} Rz(q_j + θ_j)` a rotation, and `T - P_{n-1} = R (a_n x +
+///   Rx(α_n) Ry(β_n) tool) = R_n ((Rx(α_n) Ry(β_n))ᵀ a_n x + tool)`.
+/// - MDH, `Rx(α) Ry(β) Tx(a) Rz(q+θ) Tz(d)`: the points are the frame
+///   origins `o_j` (on axis j), from `o_1 = Rx(α_1) Ry(β_1) (a_1, 0, d_1)`;
+///   `|o_j - o_{j-1}| = sqrt(a_j² + d_j²)` and `T - o_n = R_n tool`.
+///
+/// With the flange orientation `R_n` given, the last segment is fixed too:
+/// its start, `T - R_n last`, is within `radius - |last|` of the centre.
+///
+/// The same sums bound the distance from T to any joint axis (the segments
+/// after that axis), so they also bound how fast T moves as a joint turns:
+/// at most `radius` mm per radian.
+#[derive(Debug, Clone, Copy)]
+struct Reach {
+    centre: Vector3<f64>,
+    radius: f64,
+    /// The last segment in the flange frame: from the point on the last
+    /// joint's axis to T.
+    last: Vector3<f64>,
+}
+
+impl Reach {
+    fn of(chain: &Chain, p: &[f64]) -> Reach {
+        let l = chain.layout;
+        let n = l.n_joints;
+        let t = l.tool();
+        let tool = Vector3::new(p[t], p[t + 1], p[t + 2]);
+        let at = |j: usize, k: JointParam| p[l.joint(j, k)];
+        let twist = |j: usize| {
+            Rotation3::from_axis_angle(&Vector3::x_axis(), at(j, JointParam::Alpha))
+                * Rotation3::from_axis_angle(&Vector3::y_axis(), at(j, JointParam::Beta))
+        };
+        let a_x = |j: usize| Vector3::new(at(j, JointParam::A), 0.0, 0.0);
+        if n == 0 {
+            return Reach {
+                centre: Vector3::zeros(),
+                radius: tool.norm(),
+                last: tool,
+            };
+        }
+        match chain.convention {
+            Convention::Dh => {
+                let last = twist(n - 1).inverse() * a_x(n - 1) + tool;
+                Reach {
+                    centre: Vector3::new(0.0, 0.0, at(0, JointParam::D)),
+                    radius: (0..n - 1)
+                        .map(|j| {
+                            let d_next = Vector3::new(0.0, 0.0, at(j + 1, JointParam::D));
+                            (a_x(j) + twist(j) * d_next).norm()
+                        })
+                        .sum::<f64>()
+                        + last.norm(),
+                    last,
+                }
+            }
+            Convention::Mdh => Reach {
+                centre: twist(0) * Vector3::new(at(0, JointParam::A), 0.0, at(0, JointParam::D)),
+                radius: (1..n)
+                    .map(|j| at(j, JointParam::A).hypot(at(j, JointParam::D)))
+                    .sum::<f64>()
+                    + tool.norm(),
+                last: tool,
+            },
+        }
+    }
+
+    /// How far `point` is outside a ball of `radius` about the centre (mm;
+    /// negative inside), less a rounding allowance, so that a positive
+    /// answer is out of reach for sure.
+    fn outside(&self, point: &Vector3<f64>, radius: f64) -> f64 {
+        let d = (point - self.centre).norm();
+        d - radius - 1e-9 * (d + self.radius + self.centre.norm())
+    }
+
+    /// How far T at `point` is out of reach for any joints (mm; negative
+    /// when it may be within reach).
+    fn beyond(&self, point: &Vector3<f64>) -> f64 {
+        self.outside(point, self.radius)
+    }
+
+    /// The same for T at `point` with the flange at `rot` (to within
+    /// `tolerance_rad`): how far the start of the last segment is out of
+    /// the reach of the others, and where it is.
+    fn beyond_pose(
+        &self,
+        point: &Vector3<f64>,
+        rot: &Matrix3<f64>,
+        tolerance_rad: f64,
+    ) -> (f64, Vector3<f64>) {
+        let start = point - rot * self.last;
+        let len = self.last.norm();
+        // The flange may turn by `tolerance_rad`: the start moves as much
+        // times the segment's length.
+        let slack = tolerance_rad * len;
+        (self.outside(&start, self.radius - len) - slack, start)
+    }
+}
+
+/// A damped least squares solve stops at a stationary point of its error
+/// (MINPACK's `gtol`): when every column of the Jacobian is this close to
+/// orthogonal to the error (`|J_j·e| <= GTOL |J_j| |e|`), with the error
+/// far above the tolerance. Over the targets of `tests/compensate_ik.rs`
+/// the converging solves never came below 7e-4.
+const GTOL: f64 = 1e-6;
+
 impl Compensator {
     /// From the nominal and calibrated models (robot.json form).
     pub fn new(nominal: &Robot, calibrated: &Robot) -> Result<Self> {
@@ -217,10 +353,14 @@ impl Compensator {
                 "does not match the nominal robot's joints or convention",
             ));
         }
+        let chain = Chain::new(nominal.convention, nominal.dof(), 0);
+        let (nominal_p, calibrated_p) = (Params::of_robot(nominal), Params::of_robot(calibrated));
         Ok(Compensator {
-            chain: Chain::new(nominal.convention, nominal.dof(), 0),
-            nominal: Params::of_robot(nominal),
-            calibrated: Params::of_robot(calibrated),
+            chain,
+            reach_nominal: Reach::of(&chain, &nominal_p.values),
+            reach_calibrated: OnceLock::new(),
+            nominal: nominal_p,
+            calibrated: calibrated_p,
             limits_rad: calibrated
                 .joints
                 .iter()
@@ -287,7 +427,8 @@ impl Compensator {
     /// and d of the calibrated geometry grows by `k · (temp_c - T_ref)`
     /// times its nominal value. Without a temperature-driven thermal
     /// effect, an unchanged copy. A clone of the parameter vectors; no
-    /// other work.
+    /// other work (the calibrated arm's reach, which the lengths change, is
+    /// worked out again when first needed).
     pub fn at_temperature(&self, temp_c: f64) -> Compensator {
         let mut c = self.clone();
         if let Some(t) = &self.thermal {
@@ -296,9 +437,16 @@ impl Compensator {
             for &(i, v) in &t.lengths {
                 c.calibrated.values[i] += m * v;
             }
+            c.reach_calibrated = OnceLock::new();
             c.temp_c = Some(temp_c);
         }
         c
+    }
+
+    /// Where the calibrated arm's T can be, whatever the joints.
+    fn reach_calibrated(&self) -> &Reach {
+        self.reach_calibrated
+            .get_or_init(|| Reach::of(&self.chain, &self.calibrated.values))
     }
 
     /// Number of joints.
@@ -348,6 +496,9 @@ impl Compensator {
     /// Compensate one target. `orientation` also holds the flange
     /// orientation (the nominal one for joint targets, the given one for
     /// Cartesian targets with angles).
+    ///
+    /// Precondition: a joint target has one angle per joint (see
+    /// [`Compensator::compensate_near`]).
     pub fn compensate(&self, target: &Target, orientation: bool) -> Compensated {
         self.compensate_near(target, orientation, None)
     }
@@ -355,13 +506,31 @@ impl Compensator {
     /// [`Compensator::compensate`], trying the closed-form branches of a
     /// Cartesian target nearest `reference_rad` first (e.g. the robot's
     /// current joints; default: home). Joint targets ignore it.
+    ///
+    /// A Cartesian target farther from the arm's root point (on joint 1's
+    /// axis) than the calibrated arm reaches with any joints, or whose
+    /// flange at the given orientation would be beyond what the joints
+    /// before the last reach, is answered unreachable at once, without a
+    /// solve.
+    ///
+    /// # Precondition
+    ///
+    /// A joint target has one angle per joint ([`Compensator::dof`]), and
+    /// so has `reference_rad` when given with a Cartesian target (`drawcal
+    /// compensate` and `POST /compensate` check the targets before they
+    /// get here, and pass no reference). Anything else is a bug in the
+    /// caller, not a fact about the robot: debug builds panic on it
+    /// (`debug_assert!`); release builds answer a row without joints whose
+    /// message begins `malformed input:` and says the target was never
+    /// tried (its status is `Unreachable`, the only "no joints" status
+    /// there is: a new one would change the public type and the HTTP
+    /// answer's schema for a case those layers never let through).
     pub fn compensate_near(
         &self,
         target: &Target,
         orientation: bool,
         reference_rad: Option<&[f64]>,
     ) -> Compensated {
-        let n = self.dof();
         let fail = |status, iterations, message: String| Compensated {
             target: target.target.clone(),
             q_deg: None,
@@ -370,15 +539,28 @@ impl Compensator {
             status,
             message: Some(message),
         };
+        if let Some(problem) = self.malformed(target, reference_rad) {
+            debug_assert!(
+                false,
+                "Compensator::compensate_near called against its precondition: {problem}"
+            );
+            return fail(
+                CompensationStatus::Unreachable,
+                0,
+                format!(
+                    "malformed input: {problem} (a caller's error: the target was not tried, \
+                     nothing is known about its reach)"
+                ),
+            );
+        }
+        let unreachable_message = || {
+            format!(
+                "the calibrated model cannot put T on the target (no solution within {} mm)",
+                self.tolerance_mm
+            )
+        };
         let (pos, rot, seeds) = match &target.kind {
             TargetKind::Joints { q_deg } => {
-                if q_deg.len() != n {
-                    return fail(
-                        CompensationStatus::Unreachable,
-                        0,
-                        format!("{} joint angles for a {n}-joint robot", q_deg.len()),
-                    );
-                }
                 let q: Vec<f64> = q_deg.iter().map(|v| v.to_radians()).collect();
                 let (t, r) = self.nominal_pose(&q);
                 (t, orientation.then_some(r), vec![q])
@@ -387,21 +569,42 @@ impl Compensator {
                 let r = rpy_deg
                     .map(|a| rpy_matrix(a[0].to_radians(), a[1].to_radians(), a[2].to_radians()));
                 let t = Vector3::from(*xyz_mm);
-                let home = self.home();
-                let reference = match reference_rad {
-                    Some(q) if q.len() != n => {
+                // Out of reach for any joints: no seed can help.
+                let reach = self.reach_calibrated();
+                if reach.beyond(&t) > self.tolerance_mm {
+                    return fail(
+                        CompensationStatus::Unreachable,
+                        0,
+                        format!(
+                            "{}: it is {:.1} mm from the arm's root point (on joint 1's axis), \
+                             beyond the {:.1} mm the arm reaches from there with any joints",
+                            unreachable_message(),
+                            (t - reach.centre).norm(),
+                            reach.radius
+                        ),
+                    );
+                }
+                if let Some(r) = &r {
+                    let (beyond, start) = reach.beyond_pose(&t, r, self.tolerance_rad);
+                    if beyond > self.tolerance_mm {
                         return fail(
                             CompensationStatus::Unreachable,
                             0,
                             format!(
-                                "a reference of {} joint angles for a {n}-joint robot",
-                                q.len()
+                                "{}: with the flange at that orientation, joint {n}'s axis would \
+                                 have to pass through a point {:.1} mm from the arm's root point \
+                                 (on joint 1's axis), beyond the {:.1} mm the joints before it \
+                                 reach",
+                                unreachable_message(),
+                                (start - reach.centre).norm(),
+                                reach.radius - reach.last.norm(),
+                                n = self.dof(),
                             ),
                         );
                     }
-                    Some(q) => q,
-                    None => &home,
-                };
+                }
+                let home = self.home();
+                let reference = reference_rad.unwrap_or(&home);
                 (t, r, self.closed_form_seeds(&t, r.as_ref(), reference))
             }
         };
@@ -426,7 +629,7 @@ impl Compensator {
             let solved = self.solve(&pos, rot.as_ref(), &seed);
             tried.push(seed);
             match solved {
-                Some(sol) => {
+                Ok(sol) => {
                     last_iterations += sol.iterations;
                     if let Some(msg) = self.limit_violation(&sol.q) {
                         limit_msg.get_or_insert(msg);
@@ -441,7 +644,7 @@ impl Compensator {
                         message: None,
                     };
                 }
-                None => last_iterations += self.max_iterations,
+                Err(failed) => last_iterations += failed.iterations,
             }
         }
         match limit_msg {
@@ -449,11 +652,25 @@ impl Compensator {
             None => fail(
                 CompensationStatus::Unreachable,
                 last_iterations,
-                format!(
-                    "the calibrated model cannot put T on the target (no solution within {} mm)",
-                    self.tolerance_mm
-                ),
+                unreachable_message(),
             ),
+        }
+    }
+
+    /// What breaks [`Compensator::compensate_near`]'s precondition, if
+    /// anything.
+    fn malformed(&self, target: &Target, reference_rad: Option<&[f64]>) -> Option<String> {
+        let n = self.dof();
+        match (&target.kind, reference_rad) {
+            (TargetKind::Joints { q_deg }, _) if q_deg.len() != n => Some(format!(
+                "{} joint angles for a {n}-joint robot",
+                q_deg.len()
+            )),
+            (TargetKind::Cartesian { .. }, Some(q)) if q.len() != n => Some(format!(
+                "a reference of {} joint angles for a {n}-joint robot",
+                q.len()
+            )),
+            _ => None,
         }
     }
 
@@ -522,7 +739,7 @@ impl Compensator {
         let mut any = false;
         std::iter::from_fn(move || {
             for s in starts.by_ref() {
-                if let Some(mut sol) = self.solve_on(Model::Nominal, pos, rot, &s) {
+                if let Ok(mut sol) = self.solve_on(Model::Nominal, pos, rot, &s) {
                     any = true;
                     // The solve may wander whole turns away: the same pose
                     // nearer home, inside the limits when it can be.
@@ -546,26 +763,58 @@ impl Compensator {
         pos: &Vector3<f64>,
         rot: Option<&Matrix3<f64>>,
         q0: &[f64],
-    ) -> Option<Solution> {
+    ) -> std::result::Result<Solution, NotConverged> {
         self.solve_on(Model::Calibrated, pos, rot, q0)
     }
 
     /// Damped least squares on either model from `q0`.
+    ///
+    /// Besides converging or using up its iterations, a solve gives up as
+    /// soon as it cannot converge from where it is (unreachable targets
+    /// used to cost every seed its full iteration budget):
+    ///
+    /// - at a stationary point of the error far above the tolerance
+    ///   (MINPACK's `gtol` test, [`GTOL`]): the error is orthogonal to every
+    ///   column of the Jacobian, so the damped step is nil; it is a local
+    ///   minimum (or a saddle) of the distance to the target, not the
+    ///   target.
+    /// - frozen: the error did not beat the best so far (the damping has
+    ///   just grown tenfold), the damping is at least the Jacobian's
+    ///   largest curvature (`λ >= min(m, n)`, as it is scaled by the mean
+    ///   one), and the step is too short to bring the error back below that
+    ///   best. From there every further failure grows the damping tenfold
+    ///   and shrinks the step to at most 2/11 of the last, so all the steps
+    ///   still to come add up to at most 11/9 of this one; T moves at most
+    ///   [`Reach`]'s radius in mm per radian of a joint (and the flange one
+    ///   radian, weighted 1000 mm), so the error can never come back below
+    ///   the best, which is above the tolerance: the damping never falls
+    ///   again and the solve cannot converge. The test uses twice that
+    ///   allowance.
+    ///
+    /// Neither test stopped a solve that would have converged: over 6,210
+    /// targets on the arms of `tests/compensate_ik.rs` (BENCHMARKS.md),
+    /// every answer is the same as without them, joint for joint.
     fn solve_on(
         &self,
         model: Model,
         pos: &Vector3<f64>,
         rot: Option<&Matrix3<f64>>,
         q0: &[f64],
-    ) -> Option<Solution> {
+    ) -> std::result::Result<Solution, NotConverged> {
         let n = self.dof();
         let (params, effective) = match model {
             Model::Calibrated => (&self.calibrated, true),
             Model::Nominal => (&self.nominal, false),
         };
+        let give_up = |iterations| Err(NotConverged { iterations });
         let mut q = q0.to_vec();
         let mut jac = self.chain.new_jacobian();
         let m = if rot.is_some() { 6 } else { 3 };
+        // The largest error (below) a converged solve can have.
+        let converged_err = match rot {
+            Some(_) => self.tolerance_mm + 1000.0 * self.tolerance_rad,
+            None => self.tolerance_mm,
+        };
         let mut lambda: f64 = 1e-6;
         let mut prev_err = f64::INFINITY;
         for it in 0..=self.max_iterations {
@@ -583,16 +832,22 @@ impl Compensator {
             let pos_ok = e_pos.norm() <= self.tolerance_mm;
             let rot_ok = e_rot.norm() <= self.tolerance_rad;
             if pos_ok && rot_ok {
-                return Some(Solution {
+                return Ok(Solution {
                     residual_mm: e_pos.norm(),
                     q,
                     iterations: it,
                 });
             }
+            if it == self.max_iterations {
+                // A step now would never be checked.
+                return give_up(it);
+            }
             // Error in mm with rotation weighted by 1000 mm/rad so both
             // parts count alike in the damping.
             let err = e_pos.norm() + 1000.0 * e_rot.norm();
-            lambda = if err < prev_err {
+            let best = prev_err;
+            let improved = err < best;
+            lambda = if improved {
                 (lambda * 0.3).max(1e-12)
             } else {
                 lambda * 10.0
@@ -621,6 +876,9 @@ impl Compensator {
                     e[3 + r] = 1000.0 * e_rot[r];
                 }
             }
+            if err > 100.0 * converged_err && stationary(&j, &e) {
+                return give_up(it);
+            }
             let step = if n >= m {
                 // Minimum-norm: Jᵀ (J Jᵀ + λ I)⁻¹ e.
                 let mut a = &j * j.transpose();
@@ -628,24 +886,52 @@ impl Compensator {
                 for i in 0..m {
                     a[(i, i)] += lambda * scale;
                 }
-                j.transpose() * a.cholesky()?.solve(&e)
+                let Some(a) = a.cholesky() else {
+                    return give_up(it);
+                };
+                j.transpose() * a.solve(&e)
             } else {
                 let mut a = j.transpose() * &j;
                 let scale = a.trace() / n as f64;
                 for i in 0..n {
                     a[(i, i)] += lambda * scale;
                 }
-                a.cholesky()?.solve(&(j.transpose() * &e))
+                let Some(a) = a.cholesky() else {
+                    return give_up(it);
+                };
+                a.solve(&(j.transpose() * &e))
             };
+            if !improved && lambda >= m.min(n) as f64 && best > converged_err {
+                // Frozen (see above): the most all the steps to come can
+                // change the error, twice over. `|Δq|₁ <= √n |Δq|₂`.
+                let reach = match model {
+                    Model::Calibrated => self.reach_calibrated(),
+                    Model::Nominal => &self.reach_nominal,
+                };
+                // How fast the error can change per radian of a joint.
+                let per_rad = reach.radius + if rot.is_some() { 1000.0 } else { 0.0 };
+                let moved = 2.0 * (11.0 / 9.0) * (n as f64).sqrt() * per_rad * step.norm();
+                if err - moved > best {
+                    return give_up(it);
+                }
+            }
             for c in 0..n {
                 q[c] += step[c];
             }
             if !q.iter().all(|v| v.is_finite()) {
-                return None;
+                return give_up(it + 1);
             }
         }
-        None
+        unreachable!("the last iteration returns")
     }
+}
+
+/// True when every column of `j` is orthogonal to `e` to within [`GTOL`]
+/// (a column of zeros counts as orthogonal).
+fn stationary(j: &DMatrix<f64>, e: &DVector<f64>) -> bool {
+    let e_norm = e.norm();
+    j.column_iter()
+        .all(|c| c.dot(e).abs() <= GTOL * c.norm() * e_norm)
 }
 
 /// Rotation vector taking `current` to `target`, in the output frame.
@@ -839,5 +1125,152 @@ mod tests {
         assert_eq!(r.status, CompensationStatus::JointLimit, "{r:?}");
         assert!(r.message.unwrap().contains("joint 2"));
         assert!(r.q_deg.is_none());
+    }
+
+    /// ER3A-like arms with every parameter random, in both conventions.
+    fn random_arms(rng: &mut Rng) -> Vec<Robot> {
+        let (er3a, _) = robots();
+        let mut arms = vec![];
+        for convention in [Convention::Dh, Convention::Mdh] {
+            for _ in 0..20 {
+                let mut r = er3a.clone();
+                r.convention = convention;
+                for j in &mut r.joints {
+                    j.a_mm = rng.range(-400.0, 400.0);
+                    j.d_mm = rng.range(-400.0, 400.0);
+                    j.alpha_deg = rng.range(-180.0, 180.0);
+                    j.theta_offset_deg = rng.range(-180.0, 180.0);
+                    j.beta_deg = rng.range(-30.0, 30.0);
+                }
+                r.tool_point_mm = [0; 3].map(|_| rng.range(-150.0, 150.0));
+                arms.push(r);
+            }
+        }
+        arms
+    }
+
+    #[test]
+    fn the_reach_ball_holds_t_for_any_joints() {
+        let mut rng = Rng::new(11);
+        let (er3a, er3a_true) = robots();
+        let mut arms = random_arms(&mut rng);
+        arms.extend([er3a, er3a_true]);
+        for robot in &arms {
+            let comp = Compensator::new(robot, robot).unwrap();
+            let reach = *comp.reach_calibrated();
+            for _ in 0..2000 {
+                let q: Vec<f64> = (0..6)
+                    .map(|_| rng.range(-std::f64::consts::PI, std::f64::consts::PI))
+                    .collect();
+                let (t, r) = comp.calibrated_pose(&q);
+                assert!(reach.beyond(&t) < 0.0, "{robot:?} {q:?}");
+                // With the flange orientation: the start of the last
+                // segment is on the last joint's axis, and within reach of
+                // the others.
+                let (beyond, start) = reach.beyond_pose(&t, &r, 0.0);
+                assert!(beyond < 0.0, "{robot:?} {q:?}");
+                let axes = comp
+                    .chain
+                    .joint_axes(&comp.calibrated.values, &q, OutputFrame::Base);
+                let (axis, o) = axes[5];
+                assert!((start - o).cross(&axis.normalize()).norm() < 1e-9);
+                // And every joint axis is within `radius` of T (the bound
+                // on how fast T moves as a joint turns).
+                for (axis, o) in
+                    comp.chain
+                        .joint_axes(&comp.calibrated.values, &q, OutputFrame::Base)
+                {
+                    let arm = (t - o).cross(&axis.normalize()).norm();
+                    assert!(arm <= reach.radius * (1.0 + 1e-12), "{arm} {reach:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn beyond_the_reach_ball_is_unreachable_at_once_and_just_inside_is_solved() {
+        let (nominal, cal) = robots();
+        let comp = Compensator::new(&nominal, &cal).unwrap();
+        let reach = *comp.reach_calibrated();
+        // The nominal ER3A stretches out to the whole radius: 275 mm upper
+        // arm, the 60 x 312 mm forearm, 70 + 60 mm to T.
+        assert!(
+            (comp.reach_nominal.radius - 722.72).abs() < 0.01,
+            "{reach:?}"
+        );
+        let u = Vector3::new(-0.6, 0.0, 0.8);
+        let at = |r: f64| Target {
+            target: "r".into(),
+            kind: TargetKind::Cartesian {
+                xyz_mm: (reach.centre + r * u).into(),
+                rpy_deg: None,
+            },
+        };
+        // (The true ER3A's 2 mm joint-1 offset turns only about the
+        // vertical, so it cannot all point up this slanted direction.)
+        // Solved: the joints put T there, though stretching the elbow out
+        // takes joint 3 past its limit (so the status says that).
+        let inside = comp.compensate(&at(reach.radius - 3.0), false);
+        assert_eq!(inside.status, CompensationStatus::JointLimit, "{inside:?}");
+        assert!(inside.message.unwrap().contains("joint 3"));
+        for r in [reach.radius + 0.01, 5000.0] {
+            let out = comp.compensate(&at(r), false);
+            assert_eq!(out.status, CompensationStatus::Unreachable);
+            assert_eq!(out.iterations, 0);
+            assert!(out.message.unwrap().contains("beyond the 72"));
+        }
+        // The ball follows the temperature: lengths 10 % longer.
+        let mut warm = comp.clone();
+        warm.thermal = Some(Arc::new(Thermal {
+            info: ThermalInfo {
+                coef_per_k: 1e-3,
+                reference_temp_c: 20.0,
+            },
+            lengths: crate::physics::effects::nominal_lengths(&nominal),
+            reference_values: comp.calibrated.values.clone(),
+        }));
+        let warm = warm.at_temperature(120.0);
+        let grown = *warm.reach_calibrated();
+        let want = Reach::of(&warm.chain, &warm.calibrated.values);
+        assert_eq!((grown.centre, grown.radius), (want.centre, want.radius));
+        assert!(
+            (grown.radius / reach.radius - 1.1).abs() < 0.01,
+            "{grown:?}"
+        );
+        assert_eq!(
+            warm.compensate(&at(reach.radius + 1.0), false).status,
+            CompensationStatus::Ok
+        );
+    }
+
+    #[test]
+    fn a_solve_that_cannot_converge_gives_up_early() {
+        let (nominal, cal) = robots();
+        let comp = Compensator::new(&nominal, &cal).unwrap();
+        let home = comp.home();
+        let far = Vector3::new(5000.0, 0.0, 0.0);
+        let back = rpy_matrix(0.3, 2.5, 0.2);
+        for (model, rot) in [
+            (Model::Calibrated, None),
+            (Model::Nominal, None),
+            (Model::Calibrated, Some(&back)),
+        ] {
+            let Err(failed) = comp.solve_on(model, &far, rot, &home) else {
+                panic!("converged on a target 5 m away");
+            };
+            assert!(failed.iterations < 20, "{}", failed.iterations);
+        }
+        // The last step is never taken: the budget, not one more.
+        let mut c = comp.clone();
+        c.max_iterations = 3;
+        let Err(failed) = c.solve_on(Model::Calibrated, &far, None, &home) else {
+            panic!()
+        };
+        assert!(failed.iterations <= 3);
+        // A target within reach converges from home as before.
+        let q = [0.3, 0.2, 0.4, 0.1, 0.5, 0.0];
+        let (t, r) = comp.nominal_pose(&q);
+        let sol = comp.solve(&t, Some(&r), &q).ok().unwrap();
+        assert!(sol.residual_mm < 1e-3);
     }
 }
