@@ -157,21 +157,8 @@ fn er3a_compensator() -> &'static Compensator {
     })
 }
 
-fn cases(n: u32) -> ProptestConfig {
-    // PROPTEST_CASES overrides the default for long campaigns.
-    let cases = std::env::var("PROPTEST_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(n);
-    ProptestConfig {
-        cases,
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    }
-}
-
 proptest! {
-    #![proptest_config(cases(256))]
+    #![proptest_config(common::proptest_cases(256))]
 
     #[test]
     fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..400)) {

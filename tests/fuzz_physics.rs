@@ -10,6 +10,8 @@
 //! CI runs a few dozen cases; `PROPTEST_CASES=2000 cargo test --release
 //! --test fuzz_physics` runs a long campaign (see EVAL.md).
 
+mod common;
+
 use drawcal::compensate::Compensator;
 use drawcal::identify::{IdentifyOptions, NoProgress, identify};
 use drawcal::model::targets::{Target, TargetKind};
@@ -49,18 +51,6 @@ const RESHAPES: [Reshape; 11] = [
     Reshape::AllTrain,
     Reshape::DropLastString,
 ];
-
-fn cases(n: u32) -> ProptestConfig {
-    let cases = std::env::var("PROPTEST_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(n);
-    ProptestConfig {
-        cases,
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    }
-}
 
 /// The CSV with column `name` removed (if present).
 fn drop_column(rows: &mut [Vec<String>], name: &str) {
@@ -144,7 +134,7 @@ fn reshape(sim: &simulate::Simulated, how: Reshape) -> (Rig, String) {
 }
 
 proptest! {
-    #![proptest_config(cases(24))]
+    #![proptest_config(common::proptest_cases(24))]
 
     #[test]
     fn awkward_recordings_never_break_the_analysis(

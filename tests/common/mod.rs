@@ -28,3 +28,17 @@ pub fn load(name: &str) -> (Robot, Rig, Dataset) {
 pub fn truth(name: &str) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir(name).join("truth.json")).unwrap()).unwrap()
 }
+
+/// Proptest settings for the fuzz tests: `n` cases (a few seconds in CI),
+/// or `PROPTEST_CASES` for a long campaign; no failure files written.
+pub fn proptest_cases(n: u32) -> proptest::prelude::ProptestConfig {
+    let cases = std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(n);
+    proptest::prelude::ProptestConfig {
+        cases,
+        failure_persistence: None,
+        ..proptest::prelude::ProptestConfig::default()
+    }
+}
