@@ -158,6 +158,11 @@ pub struct CompensateArgs {
     /// temperature, i.e. the geometry as calibrated).
     #[arg(long, allow_negative_numbers = true)]
     pub temp_c: Option<f64>,
+    /// Payload the robot carries at T (kg, 0 to 5000), for a calibration
+    /// whose physics analysis accepted a joint compliance (default: the
+    /// calibration session's median payload, 0 if it recorded none).
+    #[arg(long)]
+    pub payload_kg: Option<f64>,
 }
 
 /// `drawcal locate`.
@@ -251,6 +256,7 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
         })?;
     let comp = core(&a.calibration, Compensator::from_report(&report))?;
     let comp = at_temperature(comp, &report, a.temp_c)?;
+    let comp = with_payload(comp, a.payload_kg)?;
     let file = File::open(&a.targets).map_err(|source| CliError::Io {
         path: a.targets.clone(),
         source,
@@ -286,6 +292,34 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
         })?,
     }
     Ok(())
+}
+
+/// The compensator with `--payload-kg`, with a note on stderr when the
+/// payload matters but is not given, or is given but does not matter.
+fn with_payload(comp: Compensator, payload_kg: Option<f64>) -> Result<Compensator, CliError> {
+    if let Some(p) = payload_kg {
+        compensate::check_payload_kg("--payload-kg", p)
+            .map_err(|e| CliError::Other(e.to_string()))?;
+    }
+    match (comp.payload_kg(), payload_kg) {
+        (Some(reference), None) => {
+            eprintln!(
+                "note: the calibration models joint compliance; compensating with the calibration session's payload {reference} kg. Give --payload-kg with the payload the robot carries"
+            );
+            Ok(comp)
+        }
+        (Some(_), Some(p)) => {
+            eprintln!("compensating with a payload of {p} kg at T (joint compliance)");
+            Ok(comp.with_payload_kg(p))
+        }
+        (None, Some(_)) => {
+            eprintln!(
+                "note: --payload-kg is not used: the calibration has no joint compliance that depends on the payload"
+            );
+            Ok(comp)
+        }
+        (None, None) => Ok(comp),
+    }
 }
 
 /// The compensator at `--temp-c`, with a note on stderr when the

@@ -30,6 +30,13 @@
 //! effect driven by time (no temperature was recorded) depends on how long
 //! the robot has been warming up since the session began, which nothing at
 //! run time knows: it is left out of compensation.
+//!
+//! Payload: an accepted joint compliance deflects the joint in proportion
+//! to its gravity torque, the payload hanging at T included.
+//! [`Compensator::from_report`] compensates with the payload the
+//! calibration session carried (its median `payload_kg`, none if it
+//! recorded none); [`Compensator::with_payload_kg`] gives the compensator
+//! for the payload the robot carries now.
 
 use std::sync::{Arc, OnceLock};
 
@@ -42,6 +49,7 @@ use crate::kinematics::chain::{Chain, OutputFrame};
 use crate::kinematics::ik::{self, ClosedFormIk};
 use crate::kinematics::{JointParam, Params, rpy_matrix};
 use crate::model::{Convention, Robot, Target, TargetKind};
+use crate::physics::JointEffects;
 use crate::rng::Rng;
 
 /// Outcome of one target.
@@ -84,10 +92,6 @@ pub struct Compensated {
     pub message: Option<String>,
 }
 
-/// Joint-angle corrections of robot-side physical effects at commanded
-/// joints (rad in, rad out): the robot really sits at `q + offsets(q)`.
-pub type JointOffsets = Arc<dyn Fn(&[f64]) -> Vec<f64> + Send + Sync>;
-
 /// Compensation for one calibration; build once, use for many targets.
 #[derive(Clone)]
 pub struct Compensator {
@@ -95,7 +99,9 @@ pub struct Compensator {
     nominal: Params,
     calibrated: Params,
     limits_rad: Vec<(f64, f64)>,
-    joint_offsets: Option<JointOffsets>,
+    /// Robot-side effects accepted by the analysis (the robot really sits
+    /// at `q + offsets(q)`), at the payload this compensator runs with.
+    joint_effects: Option<Arc<JointEffects>>,
     /// Temperature-driven thermal expansion accepted by the analysis.
     thermal: Option<Arc<Thermal>>,
     /// The temperature `calibrated` holds at (°C), with `thermal`.
@@ -140,6 +146,23 @@ pub fn check_temp_c(field: &str, temp_c: f64) -> Result<f64> {
         Err(Error::field(
             field,
             format!("a temperature in degrees C from {lo} to {hi}, got {temp_c}"),
+        ))
+    }
+}
+
+/// Heaviest payload (kg) a compensation is asked for: beyond any serial
+/// arm's rating (the largest carry about 2,300 kg).
+pub const MAX_PAYLOAD_KG: f64 = 5000.0;
+
+/// A run-time payload (kg) checked: finite, from 0 to [`MAX_PAYLOAD_KG`];
+/// the error names `field`.
+pub fn check_payload_kg(field: &str, payload_kg: f64) -> Result<f64> {
+    if payload_kg.is_finite() && (0.0..=MAX_PAYLOAD_KG).contains(&payload_kg) {
+        Ok(payload_kg)
+    } else {
+        Err(Error::field(
+            field,
+            format!("a payload in kg from 0 to {MAX_PAYLOAD_KG}, got {payload_kg}"),
         ))
     }
 }
@@ -366,7 +389,7 @@ impl Compensator {
                 .iter()
                 .map(|j| (j.q_min_deg.to_radians(), j.q_max_deg.to_radians()))
                 .collect(),
-            joint_offsets: None,
+            joint_effects: None,
             thermal: None,
             temp_c: None,
             ik: ClosedFormIk::from_robot(nominal).map(Arc::new),
@@ -393,23 +416,9 @@ impl Compensator {
             }));
             comp.temp_c = Some(info.reference_temp_c);
         }
-        let has_joint_effects = crate::physics::effects_of(&report.findings)
-            .iter()
-            .any(|e| e.kind.joint().is_some());
-        if !has_joint_effects {
-            return Ok(comp);
-        }
-        let findings = report.findings.clone();
-        let robot = report.nominal_robot.clone();
-        Ok(comp.with_joint_offsets(Arc::new(move |q| {
-            crate::physics::joint_offsets_rad(&findings, &robot, q)
-        })))
-    }
-
-    /// Add robot-side effects (joint offsets at a commanded pose).
-    pub fn with_joint_offsets(mut self, f: JointOffsets) -> Self {
-        self.joint_offsets = Some(f);
-        self
+        comp.joint_effects =
+            JointEffects::new(&report.findings, &report.nominal_robot).map(Arc::new);
+        Ok(comp)
     }
 
     /// The accepted temperature-driven thermal expansion, if any.
@@ -421,6 +430,32 @@ impl Compensator {
     /// a temperature-driven thermal effect.
     pub fn temperature_c(&self) -> Option<f64> {
         self.temp_c
+    }
+
+    /// The payload (kg at T) this compensator compensates with, when the
+    /// accepted effects depend on it (a compliance): the one given to
+    /// [`Compensator::with_payload_kg`], else the calibration session's
+    /// (`Some(0.0)` when it recorded none). `None` when the payload does
+    /// not matter.
+    pub fn payload_kg(&self) -> Option<f64> {
+        self.joint_effects
+            .as_ref()
+            .filter(|e| e.payload_matters())
+            .map(|e| e.payload_kg().unwrap_or(0.0))
+    }
+
+    /// This compensator with the robot carrying `payload_kg` at T: a
+    /// compliant joint deflects under the payload's gravity torque too.
+    /// When the payload does not matter ([`Compensator::payload_kg`] is
+    /// `None`), an unchanged copy.
+    pub fn with_payload_kg(&self, payload_kg: f64) -> Compensator {
+        let mut c = self.clone();
+        if self.payload_kg().is_some()
+            && let Some(e) = &self.joint_effects
+        {
+            c.joint_effects = Some(Arc::new(e.with_payload_kg(payload_kg)));
+        }
+        c
     }
 
     /// This compensator with the robot at `temp_c` (°C): every nominal a
@@ -487,8 +522,12 @@ impl Compensator {
     }
 
     fn effective(&self, q: &[f64]) -> Vec<f64> {
-        match &self.joint_offsets {
-            Some(f) => q.iter().zip(f(q)).map(|(a, b)| a + b).collect(),
+        match &self.joint_effects {
+            Some(e) => q
+                .iter()
+                .zip(e.offsets_rad(q, None))
+                .map(|(a, b)| a + b)
+                .collect(),
             None => q.to_vec(),
         }
     }

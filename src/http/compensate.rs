@@ -11,7 +11,10 @@
 //! is compensated at `temp_c` when the request gives one (default: the
 //! calibration's reference temperature): the cached compensator stays at
 //! the reference and each such request works on a copy moved to its
-//! temperature (a clone of a few parameter vectors).
+//! temperature (a clone of a few parameter vectors). Likewise a calibration
+//! that accepted a joint compliance is compensated with `payload_kg` (the
+//! payload at T) when the request gives one (default: the calibration
+//! session's median payload).
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -87,6 +90,12 @@ pub struct CompensateRequest {
     /// ignored otherwise (`temp_c_used` is then null).
     #[serde(default)]
     pub temp_c: Option<f64>,
+    /// Payload the robot carries at T (kg, 0 to 5000). Used when the
+    /// calibration accepted a joint compliance (default: its session's
+    /// median payload, 0 if it recorded none); ignored otherwise
+    /// (`payload_kg_used` is then null).
+    #[serde(default)]
+    pub payload_kg: Option<f64>,
 }
 
 /// Outcome of one target.
@@ -150,6 +159,10 @@ pub struct CompensateResponse {
     /// calibration has thermal expansion driven by the temperature; null
     /// when it has none (the temperature does not matter).
     pub temp_c_used: Option<f64>,
+    /// Payload (kg at T) the joint compliance was evaluated with: the
+    /// request's `payload_kg`, else the calibration session's, when the
+    /// calibration has a compliance that depends on it; null otherwise.
+    pub payload_kg_used: Option<f64>,
     /// Targets with status `ok`.
     pub n_ok: usize,
     /// One per target, in order.
@@ -322,6 +335,9 @@ pub struct CompensateQuery {
     /// with thermal expansion driven by the temperature (default: its
     /// reference temperature).
     pub temp_c: Option<f64>,
+    /// Payload the robot carries at T (kg, 0 to 5000), for a calibration
+    /// with a joint compliance (default: its session's median payload).
+    pub payload_kg: Option<f64>,
 }
 
 impl CompensateQuery {
@@ -330,6 +346,34 @@ impl CompensateQuery {
             && self.calibration_id.is_none()
             && self.orientation.is_none()
             && self.temp_c.is_none()
+            && self.payload_kg.is_none()
+    }
+}
+
+/// What the robot runs under, as the request gives it.
+struct Conditions {
+    temp_c: Option<f64>,
+    payload_kg: Option<f64>,
+}
+
+impl Conditions {
+    /// A copy of the cached compensator moved to these conditions, when
+    /// they change its answers (a temperature with a thermal effect, a
+    /// payload with a compliance); `None`: the cached one as it is.
+    fn adjust(&self, comp: &Compensator) -> Option<Compensator> {
+        let temp_c = self.temp_c.filter(|_| comp.thermal().is_some());
+        let payload_kg = self.payload_kg.filter(|_| comp.payload_kg().is_some());
+        if temp_c.is_none() && payload_kg.is_none() {
+            return None;
+        }
+        let mut c = comp.clone();
+        if let Some(t) = temp_c {
+            c = c.at_temperature(t);
+        }
+        if let Some(p) = payload_kg {
+            c = c.with_payload_kg(p);
+        }
+        Some(c)
     }
 }
 
@@ -403,7 +447,8 @@ fn wants_csv(headers: &HeaderMap) -> bool {
 /// then it is compensated.csv, in request order, with the calibration that
 /// produced it in the `X-Calibration-Id` and `X-Calibration-Version`
 /// headers (and `X-Temp-C-Used` when the calibration has thermal expansion
-/// driven by the temperature). Errors are always JSON.
+/// driven by the temperature, `X-Payload-Kg-Used` when it has a joint
+/// compliance). Errors are always JSON.
 #[utoipa::path(post, path = "/compensate", tag = "compensation",
     params(CompensateQuery),
     request_body(
@@ -419,13 +464,14 @@ fn wants_csv(headers: &HeaderMap) -> bool {
             headers(
                 ("x-calibration-id" = i64, description = "Calibration used (on text/csv answers; JSON has it in the body)"),
                 ("x-calibration-version" = i64, description = "Its version (on text/csv answers)"),
-                ("x-temp-c-used" = f64, description = "Temperature (°C) the geometry was taken at, on text/csv answers when the calibration has thermal expansion driven by the temperature (JSON: `temp_c_used`)"))),
+                ("x-temp-c-used" = f64, description = "Temperature (°C) the geometry was taken at, on text/csv answers when the calibration has thermal expansion driven by the temperature (JSON: `temp_c_used`)"),
+                ("x-payload-kg-used" = f64, description = "Payload (kg at T) the joint compliance was evaluated with, on text/csv answers when the calibration has a compliance that depends on it (JSON: `payload_kg_used`)"))),
         (status = 400, description = "Malformed JSON or query string", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody),
         (status = 409, description = "The robot has no active calibration", body = ErrorBody),
         (status = 413, description = "Body too large", body = ErrorBody),
         (status = 415, description = "Neither application/json nor text/csv", body = ErrorBody),
-        (status = 422, description = "Invalid target (row = 1-based position or CSV row), too many targets, temp_c not a temperature from -50 to 150 C, a calibration of another robot, or robot_id missing with a CSV body", body = ErrorBody)))]
+        (status = 422, description = "Invalid target (row = 1-based position or CSV row), too many targets, temp_c not a temperature from -50 to 150 C, payload_kg not from 0 to 5000 kg, a calibration of another robot, or robot_id missing with a CSV body", body = ErrorBody)))]
 pub async fn compensate(
     State(app): State<AppState>,
     headers: HeaderMap,
@@ -433,13 +479,15 @@ pub async fn compensate(
     body: RawBody,
 ) -> ApiResult<Response> {
     let csv_out = wants_csv(&headers);
-    let (robot_id, calibration_id, orientation, temp_c, inputs) = match body.content_type.as_deref()
+    let (robot_id, calibration_id, orientation, conditions, inputs) = match body
+        .content_type
+        .as_deref()
     {
         ct if is_json(ct) => {
             if !query.is_empty() {
                 return Err(ApiError::invalid(
                     "robot_id",
-                    "with a JSON body, robot_id, calibration_id, orientation and temp_c go in the body, not the query string",
+                    "with a JSON body, robot_id, calibration_id, orientation, temp_c and payload_kg go in the body, not the query string",
                 ));
             }
             let req: CompensateRequest = parse_json(&body.bytes)?;
@@ -464,7 +512,10 @@ pub async fn compensate(
                 req.robot_id,
                 req.calibration_id,
                 req.orientation,
-                req.temp_c,
+                Conditions {
+                    temp_c: req.temp_c,
+                    payload_kg: req.payload_kg,
+                },
                 Inputs::Json { targets, batch },
             )
         }
@@ -479,7 +530,10 @@ pub async fn compensate(
                 robot_id,
                 query.calibration_id,
                 query.orientation.unwrap_or(false),
-                query.temp_c,
+                Conditions {
+                    temp_c: query.temp_c,
+                    payload_kg: query.payload_kg,
+                },
                 Inputs::Csv(body.bytes),
             )
         }
@@ -490,8 +544,11 @@ pub async fn compensate(
             )));
         }
     };
-    if let Some(t) = temp_c {
+    if let Some(t) = conditions.temp_c {
         crate::compensate::check_temp_c("temp_c", t)?;
+    }
+    if let Some(p) = conditions.payload_kg {
+        crate::compensate::check_payload_kg("payload_kg", p)?;
     }
     let active = active_calibration(&app, robot_id).await?;
     let calibration_id = match calibration_id {
@@ -543,16 +600,9 @@ pub async fn compensate(
             targets
         }
     };
-    // The cached compensator holds the reference temperature; another
-    // temperature gets its own copy (only with a thermal effect).
-    let adjusted = match (cached.compensator.thermal(), temp_c) {
-        (Some(_), Some(t)) => Some(cached.compensator.at_temperature(t)),
-        _ => None,
-    };
-    let temp_c_used = adjusted
-        .as_ref()
-        .unwrap_or(&cached.compensator)
-        .temperature_c();
+    let adjusted = conditions.adjust(&cached.compensator);
+    let used = adjusted.as_ref().unwrap_or(&cached.compensator);
+    let (temp_c_used, payload_kg_used) = (used.temperature_c(), used.payload_kg());
     let results = solve(&app, cached.clone(), adjusted, targets, orientation).await?;
     if csv_out {
         let mut out = Vec::with_capacity(64 + results.len() * (16 + 14 * dof));
@@ -573,9 +623,13 @@ pub async fn compensate(
             out,
         )
             .into_response();
-        if let Some(v) = temp_c_used.and_then(|t| HeaderValue::from_str(&t.to_string()).ok()) {
-            resp.headers_mut()
-                .insert(HeaderName::from_static("x-temp-c-used"), v);
+        for (name, value) in [
+            ("x-temp-c-used", temp_c_used),
+            ("x-payload-kg-used", payload_kg_used),
+        ] {
+            if let Some(v) = value.and_then(|v| HeaderValue::from_str(&v.to_string()).ok()) {
+                resp.headers_mut().insert(HeaderName::from_static(name), v);
+            }
         }
         return Ok(resp);
     }
@@ -586,6 +640,7 @@ pub async fn compensate(
         calibration_id: cached.calibration_id,
         version: cached.version,
         temp_c_used,
+        payload_kg_used,
         n_ok,
         results,
     })

@@ -6,7 +6,7 @@
 //!
 //! Hooks for the engine: [`analyse()`] after `identify::geometric()`,
 //! [`errors_with_effects`] for `stats.test.after`, and
-//! [`joint_offsets_rad`] for compensation.
+//! [`JointEffects`] for compensation.
 
 pub mod analyse;
 pub mod effects;
@@ -31,59 +31,110 @@ pub fn effects_of(findings: &[Finding]) -> Vec<EffectModel> {
         .collect()
 }
 
-/// Joint-angle deflection (rad, per joint) that the accepted robot-side
-/// effects add at the commanded angles `q_rad`: the joint really sits at
-/// `q + offsets`. To put T where the calibrated model puts it with angles
-/// `q_model`, command `q_model - offsets(q_model)` (one fixed-point step is
-/// enough: the offsets change by their own square).
+/// The robot-side effects a calibration accepted (compliance, backlash,
+/// periodic joint errors), ready to evaluate at commanded joints: the joint
+/// really sits at `q + offsets_rad(q)`. To put T where the calibrated model
+/// puts it with angles `q_model`, command `q_model - offsets(q_model)` (one
+/// fixed-point step is enough: the offsets change by their own square).
 ///
-/// Assumptions: backlash takes the approach direction as positive (joint
-/// arrives moving in +q, as most teach programs finish with a positive
-/// approach); use [`joint_offsets_rad_with_direction`] when the direction is
-/// known. Thermal expansion is not a joint-angle effect and is left out
-/// here: it changes the lengths and needs the temperature the robot runs at
-/// (`Compensator::at_temperature`). Compliance without link masses uses the
-/// unit-mass regressors stored in the finding; compliance is evaluated with
-/// the payload the calibration session carried (its median,
-/// `reference_payload_kg` of the finding; none when the session recorded no
-/// `payload_kg`).
-pub fn joint_offsets_rad(findings: &[Finding], robot: &Robot, q_rad: &[f64]) -> Vec<f64> {
-    joint_offsets_rad_with_direction(findings, robot, q_rad, &vec![1.0; q_rad.len()])
+/// Thermal expansion is not a joint-angle effect and is left out here: it
+/// changes the lengths and needs the temperature the robot runs at
+/// (`Compensator::at_temperature`).
+#[derive(Debug, Clone)]
+pub struct JointEffects {
+    robot: Robot,
+    effects: Vec<EffectModel>,
+    /// The payload the calibration session carried (its median; none when
+    /// it recorded no `payload_kg`).
+    reference_payload_kg: Option<f64>,
+    /// The payload the robot carries now (kg; none: the reference).
+    payload_kg: Option<f64>,
 }
 
-/// As [`joint_offsets_rad`] with the approach direction of every joint
-/// (+1 or -1) given.
-pub fn joint_offsets_rad_with_direction(
-    findings: &[Finding],
-    robot: &Robot,
-    q_rad: &[f64],
-    direction: &[f64],
-) -> Vec<f64> {
-    let n = robot.dof();
-    let effects: Vec<EffectModel> = effects_of(findings)
-        .into_iter()
-        .filter(|e| e.kind.joint().is_some())
-        .collect();
-    if effects.is_empty() {
-        return vec![0.0; n];
+impl JointEffects {
+    /// The joint effects among `findings`; `None` when there are none.
+    /// `robot` is the nominal robot of the calibration (its geometry and
+    /// link masses drive compliance).
+    pub fn new(findings: &[Finding], robot: &Robot) -> Option<Self> {
+        let effects: Vec<EffectModel> = effects_of(findings)
+            .into_iter()
+            .filter(|e| e.kind.joint().is_some())
+            .collect();
+        if effects.is_empty() {
+            return None;
+        }
+        let reference_payload_kg = findings
+            .iter()
+            .find_map(|f| f.parameters.get("reference_payload_kg")?.as_f64());
+        Some(JointEffects {
+            robot: robot.clone(),
+            effects,
+            reference_payload_kg,
+            payload_kg: None,
+        })
     }
-    let payload_kg = findings
-        .iter()
-        .find_map(|f| f.parameters.get("reference_payload_kg")?.as_f64());
-    let mut ctx = Context::new(
-        robot,
-        vec![],
-        0.0,
-        &nalgebra::Matrix3::identity(),
-        &[effects::PoseInput {
-            q_rad,
-            time_s: None,
-            temp_c: None,
-            payload_kg,
-            point_rig: nalgebra::Vector3::zeros(),
-        }],
-    );
-    ctx.poses[0].direction = direction.to_vec();
-    let mut buf = effects::Basis::default();
-    ctx.apply(&effects, 0, &mut buf).dq
+
+    /// True when a payload changes the offsets: an accepted compliance with
+    /// link masses (the payload adds its torque), or without masses one
+    /// whose session varied the payload (so that its lever was fitted).
+    pub fn payload_matters(&self) -> bool {
+        let payload_regressor = self.robot.dof() + 1;
+        self.effects.iter().any(|e| match &e.kind {
+            Kind::JointCompliance { regressors, .. } => {
+                regressors.is_empty()
+                    || regressors
+                        .iter()
+                        .zip(&e.coef)
+                        .any(|(&r, &c)| r == payload_regressor && c != 0.0)
+            }
+            _ => false,
+        })
+    }
+
+    /// The payload (kg) the offsets are evaluated with: the one set by
+    /// [`JointEffects::with_payload_kg`], else the calibration session's
+    /// (none: no payload).
+    pub fn payload_kg(&self) -> Option<f64> {
+        self.payload_kg.or(self.reference_payload_kg)
+    }
+
+    /// The same effects with the robot carrying `payload_kg` at T.
+    pub fn with_payload_kg(&self, payload_kg: f64) -> Self {
+        JointEffects {
+            payload_kg: Some(payload_kg),
+            ..self.clone()
+        }
+    }
+
+    /// Joint-angle offsets (rad, per joint) at the commanded `q_rad`.
+    /// `direction` is the approach direction of every joint (+1 or -1);
+    /// without it backlash takes every joint as arriving in +q, as most
+    /// teach programs finish with a positive approach.
+    pub fn offsets_rad(&self, q_rad: &[f64], direction: Option<&[f64]>) -> Vec<f64> {
+        let mut ctx = Context::new(
+            &self.robot,
+            vec![],
+            0.0,
+            &nalgebra::Matrix3::identity(),
+            &[effects::PoseInput {
+                q_rad,
+                time_s: None,
+                temp_c: None,
+                payload_kg: self.payload_kg(),
+                point_rig: nalgebra::Vector3::zeros(),
+            }],
+        );
+        ctx.poses[0].direction = direction.map_or_else(|| vec![1.0; q_rad.len()], <[f64]>::to_vec);
+        let mut buf = effects::Basis::default();
+        ctx.apply(&self.effects, 0, &mut buf).dq
+    }
+}
+
+/// Joint-angle deflection (rad, per joint) that the accepted robot-side
+/// effects of `findings` add at the commanded angles `q_rad`, with the
+/// session's payload and every joint approaching in +q (see
+/// [`JointEffects`]); zeros without joint effects.
+pub fn joint_offsets_rad(findings: &[Finding], robot: &Robot, q_rad: &[f64]) -> Vec<f64> {
+    JointEffects::new(findings, robot)
+        .map_or_else(|| vec![0.0; robot.dof()], |e| e.offsets_rad(q_rad, None))
 }

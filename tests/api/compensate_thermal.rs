@@ -6,65 +6,23 @@
 
 use serde_json::{Value, json};
 
-use crate::helpers::{TestApp, err_json, fresh_dir, ok_json};
+use crate::helpers::{TestApp, err_json};
 use crate::openapi::validate_response;
 
 /// A robot with an active calibration of a simulated er3a session with
 /// thermal expansion: (robot, calibration, reference temperature).
 async fn thermal_calibration(app: &TestApp) -> (i64, i64, f64) {
-    let spec: drawcal::physics::simulate::Spec = serde_json::from_value(json!({
+    let spec = json!({
         "robot": "er3a",
         "n_poses": 120,
         "seed": 777,
         "effects": [{"effect": "thermal_expansion", "size_x_noise": 10}]
-    }))
-    .unwrap();
-    let sim = drawcal::physics::simulate::generate(&spec).unwrap();
-    let t_ref = sim.dataset.poses[0].temp_c.unwrap();
-    let dir = fresh_dir("thermal-data");
-    drawcal::physics::simulate::write(&sim, &dir).unwrap();
-    let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
-    let model = ok_json(
-        app.post_raw("/models", Some("application/json"), read("robot.json"))
-            .await,
-        201,
-    )
-    .await;
-    let robot = ok_json(
-        app.post_json(
-            "/robots",
-            &json!({"serial_number": "THERMAL-1", "model_id": model["id"]}),
-        )
-        .await,
-        201,
-    )
-    .await["id"]
-        .as_i64()
-        .unwrap();
-    let rig = ok_json(
-        app.post_raw("/rigs", Some("application/json"), read("rig.json"))
-            .await,
-        201,
-    )
-    .await;
-    let session = ok_json(
-        app.post_json(
-            "/sessions",
-            &json!({"robot_id": robot, "rig_id": rig["id"], "name": "warm-up"}),
-        )
-        .await,
-        201,
-    )
-    .await["id"]
-        .as_i64()
-        .unwrap();
-    let cal = app
-        .calibrate_and_activate(robot, session, read("poses.csv"), "thermal")
-        .await;
-    (robot, cal, t_ref)
+    });
+    let (robot, cal, sim) = app.calibrate_simulated(spec, "THERMAL-1").await;
+    (robot, cal, sim.dataset.poses[0].temp_c.unwrap())
 }
 
-fn q_of(answer: &Value) -> Vec<f64> {
+pub(crate) fn q_of(answer: &Value) -> Vec<f64> {
     answer["results"][0]["q_deg"]
         .as_array()
         .unwrap_or_else(|| panic!("{answer}"))

@@ -246,6 +246,59 @@ impl TestApp {
         cal
     }
 
+    /// Simulate a session from a `drawcal simulate` spec, create its model,
+    /// robot (`serial`), rig and session through the API, calibrate it and
+    /// activate the result; returns (robot_id, calibration_id, simulation).
+    pub async fn calibrate_simulated(
+        &self,
+        spec: Value,
+        serial: &str,
+    ) -> (i64, i64, drawcal::physics::simulate::Simulated) {
+        let spec: drawcal::physics::simulate::Spec = serde_json::from_value(spec).unwrap();
+        let sim = drawcal::physics::simulate::generate(&spec).unwrap();
+        let dir = fresh_dir("simulated-data");
+        drawcal::physics::simulate::write(&sim, &dir).unwrap();
+        let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
+        let model = ok_json(
+            self.post_raw("/models", Some("application/json"), read("robot.json"))
+                .await,
+            201,
+        )
+        .await;
+        let robot = ok_json(
+            self.post_json(
+                "/robots",
+                &json!({"serial_number": serial, "model_id": model["id"]}),
+            )
+            .await,
+            201,
+        )
+        .await["id"]
+            .as_i64()
+            .unwrap();
+        let rig = ok_json(
+            self.post_raw("/rigs", Some("application/json"), read("rig.json"))
+                .await,
+            201,
+        )
+        .await;
+        let session = ok_json(
+            self.post_json(
+                "/sessions",
+                &json!({"robot_id": robot, "rig_id": rig["id"], "name": serial}),
+            )
+            .await,
+            201,
+        )
+        .await["id"]
+            .as_i64()
+            .unwrap();
+        let cal = self
+            .calibrate_and_activate(robot, session, read("poses.csv"), serial)
+            .await;
+        (robot, cal, sim)
+    }
+
     /// Poll a job until it ends (bounded by a generous number of polls).
     pub async fn wait_job(&self, job_id: i64, max_wait: Duration) -> Value {
         let polls = (max_wait.as_millis() / 100).max(1);

@@ -4,6 +4,7 @@
 
 mod bad_requests;
 mod compensate_csv;
+mod compensate_payload;
 mod compensate_thermal;
 mod deploy;
 mod e2e;
