@@ -223,3 +223,48 @@ fn compensate_at_a_temperature() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A short row and a long row: the error names the file and the row once,
+/// counted after the header (as the service's `row`).
+#[test]
+fn bad_poses_files_are_named_cleanly() {
+    let dir = std::env::temp_dir().join(format!("drawcal-cli-rows-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let poses = std::fs::read_to_string(data("poses.csv")).unwrap();
+    let lines: Vec<&str> = poses.lines().collect();
+    let identify = |name: &str, text: String| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let out = bin()
+            .args(["identify", "--physics", "off", "--robot"])
+            .arg(data("robot.json"))
+            .arg("--rig")
+            .arg(data("rig.json"))
+            .arg("--poses")
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{name} accepted");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let mut short = lines.clone();
+    let cut = lines[5].rsplit_once(',').unwrap().0.to_string();
+    short[5] = &cut;
+    let err = identify("short.csv", short.join("\n"));
+    assert_eq!(
+        err.trim_end(),
+        format!(
+            "error: {}: row 5 after the header: 13 cells where the header has 14 columns",
+            dir.join("short.csv").display()
+        )
+    );
+    let mut long = lines.clone();
+    let more = format!("{},x", lines[2]);
+    long[2] = &more;
+    let err = identify("long.csv", long.join("\n"));
+    assert!(
+        err.contains("long.csv: row 2 after the header: 15 cells where the header has 14 columns"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

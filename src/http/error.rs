@@ -127,7 +127,7 @@ impl From<crate::Error> for ApiError {
                 message,
             } => ApiError::Invalid {
                 message,
-                field: Some(field),
+                field,
                 row,
             },
             crate::Error::InsufficientData(m) => ApiError::Invalid {

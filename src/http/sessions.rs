@@ -121,24 +121,16 @@ struct Table {
     rows: Vec<Vec<String>>,
 }
 
+/// Read an uploaded poses.csv as it is sent (before it is merged with the
+/// session's columns): the engine's reader, so a semicolon-separated file,
+/// text that is not UTF-8 and a short or long row are refused here, named by
+/// their row in this upload, exactly as `drawcal identify` names them.
 fn table_from_csv(bytes: &[u8]) -> ApiResult<Table> {
-    let mut rdr = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .flexible(true)
-        .from_reader(bytes);
-    let header: Vec<String> = rdr
-        .headers()
-        .map_err(|e| ApiError::invalid("header", format!("unreadable CSV header: {e}")))?
-        .iter()
-        .map(str::to_string)
-        .collect();
+    let (mut rdr, headers) = crate::model::csv_with_header(bytes)?;
+    let header: Vec<String> = headers.iter().map(str::to_string).collect();
     let mut rows = Vec::new();
     for (i, rec) in rdr.records().enumerate() {
-        let rec = rec.map_err(|e| ApiError::Invalid {
-            message: format!("unreadable CSV row: {e}"),
-            field: None,
-            row: Some(i + 1),
-        })?;
+        let rec = crate::model::csv_record(i + 1, rec, &headers)?;
         rows.push(rec.iter().map(str::to_string).collect());
     }
     Ok(Table { header, rows })
@@ -359,7 +351,7 @@ pub async fn upload_poses(
                 message,
             } if r > existing_rows => ApiError::Invalid {
                 message,
-                field: Some(field),
+                field,
                 row: Some(r - existing_rows),
             },
             crate::Error::Input {

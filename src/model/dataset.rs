@@ -140,18 +140,7 @@ impl Dataset {
         let mut seen = HashSet::new();
         for (r, rec) in rdr.records().enumerate() {
             let row = r + 1;
-            let rec = rec.map_err(|e| Error::cell(row, "row", e.to_string()))?;
-            if rec.len() != headers.len() {
-                return Err(Error::cell(
-                    row,
-                    "row",
-                    format!(
-                        "{} columns where the header has {}",
-                        rec.len(),
-                        headers.len()
-                    ),
-                ));
-            }
+            let rec = super::csv_record(row, rec, &headers)?;
             let id = rec.get(pose_col).unwrap_or("").trim().to_string();
             if id.is_empty() {
                 return Err(Error::cell(row, "pose", "empty pose id"));
@@ -322,7 +311,7 @@ mod tests {
             "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm\n1,10,20,100,200,300\n2,10,NaN,100,200,300\n";
         let e = Dataset::from_csv(csv.as_bytes(), &robot(), &rig()).unwrap_err();
         assert!(
-            matches!(e, Error::Input { ref field, row: Some(2), .. } if field == "q2_deg"),
+            matches!(e, Error::Input { ref field, row: Some(2), .. } if field.as_deref() == Some("q2_deg")),
             "{e}"
         );
     }
@@ -338,7 +327,41 @@ mod tests {
         let e = Dataset::from_csv(csv.as_bytes(), &robot(), &rig())
             .unwrap_err()
             .to_string();
-        assert!(e.contains("row 1") && e.contains("columns"), "{e}");
+        assert_eq!(
+            e,
+            "row 1 after the header: 5 cells where the header has 6 columns"
+        );
+    }
+
+    #[test]
+    fn short_long_and_unreadable_rows_name_the_row_not_a_column() {
+        let head = "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm\n1,10,20,100,200,300\n";
+        for (rest, want) in [
+            (
+                "2,10,20,100,200,300,7\n",
+                "7 cells where the header has 6 columns",
+            ),
+            (
+                "\n\n2,10,20,100\n",
+                "4 cells where the header has 6 columns",
+            ),
+            ("  \n", "an empty row where the header has 6 columns"),
+        ] {
+            let e = Dataset::from_csv(format!("{head}{rest}").as_bytes(), &robot(), &rig())
+                .unwrap_err();
+            assert!(
+                matches!(e, Error::Input { field: None, row: Some(2), ref message } if message.contains(want)),
+                "{e:?}"
+            );
+        }
+        let mut bytes = head.as_bytes().to_vec();
+        bytes.extend_from_slice(b"2,10,20,100,\xff\xfe,300\n");
+        let e = Dataset::from_csv(&bytes[..], &robot(), &rig()).unwrap_err();
+        assert!(
+            matches!(e, Error::Input { ref field, row: Some(2), ref message }
+                if field.as_deref() == Some("l2_mm") && message.contains("UTF-8")),
+            "{e:?}"
+        );
     }
 
     #[test]
@@ -385,7 +408,7 @@ pub fn string_readings_from_csv<R: Read>(input: R, rig: &Rig) -> Result<Vec<(Str
     let mut out = Vec::new();
     for (r, rec) in rdr.records().enumerate() {
         let row = r + 1;
-        let rec = rec.map_err(|e| Error::cell(row, "row", e.to_string()))?;
+        let rec = super::csv_record(row, rec, &headers)?;
         let id = rec.get(pose_col).unwrap_or("").trim().to_string();
         let mut ls = Vec::with_capacity(m);
         for (k, &c) in cols.iter().enumerate() {

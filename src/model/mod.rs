@@ -27,7 +27,7 @@ pub(crate) fn finite(field: &str, v: f64) -> Result<f64> {
 }
 
 /// A CSV reader that trims cells and tolerates ragged rows (so a short row
-/// is reported by us with its row number), with its header.
+/// is reported by [`csv_record`] with its row number), with its header.
 pub(crate) fn csv_with_header<R: std::io::Read>(
     input: R,
 ) -> Result<(csv::Reader<R>, csv::StringRecord)> {
@@ -35,11 +35,57 @@ pub(crate) fn csv_with_header<R: std::io::Read>(
         .trim(csv::Trim::All)
         .flexible(true)
         .from_reader(input);
-    let headers = rdr
-        .headers()
-        .map_err(|e| Error::field("header", e.to_string()))?
-        .clone();
+    let headers = match rdr.headers() {
+        Ok(h) => h.clone(),
+        Err(e) => {
+            let message = match e.kind() {
+                csv::ErrorKind::Utf8 { .. } => {
+                    "the header is not UTF-8 text: save the file as UTF-8 CSV".to_string()
+                }
+                _ => format!("unreadable CSV header: {e}"),
+            };
+            return Err(Error::field("header", message));
+        }
+    };
     Ok((rdr, headers))
+}
+
+/// A record of a table read by [`csv_with_header`], checked: readable
+/// (UTF-8) and exactly as many cells as the header has columns. `row` is
+/// 1-based, header excluded (blank lines are skipped and a quoted cell may
+/// span lines, so it is not the line of the file).
+pub(crate) fn csv_record(
+    row: usize,
+    rec: csv::Result<csv::StringRecord>,
+    headers: &csv::StringRecord,
+) -> Result<csv::StringRecord> {
+    let rec = match rec {
+        Ok(r) => r,
+        Err(e) => {
+            return Err(match e.kind() {
+                csv::ErrorKind::Utf8 { err, .. } => {
+                    let message = "not UTF-8 text: save the file as UTF-8 CSV";
+                    match headers.get(err.field()) {
+                        Some(col) => Error::cell(row, col, message),
+                        None => Error::row(row, message),
+                    }
+                }
+                _ => Error::row(row, format!("unreadable CSV: {e}")),
+            });
+        }
+    };
+    if rec.len() != headers.len() {
+        let cells = match rec.len() {
+            1 if rec[0].is_empty() => "an empty row".to_string(),
+            1 => "1 cell".to_string(),
+            n => format!("{n} cells"),
+        };
+        return Err(Error::row(
+            row,
+            format!("{cells} where the header has {} columns", headers.len()),
+        ));
+    }
+    Ok(rec)
 }
 
 /// A finite number from a cell, or an error naming the row and column.

@@ -74,18 +74,7 @@ pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
     let mut seen = std::collections::HashSet::new();
     for (r, rec) in rdr.records().enumerate() {
         let row = r + 1;
-        let rec = rec.map_err(|e| Error::cell(row, "row", e.to_string()))?;
-        if rec.len() != headers.len() {
-            return Err(Error::cell(
-                row,
-                "row",
-                format!(
-                    "{} columns where the header has {}",
-                    rec.len(),
-                    headers.len()
-                ),
-            ));
-        }
+        let rec = super::csv_record(row, rec, &headers)?;
         let id = rec.get(id_col).unwrap_or("").trim().to_string();
         if id.is_empty() {
             return Err(Error::cell(row, "target", "empty target id"));
@@ -153,5 +142,14 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("row 1") && e.contains("y_mm"), "{e}");
+    }
+
+    #[test]
+    fn short_rows_are_named() {
+        let e = targets_from_csv("target,q1_deg,q2_deg\na,1,2\nb,1\n".as_bytes(), 2).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "row 2 after the header: 2 cells where the header has 3 columns"
+        );
     }
 }

@@ -340,6 +340,79 @@ async fn bad_requests_are_refused_and_change_nothing() {
         Some(2),
     )
     .await;
+    // Rows with a cell too few or too many, and text that is not UTF-8, in
+    // a later batch: the row in this upload, no column, nothing stored (a
+    // short row used to be padded with empty cells and accepted).
+    let short = lines[30].rsplit_once(',').unwrap().0.to_string();
+    let long = format!("{},extra", lines[30]);
+    let batch = |last: &str| {
+        let mut b = vec![header.to_string()];
+        b.extend(lines[26..30].iter().map(|s| s.to_string()));
+        b.push(last.to_string());
+        b.join("\n")
+    };
+    for (last, cells) in [(&short, 13), (&long, 15)] {
+        let e = refused(
+            &app,
+            upload(batch(last)),
+            422,
+            "invalid_input",
+            None,
+            Some(5),
+        )
+        .await;
+        assert!(e.get("field").is_none(), "no one column is at fault: {e}");
+        assert_eq!(
+            e["message"],
+            format!("{cells} cells where the header has 14 columns"),
+            "{e}"
+        );
+    }
+    let mut latin1 = format!("{header}\n{}\n", lines[26]).into_bytes();
+    latin1.extend_from_slice(lines[27].replacen(',', ",\u{1}", 1).as_bytes());
+    let at = latin1.iter().rposition(|&b| b == 1).unwrap();
+    latin1[at] = 0xb0; // a Latin-1 degree sign
+    let e = refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/poses")))
+            .header("content-type", "text/csv")
+            .body(latin1),
+        422,
+        "invalid_input",
+        Some("q1_deg"),
+        Some(2),
+    )
+    .await;
+    assert!(e["message"].as_str().unwrap().contains("UTF-8"), "{e}");
+    // The same short row as the first upload of a new session (it used to
+    // answer 500): 422 naming the row; the session stays empty.
+    let fresh = ok_json(
+        c.post(app.url("/sessions"))
+            .json(&json!({"robot_id": robot_id, "rig_id": rig_id}))
+            .send()
+            .await
+            .unwrap(),
+        201,
+    )
+    .await;
+    let fresh_id = fresh["id"].as_i64().unwrap();
+    let e = refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{fresh_id}/poses")))
+            .header("content-type", "text/csv")
+            .body(batch(&short)),
+        422,
+        "invalid_input",
+        None,
+        Some(5),
+    )
+    .await;
+    assert_eq!(
+        e["message"], "13 cells where the header has 14 columns",
+        "{e}"
+    );
+    let s = ok_json(app.get(&format!("/sessions/{fresh_id}")).await, 200).await;
+    assert_eq!(s["n_poses"], 0, "{s}");
     // Empty upload, wrong media type, JSON that is not an array, JSON with a nested value.
     refused(
         &app,
