@@ -224,8 +224,9 @@ fn compensate_at_a_temperature() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// A short row and a long row: the error names the file and the row once,
-/// counted after the header (as the service's `row`).
+/// A short row, a long row and a semicolon-separated export: the error
+/// names the file and the row once, counted after the header (as the
+/// service's `row`), or says the file must be comma-separated.
 #[test]
 fn bad_poses_files_are_named_cleanly() {
     let dir = std::env::temp_dir().join(format!("drawcal-cli-rows-{}", std::process::id()));
@@ -264,6 +265,17 @@ fn bad_poses_files_are_named_cleanly() {
     let err = identify("long.csv", long.join("\n"));
     assert!(
         err.contains("long.csv: row 2 after the header: 15 cells where the header has 14 columns"),
+        "{err}"
+    );
+    let semi = lines
+        .iter()
+        .map(|l| l.replace(',', ";"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let err = identify("semicolons.csv", semi);
+    assert!(
+        err.contains("semicolons.csv: header: the file must be comma-separated")
+            && !err.contains("missing column"),
         "{err}"
     );
     std::fs::remove_dir_all(&dir).ok();

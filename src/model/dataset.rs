@@ -365,6 +365,26 @@ mod tests {
     }
 
     #[test]
+    fn a_semicolon_or_tab_separated_file_is_told_to_use_commas() {
+        for sep in [";", "\t"] {
+            let csv = format!(
+                "pose{sep}q1_deg{sep}q2_deg{sep}l1_mm{sep}l2_mm{sep}l3_mm\n1{sep}10,5{sep}20{sep}1{sep}2{sep}3\n"
+            );
+            let e = Dataset::from_csv(csv.as_bytes(), &robot(), &rig())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.starts_with("header: the file must be comma-separated"),
+                "{e}"
+            );
+        }
+        let e = string_readings_from_csv("pose;l1_mm;l2_mm;l3_mm\n1;1;2;3\n".as_bytes(), &rig())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("comma-separated"), "{e}");
+    }
+
+    #[test]
     fn refuses_duplicate_ids_and_limits() {
         let csv = "pose,q1_deg,q2_deg,l1_mm,l2_mm,l3_mm\n1,10,20,1,2,3\n1,10,20,1,2,3\n";
         assert!(

@@ -28,6 +28,10 @@ pub(crate) fn finite(field: &str, v: f64) -> Result<f64> {
 
 /// A CSV reader that trims cells and tolerates ragged rows (so a short row
 /// is reported by [`csv_record`] with its row number), with its header.
+///
+/// A header that is one column holding `;` or a tab (a file exported with
+/// another separator, e.g. by a spreadsheet set to a European locale) is
+/// refused with a message saying the file must be comma-separated.
 pub(crate) fn csv_with_header<R: std::io::Read>(
     input: R,
 ) -> Result<(csv::Reader<R>, csv::StringRecord)> {
@@ -47,7 +51,30 @@ pub(crate) fn csv_with_header<R: std::io::Read>(
             return Err(Error::field("header", message));
         }
     };
+    if headers.len() == 1 {
+        let only = &headers[0];
+        let sep = [(';', "';'"), ('\t', "tab")]
+            .into_iter()
+            .find(|(c, _)| only.contains(*c));
+        if let Some((_, sep)) = sep {
+            return Err(Error::field(
+                "header",
+                format!(
+                    "the file must be comma-separated (with '.' as the decimal point): its header reads as one column holding {sep} separators ('{}')",
+                    abbreviate(&only.replace('\t', "\\t"), 60)
+                ),
+            ));
+        }
+    }
     Ok((rdr, headers))
+}
+
+/// `s` cut to at most `max` characters, with an ellipsis when cut.
+fn abbreviate(s: &str, max: usize) -> String {
+    match s.char_indices().nth(max) {
+        Some((i, _)) => format!("{}...", &s[..i]),
+        None => s.to_string(),
+    }
 }
 
 /// A record of a table read by [`csv_with_header`], checked: readable

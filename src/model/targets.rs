@@ -145,11 +145,15 @@ mod tests {
     }
 
     #[test]
-    fn short_rows_are_named() {
+    fn short_rows_and_other_separators_are_named() {
         let e = targets_from_csv("target,q1_deg,q2_deg\na,1,2\nb,1\n".as_bytes(), 2).unwrap_err();
         assert_eq!(
             e.to_string(),
             "row 2 after the header: 2 cells where the header has 3 columns"
         );
+        let e = targets_from_csv("target;q1_deg;q2_deg\na;1;2\n".as_bytes(), 2)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("must be comma-separated"), "{e}");
     }
 }

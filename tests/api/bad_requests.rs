@@ -384,6 +384,26 @@ async fn bad_requests_are_refused_and_change_nothing() {
     )
     .await;
     assert!(e["message"].as_str().unwrap().contains("UTF-8"), "{e}");
+    // A semicolon-separated export (decimal commas): told to use commas.
+    let semi = [header, lines[26], lines[27]]
+        .map(|l| l.replace(',', ";").replace('.', ","))
+        .join("\n");
+    let e = refused(
+        &app,
+        upload(semi),
+        422,
+        "invalid_input",
+        Some("header"),
+        None,
+    )
+    .await;
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("must be comma-separated"),
+        "{e}"
+    );
     // The same short row as the first upload of a new session (it used to
     // answer 500): 422 naming the row; the session stays empty.
     let fresh = ok_json(
