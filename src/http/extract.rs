@@ -10,6 +10,40 @@ use serde::de::DeserializeOwned;
 
 use super::error::ApiError;
 
+/// The service's request body limit (`drawcal serve --max-upload-bytes`),
+/// put into every request's extensions by [`super::router`] so that the 413
+/// answer can say what the limit is and how to raise it.
+#[derive(Debug, Clone, Copy)]
+pub struct BodyLimit {
+    /// Largest accepted request body (bytes).
+    pub max_upload_bytes: usize,
+}
+
+impl BodyLimit {
+    /// The message of the 413 answer: the limit and how to raise it.
+    pub fn too_large_message(&self) -> String {
+        format!(
+            "request body too large: the service accepts at most {} bytes ({}) per request; raise the limit by starting it with a larger --max-upload-bytes (environment DRAWCAL_MAX_UPLOAD_BYTES), or send poses in several batches",
+            self.max_upload_bytes,
+            human_bytes(self.max_upload_bytes)
+        )
+    }
+}
+
+/// A byte count in MiB or KiB (two decimals at most).
+fn human_bytes(n: usize) -> String {
+    let (value, unit) = if n >= 1 << 20 {
+        (n as f64 / (1u64 << 20) as f64, "MiB")
+    } else if n >= 1 << 10 {
+        (n as f64 / 1024.0, "KiB")
+    } else {
+        return format!("{n} B");
+    };
+    let text = format!("{value:.2}");
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    format!("{text} {unit}")
+}
+
 /// The request body as bytes, with the body limit answered as 413.
 pub struct RawBody {
     /// `Content-Type` (lower case, parameters dropped), if any.
@@ -33,9 +67,13 @@ impl<S: Send + Sync> FromRequest<S> for RawBody {
                     .trim()
                     .to_ascii_lowercase()
             });
+        let limit = req.extensions().get::<BodyLimit>().copied();
         let bytes = Bytes::from_request(req, state).await.map_err(|r| {
             if r.status() == StatusCode::PAYLOAD_TOO_LARGE {
-                ApiError::PayloadTooLarge(format!("request body too large: {}", r.body_text()))
+                ApiError::PayloadTooLarge(match limit {
+                    Some(l) => l.too_large_message(),
+                    None => format!("request body too large: {}", r.body_text()),
+                })
             } else {
                 ApiError::BadRequest(r.body_text())
             }
@@ -132,5 +170,25 @@ impl<S: Send + Sync, T: DeserializeOwned> FromRequestParts<S> for ApiQuery<T> {
             .await
             .map(|q| ApiQuery(q.0))
             .map_err(|r| ApiError::BadRequest(r.body_text()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_limit_is_said_in_bytes_and_mib_with_the_flag() {
+        let m = BodyLimit {
+            max_upload_bytes: 16 * 1024 * 1024,
+        }
+        .too_large_message();
+        assert!(
+            m.contains("16777216 bytes (16 MiB)") && m.contains("--max-upload-bytes"),
+            "{m}"
+        );
+        assert_eq!(human_bytes(64 * 1024), "64 KiB");
+        assert_eq!(human_bytes(1536 * 1024), "1.5 MiB");
+        assert_eq!(human_bytes(100), "100 B");
     }
 }

@@ -233,6 +233,7 @@ pub fn router(state: AppState, max_upload_bytes: usize) -> Router {
         .fallback(|| async { ApiError::NotFound("no such route".into()) })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
         .layer(DefaultBodyLimit::max(max_upload_bytes))
+        .layer(axum::Extension(extract::BodyLimit { max_upload_bytes }))
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(
             TraceLayer::new_for_http()

@@ -488,7 +488,7 @@ async fn bad_requests_are_refused_and_change_nothing() {
     assert!(big.len() > 64 * 1024);
     // (`connection: close`: the server answers 413 before reading the whole
     // body and drops the connection; the client must not pool it.)
-    refused(
+    let e = refused(
         &app,
         upload(big).header("connection", "close"),
         413,
@@ -497,6 +497,14 @@ async fn bad_requests_are_refused_and_change_nothing() {
         None,
     )
     .await;
+    // The answer says the limit and how to raise it.
+    let m = e["message"].as_str().unwrap();
+    assert!(
+        m.contains("65536 bytes (64 KiB)")
+            && m.contains("--max-upload-bytes")
+            && m.contains("DRAWCAL_MAX_UPLOAD_BYTES"),
+        "{e}"
+    );
 
     // Bad job options.
     refused(
