@@ -43,6 +43,7 @@ fn identify_then_compensate() {
         "{stdout}"
     );
     assert!(stdout.contains("j3.d"), "the alias is named: {stdout}");
+    assert!(!stdout.contains("WARNING"), "{stdout}");
     let rep: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     for key in [
@@ -60,6 +61,7 @@ fn identify_then_compensate() {
         assert!(rep.get(key).is_some(), "report lacks {key}");
     }
     assert!(rep["deviations"][1].get("theta_offset_deg_sigma").is_some());
+    assert_eq!(rep["warnings"], serde_json::json!([]));
     assert!(rep["stats"]["test"]["after"]["x"]["max_abs_mm"].is_number());
     // The calibrated robot can be fed back in as a robot.json.
     drawcal::model::Robot::from_json(&rep["calibrated_robot"].to_string()).unwrap();
@@ -277,6 +279,65 @@ fn bad_poses_files_are_named_cleanly() {
         err.contains("semicolons.csv: header: the file must be comma-separated")
             && !err.contains("missing column"),
         "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// poses.csv written in radians: identified (exit 0) with the warning on
+/// stderr, in the summary and in the report.
+#[test]
+fn radians_in_degree_columns_are_warned_about() {
+    let dir = std::env::temp_dir().join(format!("drawcal-cli-rad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let poses = std::fs::read_to_string(data("poses.csv")).unwrap();
+    let mut lines = poses.lines();
+    let header = lines.next().unwrap();
+    let mut out = vec![header.to_string()];
+    for line in lines {
+        let cells: Vec<String> = line
+            .split(',')
+            .enumerate()
+            .map(|(i, c)| match i {
+                1..=6 => format!("{:.6}", c.parse::<f64>().unwrap().to_radians()),
+                _ => c.to_string(),
+            })
+            .collect();
+        out.push(cells.join(","));
+    }
+    let rad = dir.join("radians.csv");
+    std::fs::write(&rad, out.join("\n")).unwrap();
+    let report = dir.join("report.json");
+    let run = bin()
+        .args(["identify", "--physics", "off", "--robot"])
+        .arg(data("robot.json"))
+        .arg("--rig")
+        .arg(data("rig.json"))
+        .arg("--poses")
+        .arg(&rad)
+        .arg("--out")
+        .arg(&report)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr),
+    );
+    assert!(run.status.success(), "warned, not refused: {stderr}");
+    assert!(
+        stderr.contains("warning: the joint angles look like radians"),
+        "{stderr}"
+    );
+    assert!(
+        stdout.contains("WARNING: the joint angles look like radians"),
+        "{stdout}"
+    );
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(
+        rep["warnings"].as_array().unwrap().len(),
+        1,
+        "{}",
+        rep["warnings"]
     );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -232,6 +232,10 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
         identify::identify(&robot, &rig, &data, &opts, &Bar(bar.clone())),
     )?;
     bar.finish_and_clear();
+    // In the summary too, but a summary sent to a file must not hide them.
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
+    }
     print!(
         "{}",
         summary::render(&report, &robot, data.poses.len(), data.n_strings)

@@ -6,7 +6,8 @@ use std::fmt::Write;
 use crate::identify::report::{ErrorStats, Report};
 use crate::model::Robot;
 
-/// Render the summary of a report.
+/// Render the summary of a report. The report's warnings come right
+/// after the first line, each as `WARNING: ...`.
 pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> String {
     let mut s = String::new();
     let source = if n_strings > 0 {
@@ -22,6 +23,9 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
         n_poses,
         source
     );
+    for w in &r.warnings {
+        let _ = writeln!(s, "WARNING: {w}");
+    }
     let _ = writeln!(
         s,
         "split: {} train, {} test ({})",

@@ -13,6 +13,10 @@
 //! 5. "after": Levenberg-Marquardt on all identifiable parameters, optionally
 //!    with a robust loss that down-weights and flags outlier poses;
 //! 6. covariance, statistics, the paper's one-step method beside it.
+//!
+//! Input that parses but looks wrong (angles in radians in the `_deg`
+//! columns) does not stop it: it is named in the report's `warnings`
+//! ([`warnings`]).
 
 pub mod identifiability;
 pub mod lm;
@@ -20,6 +24,7 @@ pub mod paper;
 pub mod problem;
 pub mod report;
 pub mod stats;
+pub mod warnings;
 
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
@@ -511,6 +516,7 @@ pub fn identify(
     progress: &dyn Progress,
 ) -> Result<Report> {
     let session = Session::new(robot, rig, data, opts)?;
+    let warnings = warnings::input_warnings(&session);
     let geo = geometric(&session, opts, progress)?;
     let l = session.chain.layout;
     let string_sigma = session
@@ -745,6 +751,7 @@ pub fn identify(
         per_pose,
         findings,
         physics_notes,
+        warnings,
     })
 }
 

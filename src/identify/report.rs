@@ -320,4 +320,11 @@ pub struct Report {
     /// sensor side, joints, time) and the candidates it tried and rejected.
     #[serde(default)]
     pub physics_notes: Vec<String>,
+    /// Warnings about the input, one sentence each: what did not stop the
+    /// identification but makes its result suspect, e.g. joint angles
+    /// that look like radians in the `q*_deg` columns (the whole file, or
+    /// single poses; see [`super::warnings`]). Empty when nothing is
+    /// suspect; reports written before it existed read as empty.
+    #[serde(default)]
+    pub warnings: Vec<String>,
 }
