@@ -234,7 +234,12 @@ async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot
 
 /// Add poses to a session, all at once or in batches. Every row (with the
 /// rows stored before) is validated first; a bad upload stores nothing and
-/// the answer names the row (1-based in this upload) and the column.
+/// the answer names the row (`row`: 1-based in this upload, counted after
+/// the header, as `drawcal identify` counts it) and, for a bad cell, the
+/// column (`field`); a row with too few or too many cells has no `field`.
+/// A CSV separated by `;` or tabs is refused with `field: header`. Joint
+/// angles that only look like radians are stored; the identification
+/// warns about them in the report's `warnings`.
 #[utoipa::path(post, path = "/sessions/{id}/poses", tag = "sessions",
     params(("id" = i64, Path, description = "Session id")),
     request_body(
@@ -247,7 +252,7 @@ async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot
         (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
         (status = 404, description = "No such session", body = ErrorBody),
         (status = 409, description = "Another upload was stored meanwhile", body = ErrorBody),
-        (status = 413, description = "Body too large", body = ErrorBody),
+        (status = 413, description = "Body over the service's --max-upload-bytes (the message gives the limit)", body = ErrorBody),
         (status = 415, description = "Neither text/csv nor application/json", body = ErrorBody),
         (status = 422, description = "A bad row or column (named)", body = ErrorBody)))]
 pub async fn upload_poses(
