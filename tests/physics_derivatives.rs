@@ -121,6 +121,7 @@ fn string_effects_match_finite_differences() {
             (
                 Kind::ThermalExpansion {
                     driver: ThermalDriver::Temperature,
+                    tau_h: None,
                 },
                 vec![2e-5],
             ),
@@ -164,8 +165,11 @@ fn point_data_and_mass_free_compliance_match_finite_differences() {
                 vec![1e-4, -2e-4],
             ),
             (
+                // A warm-up that settles (the driver of a session
+                // without temperature): the basis is the settling curve.
                 Kind::ThermalExpansion {
-                    driver: ThermalDriver::Temperature,
+                    driver: ThermalDriver::Time,
+                    tau_h: Some(0.5),
                 },
                 vec![2e-5],
             ),

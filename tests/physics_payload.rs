@@ -3,6 +3,8 @@
 //! it, with link masses (one compliance) and without (unit-mass
 //! regressors), and compensation assumes the session's payload.
 
+mod common;
+
 use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric};
 use drawcal::model::Dataset;
 use drawcal::physics::{self, simulate};
@@ -32,21 +34,8 @@ fn analyse(sim: &simulate::Simulated, data: &Dataset) -> (physics::Analysis, f64
 
 /// The same recording with the payload column removed.
 fn without_payload(sim: &simulate::Simulated) -> Dataset {
-    let mut lines = sim.poses_csv.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let col = header.iter().position(|h| *h == "payload_kg").unwrap();
-    let drop = |l: &str| {
-        l.split(',')
-            .enumerate()
-            .filter(|(i, _)| *i != col)
-            .map(|(_, c)| c)
-            .collect::<Vec<_>>()
-            .join(",")
-    };
-    let csv: Vec<String> = std::iter::once(drop(&header.join(",")))
-        .chain(lines.map(drop))
-        .collect();
-    Dataset::from_csv(csv.join("\n").as_bytes(), &sim.robot, &sim.rig).unwrap()
+    let csv = common::drop_columns(&sim.poses_csv, &["payload_kg"]);
+    Dataset::from_csv(csv.as_bytes(), &sim.robot, &sim.rig).unwrap()
 }
 
 fn check(robot: &str, seed: u64) {

@@ -198,7 +198,8 @@ fn thermal_of(report: &Report) -> Option<ThermalInfo> {
         if !matches!(
             e.kind,
             Kind::ThermalExpansion {
-                driver: ThermalDriver::Temperature
+                driver: ThermalDriver::Temperature,
+                ..
             }
         ) {
             return None;
@@ -222,7 +223,8 @@ pub fn has_time_thermal(report: &Report) -> bool {
             matches!(
                 e.kind,
                 Kind::ThermalExpansion {
-                    driver: ThermalDriver::Time
+                    driver: ThermalDriver::Time | ThermalDriver::Order,
+                    ..
                 }
             )
         })

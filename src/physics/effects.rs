@@ -32,6 +32,9 @@ pub enum ThermalDriver {
     Temperature,
     /// Hours since the session began (no usable temperature).
     Time,
+    /// Thousands of rows since the first (neither temperature nor time
+    /// recorded: the visiting order stands in for the clock).
+    Order,
 }
 
 /// One effect of the catalogue. Joint and sensor indices are 0-based here
@@ -71,10 +74,18 @@ pub enum Kind {
         /// Harmonic h (1 = once per revolution).
         harmonic: u32,
     },
-    /// Every nominal a and d scales by `1 + k · driver`.
+    /// Every nominal a and d scales by `1 + k · driver`. Driven by time or
+    /// row order with `tau_h`, by the warm-up curve `tau_h · (1 - exp(-h /
+    /// tau_h))` of the driver `h` (hours, or thousands of rows, since the
+    /// first pose) instead: settling towards a steady temperature with that
+    /// time constant, in the driver's unit; `k` is then the initial rate.
     ThermalExpansion {
-        /// Temperature or time.
+        /// Temperature, time or row order.
         driver: ThermalDriver,
+        /// Time constant of a warm-up that settles (h, or thousands of rows
+        /// with [`ThermalDriver::Order`]); none: linear.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        tau_h: Option<f64>,
     },
     /// String `sensor_index` reads `s · l` too long.
     SensorScale {
@@ -213,13 +224,23 @@ impl Kind {
                 joint_index + 1,
                 harmonic
             ),
-            Kind::ThermalExpansion { driver } => match driver {
-                ThermalDriver::Temperature => {
+            Kind::ThermalExpansion { driver, tau_h } => match (driver, tau_h) {
+                (ThermalDriver::Temperature, _) => {
                     "the links grow with the ambient temperature (thermal expansion of the arm)".into()
                 }
-                ThermalDriver::Time => {
+                (ThermalDriver::Time, None) => {
                     "the links grow steadily during the session (warm-up; no temperature recorded, time used instead)".into()
                 }
+                (ThermalDriver::Time, Some(tau)) => format!(
+                    "the links grow during the session and settle, like an arm warming up towards a steady temperature with a time constant of about {tau:.2} h (no temperature recorded, time used instead)"
+                ),
+                (ThermalDriver::Order, None) => {
+                    "the links grow steadily through the session (warm-up; neither time nor temperature recorded, the row order stands in for the clock)".into()
+                }
+                (ThermalDriver::Order, Some(tau)) => format!(
+                    "the links grow during the session and settle, like an arm warming up towards a steady temperature, over about {:.0} rows (neither time nor temperature recorded, the row order stands in for the clock)",
+                    tau * 1000.0
+                ),
             },
             Kind::SensorScale { sensor_index } => format!(
                 "string {} reads long or short in proportion to its length (scale error of the encoder drum)",
@@ -405,10 +426,13 @@ impl Context {
         // A temperature that never changes cannot drive anything; then the
         // session clock stands in for warm-up.
         let use_temp = temps.len() == poses.len() && temp_range > 0.05;
+        let timed = poses.iter().all(|p| p.time_s.is_some());
         let thermal_driver = if use_temp {
             ThermalDriver::Temperature
-        } else {
+        } else if timed {
             ThermalDriver::Time
+        } else {
+            ThermalDriver::Order
         };
         let temp_ref = poses.first().and_then(|p| p.temp_c).unwrap_or(0.0);
         let t_ref = poses.first().and_then(|p| p.time_s).unwrap_or(0.0);
@@ -455,10 +479,10 @@ impl Context {
                         }
                     })
                     .collect();
-                let thermal = if use_temp {
-                    p.temp_c.unwrap_or(temp_ref) - temp_ref
-                } else {
-                    (p.time_s.unwrap_or(i as f64) - t_ref) / 3600.0
+                let thermal = match thermal_driver {
+                    ThermalDriver::Temperature => p.temp_c.unwrap_or(temp_ref) - temp_ref,
+                    ThermalDriver::Time => (p.time_s.unwrap_or(t_ref) - t_ref) / 3600.0,
+                    ThermalDriver::Order => i as f64 / 1000.0,
                 };
                 PoseContext {
                     q_rad: p.q_rad.to_vec(),
@@ -486,7 +510,7 @@ impl Context {
             thermal_driver,
             lengths,
             temp_ref_c: use_temp.then_some(temp_ref),
-            timed: poses.iter().all(|p| p.time_s.is_some()),
+            timed,
             payload_ref_kg,
             centre_rig,
             poses: ctx_poses,
@@ -591,7 +615,12 @@ impl Context {
                 out.dq[j] = s;
                 out.dq[n + j] = c;
             }
-            Kind::ThermalExpansion { .. } => out.thermal[0] = pc.thermal,
+            Kind::ThermalExpansion { tau_h, .. } => {
+                out.thermal[0] = match tau_h {
+                    Some(tau) => tau * (1.0 - (-pc.thermal / tau).exp()),
+                    None => pc.thermal,
+                }
+            }
             Kind::SensorScale { sensor_index } => {
                 let k = *sensor_index;
                 out.dl[k] = (pc.point_rig - self.anchors[k]).norm() - self.r_mm;

@@ -88,9 +88,13 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
         Kind::JointPeriodic { joint_index, .. } => {
             d(format!("joint {} angle", joint_index + 1), "deg")
         }
-        Kind::ThermalExpansion { driver } => match driver {
+        Kind::ThermalExpansion { driver, .. } => match driver {
             ThermalDriver::Temperature => d("temperature change since the first pose".into(), "K"),
             ThermalDriver::Time => d("hours since the session began".into(), "h"),
+            ThermalDriver::Order => d(
+                "rows since the first (no time_s), thousands".into(),
+                "1000 rows",
+            ),
         },
         Kind::SensorScale { sensor_index } => {
             d(format!("length of string {}", sensor_index + 1), "mm")

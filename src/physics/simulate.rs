@@ -782,6 +782,7 @@ fn effect_model(
         "thermal_expansion" => (
             Kind::ThermalExpansion {
                 driver: ctx.thermal_driver,
+                tau_h: None,
             },
             vec![mag * 1e-6],
         ),

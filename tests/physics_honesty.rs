@@ -1,0 +1,115 @@
+//! What the analysis must not do: name a wrong effect where the recording
+//! lacks a column the catalogue's model expects, keep a partner that only
+//! rides on another effect's held-out gain, or stay silent about a
+//! mismatch no catalogue effect explains.
+
+mod common;
+
+use drawcal::identify::report::Finding;
+use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric};
+use drawcal::model::Dataset;
+use drawcal::physics::{self, simulate};
+
+fn simulated(spec: serde_json::Value) -> simulate::Simulated {
+    simulate::generate(&serde_json::from_value(spec).unwrap()).unwrap()
+}
+
+/// Findings and final held-out RMS of the analysis on `data`.
+fn analyse(sim: &simulate::Simulated, data: &Dataset) -> (Vec<Finding>, f64) {
+    let opts = IdentifyOptions::default();
+    let s = Session::new(&sim.robot, &sim.rig, data, &opts).unwrap();
+    let g = geometric(&s, &opts, &NoProgress).unwrap();
+    let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
+    let e = &a.test_errors;
+    let rms = (e.iter().map(|v| v.norm_squared()).sum::<f64>() / e.len() as f64).sqrt();
+    (a.findings, rms)
+}
+
+fn thermal_session(seed: u64) -> simulate::Simulated {
+    // The simulator's temperature settles towards its rise with a time
+    // constant of 30 min: an arm warming up.
+    simulated(serde_json::json!({
+        "robot": "er3a", "n_poses": 150, "seed": seed,
+        "effects": [{"effect": "thermal_expansion", "size_x_noise": 6}]
+    }))
+}
+
+/// Without `temp_c` the clock drives thermal expansion, as a warm-up that
+/// settles (its time constant scanned); a linear growth in time leaves the
+/// curvature for rig steps to soak up. Measured before the scan: a
+/// spurious rig step on every one of these seeds.
+#[test]
+fn thermal_without_temperature_is_a_settling_warm_up_and_nothing_else() {
+    for seed in [1, 2, 3] {
+        let sim = thermal_session(seed);
+        let csv = common::drop_columns(&sim.poses_csv, &["temp_c"]);
+        let data = Dataset::from_csv(csv.as_bytes(), &sim.robot, &sim.rig).unwrap();
+        let (findings, rms) = analyse(&sim, &data);
+        let names: Vec<&str> = findings.iter().map(|f| f.effect.as_str()).collect();
+        assert_eq!(names, ["thermal_expansion"], "seed {seed}: {findings:#?}");
+        let f = &findings[0];
+        assert_eq!(f.parameters["driver"], "time", "seed {seed}");
+        assert!(
+            f.parameters["tau_h"].as_f64().is_some(),
+            "seed {seed}: {f:#?}"
+        );
+        assert!(f.unit.contains("growth over the session"), "{}", f.unit);
+        assert!(
+            rms < 1.25 * sim.point_noise_mm,
+            "seed {seed}: held-out {rms} vs point noise {}",
+            sim.point_noise_mm
+        );
+    }
+}
+
+/// Without time either, the row order stands in for the clock, in its own
+/// unit (never hours of rows).
+#[test]
+fn thermal_without_a_clock_is_counted_in_rows() {
+    let sim = thermal_session(2);
+    let csv = common::drop_columns(&sim.poses_csv, &["temp_c", "time_s"]);
+    let data = Dataset::from_csv(csv.as_bytes(), &sim.robot, &sim.rig).unwrap();
+    let (findings, _) = analyse(&sim, &data);
+    let names: Vec<&str> = findings.iter().map(|f| f.effect.as_str()).collect();
+    assert_eq!(names, ["thermal_expansion"], "{findings:#?}");
+    assert_eq!(findings[0].parameters["driver"], "order");
+    assert!(findings[0].unit.contains("rows"), "{}", findings[0].unit);
+    assert!(!findings[0].unit.contains(" h"), "{}", findings[0].unit);
+}
+
+/// A pair is kept only when each member improves the held-out readings
+/// beyond the other alone. Before that gate this session (found by an
+/// independent cross-check) kept an anchor step on string 1 beside the
+/// thermal expansion: chi-square just over its threshold on the train
+/// poses, the held-out RMS 0.0538 -> 0.0525 mm, quoted with the pair's
+/// held-out z.
+#[test]
+fn a_partner_riding_on_the_lead_is_not_kept() {
+    let sim = thermal_session(6);
+    let (findings, _) = analyse(&sim, &sim.dataset);
+    let names: Vec<&str> = findings.iter().map(|f| f.effect.as_str()).collect();
+    assert_eq!(names, ["thermal_expansion"], "{findings:#?}");
+}
+
+/// A once-per-third-revolution error (third harmonic: the catalogue tries
+/// the first two) leaves a robot-side residual far above what the strings'
+/// own disagreement explains; it is reported as unexplained with where it
+/// lives, not silently dropped.
+#[test]
+fn an_error_outside_the_catalogue_is_reported_as_unexplained() {
+    let sim = simulated(serde_json::json!({
+        "robot": "er3a", "n_poses": 120, "seed": 41,
+        "effects": [{"effect": "joint_periodic", "joint": 1, "harmonic": 3, "size_x_noise": 8}]
+    }));
+    let (findings, rms) = analyse(&sim, &sim.dataset);
+    let u = findings
+        .iter()
+        .find(|f| f.effect == "unexplained")
+        .unwrap_or_else(|| panic!("{findings:#?}"));
+    assert!(rms > 2.0 * sim.point_noise_mm, "{rms}");
+    assert!(
+        u.evidence.contains("largest") || u.evidence.contains("varies"),
+        "{}",
+        u.evidence
+    );
+}
