@@ -125,8 +125,14 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
     for note in &r.physics_notes {
         let _ = writeln!(s, "physics: {note}");
     }
+    let ran = !r
+        .physics_notes
+        .iter()
+        .any(|n| n.starts_with(crate::identify::PHYSICS_NOT_RUN));
     if r.findings.is_empty() {
-        let _ = writeln!(s, "physics: nothing found beyond the geometric model");
+        if ran {
+            let _ = writeln!(s, "physics: nothing found beyond the geometric model");
+        }
     } else {
         let _ = writeln!(s, "physics found beyond the geometric model:");
         for f in &r.findings {

@@ -507,6 +507,15 @@ pub fn sigmas(jtj: &DMatrix<f64>, sigma: f64) -> Vec<f64> {
     }
 }
 
+/// Train RMS (mm) after the geometric calibration beyond which the physics
+/// analysis is not run: physical effects are fractions of a millimetre, and
+/// a calibrated arm that misses by more than this is a wrong model or wrong
+/// data (angles in radians, another robot, a swapped string), not physics.
+pub const PHYSICS_MAX_GEOMETRIC_RMS_MM: f64 = 10.0;
+
+/// How a physics note that says the analysis did not run begins.
+pub const PHYSICS_NOT_RUN: &str = "not run";
+
 /// Run the whole identification and build the report.
 pub fn identify(
     robot: &Robot,
@@ -545,7 +554,20 @@ pub fn identify(
     let mut findings = vec![];
     let mut physics_notes = vec![];
     let mut accepted = None;
-    if opts.physics && opts.method == Method::Lm {
+    let train_rms_mm = {
+        let e = session.errors(&after_values, &session.train);
+        (e.iter().map(|v| v.norm_squared()).sum::<f64>() / e.len().max(1) as f64).sqrt()
+    };
+    let broken = train_rms_mm > PHYSICS_MAX_GEOMETRIC_RMS_MM;
+    if !opts.physics {
+        physics_notes.push(format!("{PHYSICS_NOT_RUN} (physics off)"));
+    }
+    if opts.physics && opts.method == Method::Lm && broken {
+        physics_notes.push(format!(
+            "{PHYSICS_NOT_RUN}: the calibrated geometric model still misses the train poses by {train_rms_mm:.1} mm RMS (more than {PHYSICS_MAX_GEOMETRIC_RMS_MM} mm), so it does not describe these recordings and any effect fitted on top would fit a broken model; check the units (degrees, mm), the robot model and the rig first"
+        ));
+    }
+    if opts.physics && opts.method == Method::Lm && !broken {
         progress.update("physics analysis", 0.0);
         let an = crate::physics::analyse(&session, &geo, opts, progress)?;
         if !an.effects.is_empty() {
