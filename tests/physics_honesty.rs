@@ -113,3 +113,60 @@ fn an_error_outside_the_catalogue_is_reported_as_unexplained() {
         u.evidence
     );
 }
+
+/// On a positioner whose first axis is vertical the gravity torque on
+/// joint 2 is a pure sinusoid of its angle: a compliance there and a
+/// once-per-turn error of the joint are the same model. Whichever name
+/// scores better, the evidence says the other explains as much.
+#[test]
+fn indistinguishable_models_are_named_as_such() {
+    let sim = simulated(serde_json::json!({
+        "robot": "tests/data/positioner_sim/robot.json",
+        "rig": "tests/data/positioner_sim/rig.json",
+        "n_poses": 120, "seed": 8,
+        "effects": [{"effect": "joint_compliance", "joint": 2, "size_x_noise": 8}]
+    }));
+    let (findings, _) = analyse(&sim, &sim.dataset);
+    let f = findings
+        .iter()
+        .find(|f| f.joint == Some(2))
+        .unwrap_or_else(|| panic!("{findings:#?}"));
+    let other = match f.effect.as_str() {
+        "joint_compliance" => "joint_periodic",
+        "joint_periodic" => "joint_compliance",
+        e => panic!("{e}: {findings:#?}"),
+    };
+    assert!(
+        f.evidence
+            .contains(&format!("indistinguishable on this data from {other}")),
+        "{}",
+        f.evidence
+    );
+}
+
+/// A compliance on an arm whose robot.json has no link masses is fitted
+/// with unit-mass regressors; with too few of them the part of the gravity
+/// torque they missed (a pure `cos q` term) came back as a second,
+/// invented periodic error on the same joint.
+#[test]
+fn a_mass_free_compliance_is_one_finding() {
+    for seed in [11, 12, 13] {
+        let sim = simulated(serde_json::json!({
+            "robot": "er3a", "n_poses": 150, "seed": seed,
+            "effects": [{"effect": "joint_compliance", "joint": 2, "size_x_noise": 8}]
+        }));
+        // The masses made the recording; the analysis does not get them.
+        let mut robot = sim.robot.clone();
+        robot.links = None;
+        let opts = IdentifyOptions::default();
+        let s = Session::new(&robot, &sim.rig, &sim.dataset, &opts).unwrap();
+        let g = geometric(&s, &opts, &NoProgress).unwrap();
+        let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
+        let named: Vec<(&str, Option<usize>)> = a
+            .findings
+            .iter()
+            .map(|f| (f.effect.as_str(), f.joint))
+            .collect();
+        assert_eq!(named, [("joint_compliance", Some(2))], "seed {seed}");
+    }
+}

@@ -47,6 +47,9 @@ pub const HELD_OUT_Z: f64 = 2.0;
 /// beyond the other alone by this paired z (positive evidence that it
 /// adds something; the pair as a whole passes [`HELD_OUT_Z`]).
 pub const PAIR_MEMBER_Z: f64 = 1.0;
+/// Another candidate explaining at least this share of a kept effect's
+/// chi-square drop on its own is named beside it as indistinguishable.
+const TWIN_SHARE: f64 = 0.98;
 /// A kept effect's magnitude is at least this many sigma from zero.
 pub const MAGNITUDE_Z: f64 = 2.0;
 /// Cross-validation folds.
@@ -1147,6 +1150,43 @@ pub fn analyse(
                 let evidence = match thermal_doubt(&ctx, &e) {
                     Some(doubt) => format!("{evidence}; {doubt}"),
                     None => evidence,
+                };
+                // Another effect of the catalogue on the same joint or
+                // sensor that explains as much on its own (a positioner
+                // whose gravity torque is a pure sinusoid of the joint
+                // makes compliance and a once-per-turn error the same
+                // model): the name is then a choice, and is said to be.
+                let twins: Vec<String> = scored
+                    .iter()
+                    .filter(|o| {
+                        let k = &cands[o.idx].kind;
+                        let member = prop.members.iter().any(|m| scored[m.0].idx == o.idx);
+                        !member
+                            && (k.joint().is_some() || k.sensor().is_some())
+                            && k.name() != e.kind.name()
+                            && k.joint() == e.kind.joint()
+                            && k.sensor() == e.kind.sensor()
+                            && o.drop >= TWIN_SHARE * s.drop
+                    })
+                    .fold(Vec::<&Scored>::new(), |mut seen, o| {
+                        // One per effect (a step scanned over the session
+                        // would otherwise be listed at every position).
+                        let name = cands[o.idx].kind.name();
+                        if !seen.iter().any(|x| cands[x.idx].kind.name() == name) {
+                            seen.push(o);
+                        }
+                        seen
+                    })
+                    .iter()
+                    .map(|o| format!("{} ({})", cands[o.idx].kind.name(), cands[o.idx].what))
+                    .collect();
+                let evidence = if twins.is_empty() {
+                    evidence
+                } else {
+                    format!(
+                        "{evidence}; indistinguishable on this data from {}: it explains as much of the train residual (the two models predict nearly the same errors at these poses), so the name is the better-scoring of equals",
+                        twins.join(" or ")
+                    )
                 };
                 let mut params = serde_json::to_value(&e).unwrap_or(serde_json::Value::Null);
                 if let serde_json::Value::Object(o) = &mut params {

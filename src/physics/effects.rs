@@ -357,6 +357,13 @@ pub struct PoseInput<'a> {
     pub point_rig: Vector3<f64>,
 }
 
+/// Most unit-mass regressors one mass-free compliance carries: the tool and
+/// the frames of the links the joint lifts (a UR's shoulder carries the
+/// tool, the wrist, the forearm and the elbow: with three, the elbow's pure
+/// `cos q` term was left for a separate periodic error of the same joint).
+/// Each is a coefficient the look-elsewhere threshold charges for.
+pub const MAX_COMPLIANCE_REGRESSORS: usize = 4;
+
 /// `(parameter index, nominal value)` of every nonzero a and d of `robot`:
 /// the lengths thermal expansion scales. A thermal multiplier `m` adds
 /// `m · value` to parameter `index` (of any parameter vector with the
@@ -542,7 +549,7 @@ impl Context {
     /// Independent unit-mass regressors for the compliance of joint `j`
     /// without link masses: frames whose torque columns over the given
     /// poses are not (nearly) combinations of the ones already kept, at
-    /// most three (more would alias the geometry).
+    /// most [`MAX_COMPLIANCE_REGRESSORS`].
     pub fn compliance_regressors(&self, j: usize, poses: &[usize]) -> Vec<usize> {
         let n = self.n_joints;
         let mut kept: Vec<Vec<f64>> = Vec::new();
@@ -568,7 +575,7 @@ impl Context {
                 kept.push(v);
                 idx.push(k);
             }
-            if idx.len() == 3 {
+            if idx.len() == MAX_COMPLIANCE_REGRESSORS {
                 break;
             }
         }
