@@ -170,3 +170,55 @@ fn a_mass_free_compliance_is_one_finding() {
         assert_eq!(named, [("joint_compliance", Some(2))], "seed {seed}");
     }
 }
+
+/// The same out-of-catalogue error seen by a tracker (points, no strings:
+/// no redundancy to measure the noise by): located by the joint whose own
+/// angle error it behaves like. Residuals of neighbours in joint 1's angle
+/// point in opposite directions on the two sides of the axis, so before the
+/// along-the-joint components were compared this was silent.
+#[test]
+fn an_error_outside_the_catalogue_is_located_on_its_joint_with_points() {
+    let sim = simulated(serde_json::json!({
+        "robot": "er3a", "n_poses": 150, "seed": 43,
+        "effects": [{"effect": "joint_periodic", "joint": 1, "harmonic": 3, "size_x_noise": 8}]
+    }));
+    // Tracker-style points: the true T plus the simulated point noise.
+    let truth = sim.truth["true_points_mm"].as_array().unwrap();
+    let n = sim.robot.dof();
+    let mut csv = String::from("pose");
+    for j in 1..=n {
+        csv += &format!(",q{j}_deg");
+    }
+    csv += ",x_mm,y_mm,z_mm,split\n";
+    for (i, pose) in sim.dataset.poses.iter().enumerate() {
+        csv += &pose.id;
+        for q in &pose.q_rad {
+            csv += &format!(",{}", q.to_degrees());
+        }
+        for c in 0..3 {
+            let t = truth[i][c].as_f64().unwrap() + sim.point_noise[i][c];
+            csv += &format!(",{t}");
+        }
+        csv += if i % 10 < 3 { ",test\n" } else { ",train\n" };
+    }
+    let rig = drawcal::model::Rig::from_json(
+        &serde_json::json!({
+            "anchors_mm": [], "r_mm": 0.0,
+            "base_in_rig": serde_json::to_value(&sim.rig.base_in_rig).unwrap()
+        })
+        .to_string(),
+    )
+    .unwrap();
+    let data = Dataset::from_csv(csv.as_bytes(), &sim.robot, &rig).unwrap();
+    let opts = IdentifyOptions::default();
+    let s = Session::new(&sim.robot, &rig, &data, &opts).unwrap();
+    let g = geometric(&s, &opts, &NoProgress).unwrap();
+    let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
+    let u = a
+        .findings
+        .iter()
+        .find(|f| f.effect == "unexplained")
+        .unwrap_or_else(|| panic!("{:#?}", a.findings));
+    assert_eq!(u.parameters["ordering"], "joint 1 angle", "{}", u.evidence);
+    assert_eq!(u.parameters["along_joint_motion"], true, "{}", u.evidence);
+}

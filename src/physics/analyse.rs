@@ -912,8 +912,16 @@ pub fn analyse(
         let r_before = reading_errors(session, &ctx, &p, &accepted);
         let test_before = rms(&e_before);
         let mut progressed = false;
-        for prop in proposals.iter().take(TRIES) {
+        // At most TRIES proposals of each size: a pair turned down because
+        // one member adds nothing does not use up a try of its lead alone.
+        let mut tried = [0usize; 2];
+        for prop in &proposals {
             let single = prop.members.len() == 1;
+            let count = &mut tried[usize::from(!single)];
+            if *count == TRIES {
+                continue;
+            }
+            *count += 1;
             let mut cs: Vec<Candidate> = prop
                 .members
                 .iter()
@@ -1694,36 +1702,72 @@ fn unexplained(
         "the joint configuration (nearest pose in joint space)".into(),
         nearest_in_joint_space(ctx, &session.train),
     ));
-    let alpha = 1e-3 / pairings.len() as f64;
+    // The same joint orderings once more, on the part of each residual
+    // along the direction that joint moves T: an error of the joint's own
+    // angle, smooth in the angle (a harmonic the catalogue lacks, a gear
+    // ratio, a local bump), moves T in opposite directions on the two sides
+    // of the axis, so raw residuals of neighbours in that angle need not
+    // agree while these components do.
+    let along = joint_components(session, ctx, p, &res, rpp);
+    let n_plain = pairings.len();
+    let n_tests = n_plain + along.as_ref().map_or(0, |_| n);
+    let alpha = 1e-3 / n_tests as f64;
     let zcrit = normal_quantile(1.0 - alpha);
-    let mut best: Option<(f64, String)> = None;
-    let mut zs = vec![f64::NAN; pairings.len()];
-    for (pk, (name, pairs)) in pairings.iter().enumerate() {
+    let z_of = |pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64| {
         let (mut s, mut v) = (0.0, 0.0);
         for &(i, k) in pairs {
-            let d: f64 = (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
-            s += d;
-            v += d * d;
+            let x = d(i, k);
+            s += x;
+            v += x * x;
         }
-        if v <= 0.0 {
-            continue;
+        (v > 0.0).then(|| s / v.sqrt())
+    };
+    let mut best: Option<(f64, String)> = None;
+    // Per ordering of `pairings` (the plot's layout), the larger of the raw
+    // and the along-the-joint z for the joints.
+    let mut zs = vec![f64::NAN; n_plain];
+    // The winning ordering, and whether it was the along-the-joint one.
+    let mut winner_at: Option<(usize, bool)> = None;
+    for (pk, (name, pairs)) in pairings.iter().enumerate() {
+        let raw = |i: usize, k: usize| (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
+        let mut tries: Vec<(Option<f64>, bool)> = vec![(z_of(pairs, &raw), false)];
+        if let (Some(a), true) = (&along, pk < n) {
+            let proj = |i: usize, k: usize| a[pk][i] * a[pk][k];
+            tries.push((z_of(pairs, &proj), true));
         }
-        let z = s / v.sqrt();
-        zs[pk] = z;
-        if z > zcrit && best.as_ref().is_none_or(|b| z > b.0) {
-            best = Some((z, name.clone()));
+        for (z, projected) in tries {
+            let Some(z) = z else { continue };
+            if !(zs[pk] >= z) {
+                zs[pk] = z;
+            }
+            if z > zcrit && best.as_ref().is_none_or(|b| z > b.0) {
+                let label = if projected {
+                    format!("{name}, along the direction joint {} moves T", pk + 1)
+                } else {
+                    name.clone()
+                };
+                best = Some((z, label));
+                winner_at = Some((pk, projected));
+            }
         }
     }
     let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
     let excess = robot_side_excess(session, ctx, &res, rpp, n_params);
-    let (winner, located) = match (&best, excess) {
-        (Some((z, name)), _) => (
-            pairings.iter().position(|(nm, _)| nm == name)?,
+    let (winner, located) = match (&best, excess, winner_at) {
+        (Some((z, name)), _, Some((pk, false))) => (
+            pk,
             format!(
                 "residuals of neighbouring poses by {name} agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch varies smoothly with {name}"
             ),
         ),
-        (None, Some(x)) if x.f > x.threshold => {
+        (Some((z, _)), _, Some((pk, true))) => (
+            pk,
+            format!(
+                "along the direction joint {j} moves T, the residuals of poses neighbouring in joint {j}'s angle agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch behaves like an error of joint {j}'s own angle that varies smoothly with the angle, in a form no catalogue effect has",
+                j = pk + 1
+            ),
+        ),
+        (None, Some(x), _) if x.f > x.threshold => {
             // The ordering that comes nearest, for the plot.
             let (w, z) = zs
                 .iter()
@@ -1752,6 +1796,7 @@ fn unexplained(
     ));
     let mut parameters = serde_json::json!({
         "ordering": pairings[winner].0,
+        "along_joint_motion": winner_at.is_some_and(|(_, projected)| projected),
         "z": zs[winner],
     });
     if let Some(x) = excess {
@@ -1842,4 +1887,59 @@ fn robot_side_excess(
         d1,
         d2,
     })
+}
+
+/// Per joint and train pose (position in `session.train`), the component of
+/// the pose's residual, as a displacement of T in the rig frame, along the
+/// direction a turn of that joint moves T (mm). A point residual is the
+/// displacement; string residuals give it by least squares through the
+/// anchors' unit vectors (their robot-side part). `None` with fewer than
+/// three strings.
+fn joint_components(
+    session: &Session,
+    ctx: &Context,
+    p: &[f64],
+    res: &[f64],
+    rpp: usize,
+) -> Option<Vec<Vec<f64>>> {
+    let m = session.anchors.len();
+    if m > 0 && (m < 3 || rpp != m) {
+        return None;
+    }
+    let n = ctx.n_joints;
+    let l = session.chain.layout;
+    let mut jac = session.chain.new_jacobian();
+    let mut out = vec![Vec::with_capacity(session.train.len()); n];
+    for (pos, &i) in session.train.iter().enumerate() {
+        let r = &res[pos * rpp..(pos + 1) * rpp];
+        let disp = if m == 0 {
+            Vector3::new(r[0], r[1], r[2])
+        } else {
+            let t = ctx.poses[i].point_rig;
+            let mut gtg = nalgebra::Matrix3::zeros();
+            let mut gtr = Vector3::zeros();
+            for (k, a) in session.anchors.iter().enumerate() {
+                let u = (t - a).normalize();
+                gtg += u * u.transpose();
+                gtr += u * r[k];
+            }
+            gtg.try_inverse().map_or(Vector3::zeros(), |inv| inv * gtr)
+        };
+        session.chain.point_jacobian(
+            p,
+            &ctx.poses[i].q_rad,
+            crate::kinematics::chain::OutputFrame::Rig,
+            &mut jac,
+        );
+        for (j, o) in out.iter_mut().enumerate() {
+            let w = jac.d_params[l.joint(j, crate::kinematics::JointParam::Theta)];
+            let norm = w.norm();
+            o.push(if norm > 1e-9 {
+                disp.dot(&w) / norm
+            } else {
+                0.0
+            });
+        }
+    }
+    Some(out)
 }
