@@ -106,6 +106,23 @@ fn identify_then_compensate() {
         "one bad target, reported per row: {}",
         lines[2]
     );
+    // Without a backlash the approach changes nothing, and says so.
+    let out = bin()
+        .arg("compensate")
+        .arg("--calibration")
+        .arg(&report)
+        .arg("--targets")
+        .arg(&targets)
+        .args(["--approach", "in-order"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("--approach is not used"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(String::from_utf8_lossy(&out.stdout), text);
 
     // Bad input: a clear error naming the row and column.
     let bad = dir.join("bad.csv");

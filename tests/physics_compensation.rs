@@ -424,3 +424,110 @@ fn payload_does_not_matter_without_a_compliance() {
         comp.compensate(&target, false)
     );
 }
+
+/// Backlash: where a joint stops depends on the side it arrives from. A
+/// program visits its targets in order, so `compensate_in_order` takes
+/// each joint's approach from the move out of the previous target; the
+/// default assumes every joint arrives in +q. Against the simulator's
+/// truth (the true backlash, with the approach of the commanded sequence),
+/// over poses visited in the recording's order, the first left out (its
+/// approach from home is not in the list).
+#[test]
+fn compensation_in_visiting_order_follows_the_backlash() {
+    let spec: Spec = serde_json::from_value(serde_json::json!({
+        "robot": "er3a",
+        "n_poses": 150,
+        "seed": 31,
+        "effects": [{"effect": "backlash", "joint": 2, "size_x_noise": 10}]
+    }))
+    .unwrap();
+    let sim = simulate::generate(&spec).unwrap();
+    let true_robot: Robot = serde_json::from_value(sim.truth["true_robot"].clone()).unwrap();
+    let true_base: BasePose = serde_json::from_value(sim.truth["base_in_rig"].clone()).unwrap();
+    let (rt, tt) = base_rt(&true_base);
+    let report = identify(
+        &sim.robot,
+        &sim.rig,
+        &sim.dataset,
+        &IdentifyOptions::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        report
+            .findings
+            .iter()
+            .any(|f| f.effect == "backlash" && f.joint == Some(2)),
+        "{:#?}",
+        report.findings
+    );
+    let comp = Compensator::from_report(&report).unwrap();
+    assert!(comp.has_backlash());
+    let (rb, tb) = base_rt(&report.base_in_rig);
+    let poses: Vec<&[f64]> = sim
+        .dataset
+        .poses
+        .iter()
+        .take(60)
+        .map(|p| p.q_rad.as_slice())
+        .collect();
+    let targets: Vec<Target> = poses
+        .iter()
+        .enumerate()
+        .map(|(k, q)| Target {
+            target: format!("t{k}"),
+            kind: TargetKind::Joints {
+                q_deg: q.iter().map(|v| v.to_degrees()).collect(),
+            },
+        })
+        .collect();
+    // The true T of a commanded sequence: each joint deflected by the true
+    // backlash for the direction the sequence moves it in.
+    let errors = |rows: &[drawcal::compensate::Compensated]| -> Vec<f64> {
+        let qs: Vec<Vec<f64>> = rows
+            .iter()
+            .map(|r| {
+                r.q_deg
+                    .as_ref()
+                    .unwrap_or_else(|| panic!("{:?}", r.message))
+                    .iter()
+                    .map(|v| v.to_radians())
+                    .collect()
+            })
+            .collect();
+        let inputs: Vec<PoseInput> = qs
+            .iter()
+            .map(|q| PoseInput {
+                q_rad: q,
+                time_s: None,
+                temp_c: None,
+                payload_kg: None,
+                point_rig: Vector3::zeros(),
+            })
+            .collect();
+        let ctx = Context::new(&sim.robot, vec![], 0.0, &Matrix3::identity(), &inputs);
+        let mut buf = Basis::default();
+        (1..qs.len())
+            .map(|i| {
+                let dq = ctx.apply(&sim.effects, i, &mut buf).dq;
+                let qe: Vec<f64> = qs[i].iter().zip(&dq).map(|(a, b)| a + b).collect();
+                let goal = rb * point(&sim.robot, poses[i]) + tb;
+                (rt * point(&true_robot, &qe) + tt - goal).norm()
+            })
+            .collect()
+    };
+    let positive = rms(&errors(&drawcal::compensate::compensate_all(
+        &comp, &targets, false,
+    )));
+    let in_order = rms(&errors(&drawcal::compensate::compensate_in_order(
+        &comp, &targets, false,
+    )));
+    let msg = format!(
+        "true T to target RMS over {} targets visited in order: assuming +q approach {positive:.4} mm, approach from the previous target {in_order:.4} mm (point noise {:.4} mm)",
+        targets.len() - 1,
+        sim.point_noise_mm
+    );
+    eprintln!("{msg}");
+    assert!(in_order < 0.5 * positive, "{msg}");
+    assert!(in_order < sim.point_noise_mm, "{msg}");
+}

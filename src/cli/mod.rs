@@ -93,6 +93,19 @@ pub enum MethodArg {
     Paper,
 }
 
+/// The direction the joints arrive at the targets from, for a calibration
+/// with a backlash.
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum ApproachArg {
+    /// Every joint moving in +q (most teach programs finish so).
+    Positive,
+    /// Every joint moving in -q.
+    Negative,
+    /// The robot visits the targets in file order: each joint arrives from
+    /// the previous target's compensated joints.
+    InOrder,
+}
+
 /// On or off.
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
 pub enum Switch {
@@ -163,6 +176,10 @@ pub struct CompensateArgs {
     /// calibration session's median payload, 0 if it recorded none).
     #[arg(long)]
     pub payload_kg: Option<f64>,
+    /// How the joints arrive at the targets, for a calibration whose
+    /// physics analysis accepted a backlash (ignored otherwise).
+    #[arg(long, value_enum, default_value = "positive")]
+    pub approach: ApproachArg,
 }
 
 /// `drawcal locate`.
@@ -266,7 +283,18 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
         source,
     })?;
     let targets = core(&a.targets, targets_from_csv(file, comp.dof()))?;
-    let rows = compensate::compensate_all(&comp, &targets, a.orientation);
+    if !comp.has_backlash() && a.approach != ApproachArg::Positive {
+        eprintln!("note: --approach is not used: the calibration has no backlash");
+    }
+    let rows = match a.approach {
+        ApproachArg::Positive => compensate::compensate_all(&comp, &targets, a.orientation),
+        ApproachArg::Negative => compensate::compensate_all(
+            &comp.with_approach(&vec![-1.0; comp.dof()]),
+            &targets,
+            a.orientation,
+        ),
+        ApproachArg::InOrder => compensate::compensate_in_order(&comp, &targets, a.orientation),
+    };
     let failed = rows
         .iter()
         .filter(|r| r.status != compensate::CompensationStatus::Ok)

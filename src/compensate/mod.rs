@@ -37,6 +37,12 @@
 //! calibration session carried (its median `payload_kg`, none if it
 //! recorded none); [`Compensator::with_payload_kg`] gives the compensator
 //! for the payload the robot carries now.
+//!
+//! Backlash: where a joint stops depends on the side it arrives from. A
+//! compensator takes every joint as arriving in +q (most teach programs
+//! finish so); [`Compensator::with_approach`] sets the directions, and
+//! [`compensate_in_order`] takes them from the moves between targets the
+//! robot visits in order.
 
 use std::sync::{Arc, OnceLock};
 
@@ -432,6 +438,26 @@ impl Compensator {
     /// a temperature-driven thermal effect.
     pub fn temperature_c(&self) -> Option<f64> {
         self.temp_c
+    }
+
+    /// True when the calibration accepted a backlash: the joints to send
+    /// then depend on the direction each joint arrives from
+    /// ([`Compensator::with_approach`]; default: every joint moving in +q).
+    pub fn has_backlash(&self) -> bool {
+        self.joint_effects
+            .as_ref()
+            .is_some_and(|e| e.has_backlash())
+    }
+
+    /// This compensator with every joint arriving from `direction` (+1:
+    /// moving in +q, -1: in -q; one per joint). Without a backlash, an
+    /// unchanged copy.
+    pub fn with_approach(&self, direction: &[f64]) -> Compensator {
+        let mut c = self.clone();
+        if let Some(e) = self.joint_effects.as_ref().filter(|e| e.has_backlash()) {
+            c.joint_effects = Some(Arc::new(e.with_approach(direction)));
+        }
+        c
     }
 
     /// The payload (kg at T) this compensator compensates with, when the
@@ -1021,6 +1047,67 @@ pub fn compensate_all(
         .iter()
         .map(|t| comp.compensate(t, orientation))
         .collect()
+}
+
+/// Compensate targets the robot visits in the given order: with an
+/// accepted backlash each joint arrives from the direction it moves in from
+/// the previous target's compensated joints (the first target, and a joint
+/// that does not move, keep the direction before: +q at the start). A
+/// target is solved with the directions carried over, and solved again
+/// when its joints turn out to arrive from the other side. Without a
+/// backlash, [`compensate_all`].
+pub fn compensate_in_order(
+    comp: &Compensator,
+    targets: &[Target],
+    orientation: bool,
+) -> Vec<Compensated> {
+    if !comp.has_backlash() {
+        return compensate_all(comp, targets, orientation);
+    }
+    let mut direction = vec![1.0; comp.dof()];
+    let mut previous: Option<Vec<f64>> = None;
+    let mut out = Vec::with_capacity(targets.len());
+    for t in targets {
+        let arriving = |q: &[f64], carried: &[f64]| -> Vec<f64> {
+            match &previous {
+                Some(p) => q
+                    .iter()
+                    .zip(p)
+                    .zip(carried)
+                    .map(|((a, b), &d)| {
+                        if (a - b).abs() > 1e-9 {
+                            (a - b).signum()
+                        } else {
+                            d
+                        }
+                    })
+                    .collect(),
+                None => carried.to_vec(),
+            }
+        };
+        let mut row = comp.with_approach(&direction).compensate(t, orientation);
+        if let Some(q) = &row.q_deg {
+            let d = arriving(q, &direction);
+            if d != direction {
+                let again = comp.with_approach(&d).compensate(t, orientation);
+                // Keep the second answer when it is consistent with its own
+                // approach (a move of a few micro-degrees could flip back).
+                if again
+                    .q_deg
+                    .as_ref()
+                    .is_some_and(|q2| arriving(q2, &direction) == d)
+                {
+                    row = again;
+                }
+            }
+        }
+        if let Some(q) = &row.q_deg {
+            direction = arriving(q, &direction);
+            previous = Some(q.clone());
+        }
+        out.push(row);
+    }
+    out
 }
 
 /// Write compensated.csv rows.

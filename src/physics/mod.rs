@@ -49,6 +49,8 @@ pub struct JointEffects {
     reference_payload_kg: Option<f64>,
     /// The payload the robot carries now (kg; none: the reference).
     payload_kg: Option<f64>,
+    /// The direction each joint arrives from (+1 or -1); none: +1.
+    approach: Option<Vec<f64>>,
 }
 
 impl JointEffects {
@@ -71,6 +73,7 @@ impl JointEffects {
             effects,
             reference_payload_kg,
             payload_kg: None,
+            approach: None,
         })
     }
 
@@ -106,10 +109,28 @@ impl JointEffects {
         }
     }
 
+    /// True when a backlash was accepted: the offsets then depend on the
+    /// direction each joint arrives from.
+    pub fn has_backlash(&self) -> bool {
+        self.effects
+            .iter()
+            .any(|e| matches!(e.kind, Kind::Backlash { .. }))
+    }
+
+    /// The same effects with every joint arriving from `direction` (+1:
+    /// moving in +q, -1: in -q; one per joint).
+    pub fn with_approach(&self, direction: &[f64]) -> Self {
+        JointEffects {
+            approach: Some(direction.iter().map(|d| d.signum()).collect()),
+            ..self.clone()
+        }
+    }
+
     /// Joint-angle offsets (rad, per joint) at the commanded `q_rad`.
     /// `direction` is the approach direction of every joint (+1 or -1);
-    /// without it backlash takes every joint as arriving in +q, as most
-    /// teach programs finish with a positive approach.
+    /// without it the one set by [`JointEffects::with_approach`], else
+    /// backlash takes every joint as arriving in +q, as most teach
+    /// programs finish with a positive approach.
     pub fn offsets_rad(&self, q_rad: &[f64], direction: Option<&[f64]>) -> Vec<f64> {
         let mut ctx = Context::new(
             &self.robot,
@@ -124,7 +145,9 @@ impl JointEffects {
                 point_rig: nalgebra::Vector3::zeros(),
             }],
         );
-        ctx.poses[0].direction = direction.map_or_else(|| vec![1.0; q_rad.len()], <[f64]>::to_vec);
+        ctx.poses[0].direction = direction
+            .or(self.approach.as_deref())
+            .map_or_else(|| vec![1.0; q_rad.len()], <[f64]>::to_vec);
         let mut buf = effects::Basis::default();
         ctx.apply(&self.effects, 0, &mut buf).dq
     }
