@@ -229,6 +229,12 @@ fn cli_report_holds_the_numbers_and_draws_the_plots() {
     for n in &r.physics_notes {
         assert!(html.contains(&format!("<li>{}</li>", esc(n))), "note {n}");
     }
+    // No warnings about this input: no warnings box; the physics analysis
+    // ran.
+    assert!(r.warnings.is_empty(), "{:?}", r.warnings);
+    assert!(warnings_box(&html).is_none());
+    assert!(!html.contains("id=\"report-warnings\""));
+    assert!(!html.contains("physics-not-run\""));
 
     // Plots: every one drew something; per pose holds every pose twice
     // (before and after) and the residual plots exist per joint angle.
@@ -364,4 +370,122 @@ fn pose_columns_keep_numeric_columns_by_pose_id() {
         report_html::svg::esc("<a&\"'>"),
         "&lt;a&amp;&quot;&#39;&gt;"
     );
+}
+
+/// A dataset's poses.csv with every joint angle (`q*_deg`) rewritten in
+/// radians: input that parses but looks wrong.
+fn in_radians(name: &str) -> String {
+    let text = std::fs::read_to_string(data(name).join("poses.csv")).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let is_q = |h: &str| h.starts_with('q') && h.ends_with("_deg");
+    let cols: Vec<bool> = header.split(',').map(is_q).collect();
+    assert!(cols.iter().any(|&q| q));
+    let mut out = vec![header.to_string()];
+    for line in lines {
+        let cells: Vec<String> = line
+            .split(',')
+            .zip(&cols)
+            .map(|(c, &q)| {
+                if q {
+                    format!("{:.6}", c.parse::<f64>().unwrap().to_radians())
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect();
+        out.push(cells.join(","));
+    }
+    out.join("\n") + "\n"
+}
+
+/// The box of the report's `warnings`, from its opening tag to its end.
+fn warnings_box(html: &str) -> Option<&str> {
+    let i = html.find(r#"<div class="report-warnings""#)?;
+    let end = html[i..].find("</div>").expect("closed warnings box") + i;
+    Some(&html[i..end])
+}
+
+/// Joint angles in radians: the report's warning is shown in a box at the
+/// top of the HTML (before the summary), escaped; the physics analysis did
+/// not run on a model that far off, and the HTML says so in the summary
+/// and in the findings section instead of "no finding".
+#[test]
+fn warnings_and_a_physics_note_not_run_are_shown() {
+    let dir = tmpdir("warnings");
+    let poses = dir.join("poses.csv");
+    std::fs::write(&poses, in_radians("er3a_paper_like")).unwrap();
+    let d = data("er3a_paper_like");
+    let report_path = dir.join("report.json");
+    let st = Command::new(BIN)
+        .args(["identify", "--robot"])
+        .arg(d.join("robot.json"))
+        .arg("--rig")
+        .arg(d.join("rig.json"))
+        .arg("--poses")
+        .arg(&poses)
+        .arg("--out")
+        .arg(&report_path)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let html_path = dir.join("out.html");
+    run_report(&report_path, &html_path, Some(&poses));
+    let html = std::fs::read_to_string(&html_path).unwrap();
+    let r: Report = serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    assert_self_contained(&html);
+
+    assert!(!r.warnings.is_empty(), "radians are warned about");
+    let b = warnings_box(&html).expect("the warnings box");
+    assert!(
+        html.find(r#"class="report-warnings""#) < html.find(r#"id="summary""#),
+        "the warnings come before the summary"
+    );
+    for w in &r.warnings {
+        assert!(b.contains(&format!("<li>{}</li>", esc(w))), "warning {w}");
+    }
+    assert_eq!(b.matches("<li>").count(), r.warnings.len());
+
+    let note = r
+        .physics_notes
+        .iter()
+        .find(|n| n.starts_with(drawcal::identify::PHYSICS_NOT_RUN))
+        .expect("physics not run on a model this far off");
+    assert!(r.findings.is_empty());
+    assert!(html.contains(&format!(
+        r#"<tr><th>physics analysis</th><td class="physics-not-run">{}</td></tr>"#,
+        esc(note)
+    )));
+    assert!(html.contains(&format!(
+        r#"<p id="physics-not-run" class="physics-not-run"><b>Physics analysis:</b> {}</p>"#,
+        esc(note)
+    )));
+    assert!(
+        !html.contains("id=\"no-findings\""),
+        "a physics analysis that did not run found nothing is not 'no finding'"
+    );
+
+    // Text is escaped.
+    let mut evil = r.clone();
+    evil.warnings = vec!["<script>alert(1)</script> & \"q\"".into()];
+    let h = report_html::render_fragment(&evil, None);
+    let b = warnings_box(&h).unwrap();
+    assert!(b.contains("<li>&lt;script&gt;alert(1)&lt;/script&gt; &amp; &quot;q&quot;</li>"));
+    assert!(!h.contains("<script>"));
+
+    // Physics switched off: its note is shown the same way.
+    let mut off = r.clone();
+    off.warnings.clear();
+    off.physics_notes = vec!["not run (physics off)".into()];
+    let h = report_html::render_fragment(&off, None);
+    assert!(h.contains("<b>Physics analysis:</b> not run (physics off)</p>"));
+    assert!(!h.contains("id=\"no-findings\""));
+    // No warnings: no box (the CSS rule names the class, no element has it).
+    assert!(warnings_box(&h).is_none());
+    assert!(!h.contains("id=\"report-warnings\""));
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -59,6 +59,20 @@ async fn the_page_is_served_from_the_binary() {
     ] {
         assert!(js.contains(needle), "app.js lacks {needle}");
     }
+    // The calibration view shows the report's `warnings` (as the API gave
+    // them, escaped) in a styled box above activation, and drops the
+    // embedded report's own copy of the box.
+    for needle in [
+        "function warningsHtml(warnings)",
+        "if (!warnings || !warnings.length) return \"\";",
+        "warnings.map(w => `<li>${esc(w)}</li>`)",
+        "id=\"cal-warnings\"",
+        "${warningsHtml(out.report && out.report.warnings)}\n    <fieldset><legend>Activate",
+        "$(\"#report-warnings\", frag)",
+    ] {
+        assert!(js.contains(needle), "app.js lacks {needle}");
+    }
+    assert!(html.contains(".warnings{"), "index.html styles the box");
     // The page's routes are not API routes: unknown paths still answer the
     // API's 404.
     err_json(app.get("/ui/nope.js").await, 404, "not_found").await;
@@ -125,6 +139,9 @@ async fn report_html_renders_the_stored_calibration() {
     }
     assert!(!report.findings.is_empty());
     assert!(html.contains("3-D error after vs q2_deg"));
+    // Nothing looked wrong in this input: no warnings box.
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+    assert!(!html.contains("id=\"report-warnings\""));
     no_outside_reference("report.html", &html);
     app.stop().await;
 }

@@ -5,7 +5,10 @@
 //! the API gave it, the poses, the identification with its progress, the
 //! calibration view whose tables hold the engine's numbers and whose plots
 //! drew (each finding's evidence plot with its held-out RMS before and
-//! after among them), activation, and compensation to CSV. Then the UR10
+//! after among them), activation, and compensation to CSV. A calibration
+//! from joint angles in radians (er3a_paper_like converted, through the
+//! API): its view shows the report's warnings in a box above activation
+//! and the physics note saying the analysis was not run. Then the UR10
 //! grid (11,911 poses), identified through the API: its calibration view's
 //! first draw is measured and printed (not asserted; recorded in
 //! docs/UI.md) and its evidence plots are bounded and drew, the
@@ -525,6 +528,16 @@ async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
     // and the held-out RMS before and after it, as the API gave them.
     let (n_evidence, _) = check_evidence(&d, rep["findings"].as_array().unwrap(), ds).await;
     assert!(n_evidence >= 1, "the compliance finding's evidence plot");
+    // Nothing looked wrong in this input: no warnings box.
+    assert!(
+        rep["warnings"].as_array().unwrap().is_empty(),
+        "{}",
+        rep["warnings"]
+    );
+    assert_eq!(
+        d.js("return document.querySelector('#cal-warnings') === null && document.querySelector('#report-warnings') === null").await,
+        Value::Bool(true)
+    );
     let ms = d
         .wait("document.querySelector('#report').dataset.drawMs", 10)
         .await;
@@ -598,6 +611,74 @@ async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
         "target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,residual_mm,iterations,status,message\n"
     ));
     d.screenshot("compensate").await;
+
+    // A calibration whose input looks wrong: er3a_paper_like with its
+    // joint angles in radians, identified through the API. Its view shows
+    // the report's warnings, as the API gave them, in a box above the
+    // activation controls (once: the embedded report's copy is dropped),
+    // and the physics note saying the analysis was not run.
+    let rad = "er3a_paper_like";
+    let (_, _, _, rs) = app.setup(rad, "ER3A-RADIANS").await;
+    ok_json(
+        app.post_raw(
+            &format!("/sessions/{rs}/poses"),
+            Some("text/csv"),
+            in_radians(&read(rad, "poses.csv")),
+        )
+        .await,
+        200,
+    )
+    .await;
+    let job = ok_json(
+        app.post_raw(&format!("/sessions/{rs}/jobs"), None, "")
+            .await,
+        202,
+    )
+    .await;
+    let done = app
+        .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(180))
+        .await;
+    assert_eq!(done["state"], "succeeded", "{done}");
+    let rcal = done["calibration_id"].as_i64().unwrap();
+    let rrep =
+        ok_json(app.get(&format!("/calibrations/{rcal}")).await, 200).await["report"].clone();
+    let warnings = rrep["warnings"].as_array().unwrap();
+    assert!(
+        !warnings.is_empty(),
+        "radians are warned about: {}",
+        rrep["warnings"]
+    );
+    d.goto(&url(&format!("calibration/{rcal}"))).await;
+    d.wait(
+        &format!("location.hash === '#/calibration/{rcal}' && document.querySelector('#report .drawcal-report')"),
+        60,
+    )
+    .await;
+    let got = d
+        .js("const b = document.querySelector('#cal-warnings'); if (!b) return null; const r = b.getBoundingClientRect(); return {items: [...b.querySelectorAll('li')].map(l => l.textContent), before_activate: !!(b.compareDocumentPosition(document.querySelector('#activate')) & Node.DOCUMENT_POSITION_FOLLOWING), w: r.width, h: r.height, bg: getComputedStyle(b).backgroundColor, boxes: document.querySelectorAll('#cal-warnings, #report-warnings').length}")
+        .await;
+    assert!(!got.is_null(), "no warnings box in the calibration view");
+    assert_eq!(&got["items"], &rrep["warnings"], "{got}");
+    assert_eq!(got["before_activate"], true, "{got}");
+    assert_eq!(got["boxes"], 1, "{got}");
+    assert!(num(&got["w"]) > 100.0 && num(&got["h"]) > 20.0, "{got}");
+    assert_ne!(got["bg"], "rgba(0, 0, 0, 0)", "the box is styled: {got}");
+    let note = rrep["physics_notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .find(|n| n.starts_with("not run"))
+        .unwrap_or_else(|| panic!("physics not run on radians: {}", rrep["physics_notes"]))
+        .to_string();
+    let shown = d
+        .js("const p = document.querySelector('#report #physics-not-run'); return p && p.textContent")
+        .await;
+    assert!(
+        shown.as_str().is_some_and(|t| t.contains(&note)),
+        "{shown} vs {note}"
+    );
+    d.screenshot_of("calibration-warnings", "#view h2").await;
 
     // The UR10 grid (11,911 poses), identified through the API: the
     // calibration view's first draw from a fresh navigation, measured and
@@ -779,6 +860,32 @@ async fn check_evidence(d: &Driver, findings: &[Value], what: &str) -> (usize, O
         }
     }
     (findings.len(), unexplained)
+}
+
+/// poses.csv with every joint angle (`q*_deg`) rewritten in radians.
+fn in_radians(csv: &str) -> String {
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    let q: Vec<bool> = header
+        .split(',')
+        .map(|h| h.starts_with('q') && h.ends_with("_deg"))
+        .collect();
+    let mut out = vec![header.to_string()];
+    for line in lines {
+        let cells: Vec<String> = line
+            .split(',')
+            .zip(&q)
+            .map(|(c, &q)| {
+                if q {
+                    format!("{:.6}", c.parse::<f64>().unwrap().to_radians())
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect();
+        out.push(cells.join(","));
+    }
+    out.join("\n") + "\n"
 }
 
 fn num_eq(a: &Value, b: &Value) -> bool {

@@ -13,6 +13,7 @@ pub mod svg;
 use std::collections::HashMap;
 use std::fmt::Write;
 
+use crate::identify::PHYSICS_NOT_RUN;
 use crate::identify::report::{ErrorStats, Finding, Report, SplitStats, Stats};
 use crate::model::Split;
 use svg::{Series, esc};
@@ -110,6 +111,10 @@ const CSS: &str = r#"
 .drawcal-report .muted{color:#666}
 .drawcal-report figure.evidence{margin:0;max-width:560px}
 .drawcal-report figure.evidence figcaption{font-size:12px;color:#444}
+.drawcal-report .report-warnings{color:#5c3c00;background:#fff4d6;border:2px solid #e0a100;border-left-width:8px;padding:8px 12px;margin:8px 0 12px}
+.drawcal-report .report-warnings ul{margin:.3em 0 0;padding-left:1.4em}
+.drawcal-report p.physics-not-run{color:#5c3c00;background:#fff8e6;border:1px solid #e0b84d;padding:6px 10px}
+.drawcal-report td.physics-not-run{color:#5c3c00;background:#fff8e6}
 "#;
 
 fn stats_rows(out: &mut String, split: &str, model: &str, e: &ErrorStats) {
@@ -371,6 +376,22 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
     let mut o = String::with_capacity(64 * 1024 + r.per_pose.len() * 200);
     let _ = write!(o, r#"<div class="drawcal-report"><style>{CSS}</style>"#);
 
+    // Warnings about the input, first: they say the rest may not be
+    // trusted.
+    if !r.warnings.is_empty() {
+        o.push_str(r#"<div class="report-warnings" id="report-warnings" role="alert"><b>Warning: the input looks wrong.</b> It was used as given; check it before trusting this calibration.<ul>"#);
+        for w in &r.warnings {
+            let _ = write!(o, "<li>{}</li>", esc(w));
+        }
+        o.push_str("</ul></div>");
+    }
+    // The physics analysis's note when it did not run (physics off, or a
+    // geometric model too far off the data to fit effects on).
+    let not_run = r
+        .physics_notes
+        .iter()
+        .find(|n| n.starts_with(PHYSICS_NOT_RUN));
+
     // Summary.
     o.push_str(r#"<h2 id="summary">Summary</h2><table id="summary-table">"#);
     let row = |o: &mut String, k: &str, v: String| {
@@ -426,6 +447,13 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
                 "{} poses, RMS {:.4} mm, max {:.4} mm",
                 c.n, c.rms_mm, c.max_mm
             ),
+        );
+    }
+    if let Some(n) = not_run {
+        let _ = write!(
+            o,
+            r#"<tr><th>physics analysis</th><td class="physics-not-run">{}</td></tr>"#,
+            esc(n)
         );
     }
     o.push_str("</table>");
@@ -540,8 +568,19 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
 
     // Findings.
     o.push_str(r#"<h2 id="findings">Physics beyond the geometric model</h2>"#);
+    if let Some(n) = not_run {
+        let _ = write!(
+            o,
+            r#"<p id="physics-not-run" class="physics-not-run"><b>Physics analysis:</b> {}</p>"#,
+            esc(n)
+        );
+    }
     if r.findings.is_empty() {
-        o.push_str(r#"<p id="no-findings">No finding: the geometric model explains the data.</p>"#);
+        if not_run.is_none() {
+            o.push_str(
+                r#"<p id="no-findings">No finding: the geometric model explains the data.</p>"#,
+            );
+        }
     } else {
         o.push_str(r#"<table id="findings-table"><tr><th>effect</th><th>on</th><th>magnitude</th><th>1σ</th><th>unit</th><th>physics</th><th>evidence</th><th>held-out RMS before (mm)</th><th>held-out RMS after (mm)</th></tr>"#);
         for (i, f) in r.findings.iter().enumerate() {
@@ -577,9 +616,15 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
         o.push_str("</div>");
     }
 
-    if !r.physics_notes.is_empty() {
+    // The other notes (the "not run" one is shown above).
+    let notes: Vec<&String> = r
+        .physics_notes
+        .iter()
+        .filter(|n| Some(*n) != not_run)
+        .collect();
+    if !notes.is_empty() {
         o.push_str(r#"<h3>What the physics analysis saw</h3><ul id="physics-notes">"#);
-        for n in &r.physics_notes {
+        for n in notes {
             let _ = write!(o, "<li>{}</li>", esc(n));
         }
         o.push_str("</ul>");

@@ -1,7 +1,8 @@
 // drawcal browser page: plain JavaScript, no framework, no build step.
 // Every number shown comes from the API as it answered; this script only
 // formats it (and draws the accuracy history). The calibration's tables and
-// plots are the server's HTML report (GET /calibrations/{id}/report.html).
+// plots are the server's HTML report (GET /calibrations/{id}/report.html);
+// the report's warnings come from GET /calibrations/{id}.
 "use strict";
 
 const $ = (sel, root) => (root || document).querySelector(sel);
@@ -298,13 +299,23 @@ function watchJob(jobId) {
 
 // ---- calibration ---------------------------------------------------------
 
+// The report's `warnings` (input that looks wrong but was used, one
+// sentence each, as the API wrote them) as a box; nothing when there are
+// none.
+function warningsHtml(warnings) {
+  if (!warnings || !warnings.length) return "";
+  return `<div class="warnings" id="cal-warnings" role="alert"><b>Warning: the input looks wrong.</b> It was used as given; check it before trusting or activating this calibration.<ul>${warnings.map(w => `<li>${esc(w)}</li>`).join("")}</ul></div>`;
+}
+
 async function calibrationView(id) {
-  const c = (await api("GET", `/calibrations/${id}`)).calibration;
+  const out = await api("GET", `/calibrations/${id}`);
+  const c = out.calibration;
   view().innerHTML = `<h2>Calibration #${c.id} v${c.version} of <a href="#/robot/${c.robot_id}">${esc(c.serial_number)}</a></h2>
     <p>${esc(c.created_at)}, method ${esc(c.method)}, ${c.n_poses} poses (${c.n_test} held out), session
     <a href="#/session/${c.session_id}">#${c.session_id}</a>; ${c.active ? "<b>active</b>" : "not active"}.
     <a href="/calibrations/${c.id}" download="calibration-${c.id}.json">report JSON</a> ·
     <a href="/calibrations/${c.id}/report.html" download="calibration-${c.id}.html">report HTML</a></p>
+    ${warningsHtml(out.report && out.report.warnings)}
     <fieldset><legend>Activate for the robot</legend>
       <label>by <input type="text" id="act-by"></label><label>reason <input type="text" id="act-reason" size="40"></label>
       <button id="activate" ${c.active ? "disabled" : ""}>Activate</button>
@@ -327,6 +338,9 @@ async function calibrationView(id) {
   const html = await api("GET", `/calibrations/${id}/report.html`);
   const doc = new DOMParser().parseFromString(html, "text/html");
   const frag = doc.querySelector(".drawcal-report");
+  // The report's own copy of the warnings box: already shown at the top of
+  // the view, above activation.
+  if ($("#cal-warnings")) { const w = $("#report-warnings", frag); if (w) w.remove(); }
   const box = $("#report");
   box.innerHTML = "";
   box.appendChild(document.adoptNode(frag));
