@@ -77,7 +77,7 @@ fn rig_out(r: RigRec) -> ApiResult<RigOut> {
     responses(
         (status = 201, description = "Stored", body = ModelOut),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
-        (status = 413, description = "Body too large", body = ErrorBody),
+        (status = 413, description = "Body larger than the service accepts (`drawcal serve --max-upload-bytes`, environment `DRAWCAL_MAX_UPLOAD_BYTES`; default 16 MiB): error `payload_too_large`, whose message gives the limit in bytes and says how to raise it", body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Invalid robot.json (field named)", body = ErrorBody)))]
 pub async fn create_model(
@@ -237,7 +237,7 @@ pub async fn get_robot(State(app): State<AppState>, Id(id): Id) -> ApiResult<Jso
     responses(
         (status = 201, description = "Stored", body = RigOut),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
-        (status = 413, description = "Body too large", body = ErrorBody),
+        (status = 413, description = "Body larger than the service accepts (`drawcal serve --max-upload-bytes`, environment `DRAWCAL_MAX_UPLOAD_BYTES`; default 16 MiB): error `payload_too_large`, whose message gives the limit in bytes and says how to raise it", body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Invalid rig.json (field named)", body = ErrorBody)))]
 pub async fn create_rig(
