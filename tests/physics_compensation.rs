@@ -36,6 +36,50 @@ fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
 }
 
+/// A session simulated from `spec` and calibrated with the physics, which
+/// must have named `effect` on `joint`.
+struct Calibrated {
+    sim: simulate::Simulated,
+    report: drawcal::identify::report::Report,
+    true_robot: Robot,
+    /// The true base in the rig: rotation and translation.
+    rt: Matrix3<f64>,
+    tt: Vector3<f64>,
+}
+
+fn calibrated(spec: serde_json::Value, effect: &str, joint: Option<usize>) -> Calibrated {
+    let spec: Spec = serde_json::from_value(spec).unwrap();
+    let sim = simulate::generate(&spec).unwrap();
+    let true_robot: Robot = serde_json::from_value(sim.truth["true_robot"].clone()).unwrap();
+    let true_base: BasePose = serde_json::from_value(sim.truth["base_in_rig"].clone()).unwrap();
+    let (rt, tt) = base_rt(&true_base);
+    let report = identify(
+        &sim.robot,
+        &sim.rig,
+        &sim.dataset,
+        &IdentifyOptions::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        report
+            .findings
+            .iter()
+            .any(|f| f.effect == effect && f.joint == joint),
+        "{} seed {}: {:#?}",
+        spec.robot,
+        spec.seed,
+        report.findings
+    );
+    Calibrated {
+        sim,
+        report,
+        true_robot,
+        rt,
+        tt,
+    }
+}
+
 #[test]
 fn compensation_with_compliance_beats_geometry_only() {
     let spec = Spec {
@@ -173,33 +217,29 @@ fn compensation_with_compliance_beats_geometry_only() {
 /// coefficient) far nearer the target than compensating at the reference.
 #[test]
 fn compensation_at_the_running_temperature_beats_the_reference() {
-    let spec: Spec = serde_json::from_value(serde_json::json!({
-        "robot": "er3a",
-        "n_poses": 120,
-        "seed": 777,
-        "effects": [{"effect": "thermal_expansion", "size_x_noise": 10}]
-    }))
-    .unwrap();
-    let sim = simulate::generate(&spec).unwrap();
-    let true_robot: Robot = serde_json::from_value(sim.truth["true_robot"].clone()).unwrap();
-    let true_base: BasePose = serde_json::from_value(sim.truth["base_in_rig"].clone()).unwrap();
-    let (rt, tt) = base_rt(&true_base);
+    let Calibrated {
+        sim,
+        report,
+        true_robot,
+        rt,
+        tt,
+    } = calibrated(
+        serde_json::json!({
+            "robot": "er3a",
+            "n_poses": 120,
+            "seed": 777,
+            "effects": [{"effect": "thermal_expansion", "size_x_noise": 10}]
+        }),
+        "thermal_expansion",
+        None,
+    );
     let true_k = sim.effects[0].coef[0];
     let t_ref = sim.dataset.poses[0].temp_c.unwrap();
-
-    let report = identify(
-        &sim.robot,
-        &sim.rig,
-        &sim.dataset,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
     let finding = report
         .findings
         .iter()
         .find(|f| f.effect == "thermal_expansion")
-        .unwrap_or_else(|| panic!("{:#?}", report.findings));
+        .unwrap();
     assert_eq!(finding.parameters["driver"], "temperature");
     assert_eq!(finding.parameters["reference_temp_c"].as_f64(), Some(t_ref));
 
@@ -293,33 +333,22 @@ fn compensation_at_the_running_temperature_beats_the_reference() {
 /// and without (ur5: unit-mass regressors, the payload's lever fitted from
 /// the swaps).
 fn check_payload_compensation(robot: &str, seed: u64) {
-    let spec: Spec = serde_json::from_value(serde_json::json!({
-        "robot": robot,
-        "n_poses": 120,
-        "seed": seed,
-        "session": {"payload_kg": [0.0, 12.0, 4.0]},
-        "effects": [{"effect": "joint_compliance", "joint": 2, "size_x_noise": 10}]
-    }))
-    .unwrap();
-    let sim = simulate::generate(&spec).unwrap();
-    let true_robot: Robot = serde_json::from_value(sim.truth["true_robot"].clone()).unwrap();
-    let true_base: BasePose = serde_json::from_value(sim.truth["base_in_rig"].clone()).unwrap();
-    let (rt, tt) = base_rt(&true_base);
-    let report = identify(
-        &sim.robot,
-        &sim.rig,
-        &sim.dataset,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
-    assert!(
-        report
-            .findings
-            .iter()
-            .any(|f| f.effect == "joint_compliance" && f.joint == Some(2)),
-        "{robot}: {:#?}",
-        report.findings
+    let Calibrated {
+        sim,
+        report,
+        true_robot,
+        rt,
+        tt,
+    } = calibrated(
+        serde_json::json!({
+            "robot": robot,
+            "n_poses": 120,
+            "seed": seed,
+            "session": {"payload_kg": [0.0, 12.0, 4.0]},
+            "effects": [{"effect": "joint_compliance", "joint": 2, "size_x_noise": 10}]
+        }),
+        "joint_compliance",
+        Some(2),
     );
     let comp = Compensator::from_report(&report).unwrap();
     assert_eq!(
@@ -434,32 +463,21 @@ fn payload_does_not_matter_without_a_compliance() {
 /// approach from home is not in the list).
 #[test]
 fn compensation_in_visiting_order_follows_the_backlash() {
-    let spec: Spec = serde_json::from_value(serde_json::json!({
-        "robot": "er3a",
-        "n_poses": 150,
-        "seed": 31,
-        "effects": [{"effect": "backlash", "joint": 2, "size_x_noise": 10}]
-    }))
-    .unwrap();
-    let sim = simulate::generate(&spec).unwrap();
-    let true_robot: Robot = serde_json::from_value(sim.truth["true_robot"].clone()).unwrap();
-    let true_base: BasePose = serde_json::from_value(sim.truth["base_in_rig"].clone()).unwrap();
-    let (rt, tt) = base_rt(&true_base);
-    let report = identify(
-        &sim.robot,
-        &sim.rig,
-        &sim.dataset,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
-    assert!(
-        report
-            .findings
-            .iter()
-            .any(|f| f.effect == "backlash" && f.joint == Some(2)),
-        "{:#?}",
-        report.findings
+    let Calibrated {
+        sim,
+        report,
+        true_robot,
+        rt,
+        tt,
+    } = calibrated(
+        serde_json::json!({
+            "robot": "er3a",
+            "n_poses": 150,
+            "seed": 31,
+            "effects": [{"effect": "backlash", "joint": 2, "size_x_noise": 10}]
+        }),
+        "backlash",
+        Some(2),
     );
     let comp = Compensator::from_report(&report).unwrap();
     assert!(comp.has_backlash());

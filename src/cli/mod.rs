@@ -366,7 +366,7 @@ fn at_temperature(
     }
     if compensate::has_time_thermal(report) {
         eprintln!(
-            "note: the calibration's thermal expansion is driven by time (no temperature was recorded in its session); it cannot be compensated at run time and is left out"
+            "note: the calibration's thermal expansion is driven by time or row order (no temperature was recorded in its session); it cannot be compensated at run time and is left out"
         );
     }
     match (comp.thermal(), temp_c) {

@@ -27,7 +27,7 @@
 //! [`Compensator::from_report`] compensates at the reference temperature
 //! (the behaviour without a temperature); [`Compensator::at_temperature`]
 //! gives the compensator for the temperature the robot runs at. A thermal
-//! effect driven by time (no temperature was recorded) depends on how long
+//! effect driven by time or row order (no temperature was recorded) depends on how long
 //! the robot has been warming up since the session began, which nothing at
 //! run time knows: it is left out of compensation.
 //!
@@ -219,8 +219,8 @@ fn thermal_of(report: &Report) -> Option<ThermalInfo> {
     })
 }
 
-/// True when the report accepted a thermal expansion driven by time (not
-/// compensated: see the module documentation).
+/// True when the report accepted a thermal expansion driven by time or by
+/// the row order (not compensated: see the module documentation).
 pub fn has_time_thermal(report: &Report) -> bool {
     use crate::physics::effects::{Kind, ThermalDriver};
     crate::physics::effects_of(&report.findings)
@@ -1068,18 +1068,14 @@ pub fn compensate_in_order(
     let mut previous: Option<Vec<f64>> = None;
     let mut out = Vec::with_capacity(targets.len());
     for t in targets {
-        let arriving = |q: &[f64], carried: &[f64]| -> Vec<f64> {
+        let arriving = |q_deg: &[f64], carried: &[f64]| -> Vec<f64> {
             match &previous {
-                Some(p) => q
+                Some(p) => q_deg
                     .iter()
                     .zip(p)
                     .zip(carried)
                     .map(|((a, b), &d)| {
-                        if (a - b).abs() > 1e-9 {
-                            (a - b).signum()
-                        } else {
-                            d
-                        }
+                        crate::physics::effects::step_direction(b.to_radians(), a.to_radians(), d)
                     })
                     .collect(),
                 None => carried.to_vec(),

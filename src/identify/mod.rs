@@ -558,7 +558,8 @@ pub fn identify(
         let e = session.errors(&after_values, &session.train);
         (e.iter().map(|v| v.norm_squared()).sum::<f64>() / e.len().max(1) as f64).sqrt()
     };
-    let broken = train_rms_mm > PHYSICS_MAX_GEOMETRIC_RMS_MM;
+    // NaN counts as broken.
+    let broken = !(train_rms_mm <= PHYSICS_MAX_GEOMETRIC_RMS_MM);
     if !opts.physics {
         physics_notes.push(format!("{PHYSICS_NOT_RUN} (physics off)"));
     }

@@ -21,7 +21,7 @@
 //!    residuals still vary smoothly along any joint angle, time or
 //!    temperature; if so report an `unexplained` finding saying where.
 
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::effects::{Context, EffectModel, Kind, PoseInput};
 use super::problem::{EffectProblem, accumulate};
@@ -47,6 +47,38 @@ pub const HELD_OUT_Z: f64 = 2.0;
 /// beyond the other alone by this paired z (positive evidence that it
 /// adds something; the pair as a whole passes [`HELD_OUT_Z`]).
 pub const PAIR_MEMBER_Z: f64 = 1.0;
+/// Two-sided false-alarm rate of [`MAGNITUDE_Z`] sigma, for magnitudes
+/// that are a norm of several coefficients (tested as a block).
+const MAGNITUDE_ALPHA: f64 = 0.0455;
+
+/// Is a fitted effect's size distinguishable from none? A magnitude that
+/// is one signed coefficient (a compliance with masses, a backlash, a
+/// thermal, scale or offset coefficient, a sag) must be [`MAGNITUDE_Z`]
+/// sigma from zero; one that is a norm of several (a periodic amplitude,
+/// a step of an anchor or of the rig, the RMS of a lumped compliance) is
+/// never negative, so its coefficients are tested together: the Wald
+/// statistic `cᵀ C⁻¹ c` against chi-square with as many degrees of freedom.
+fn distinguishable_from_zero(e: &EffectModel, info: &FitInfo, mag: f64, sig: f64) -> bool {
+    let signed = match &e.kind {
+        Kind::JointCompliance { regressors, .. } => regressors.is_empty(),
+        Kind::JointPeriodic { .. }
+        | Kind::AnchorStep { .. }
+        | Kind::RigStep { .. }
+        | Kind::RigDrift => false,
+        _ => true,
+    };
+    if signed {
+        return mag.abs() > MAGNITUDE_Z * sig;
+    }
+    let c = DVector::from_column_slice(&e.coef);
+    let Ok(inv) = info.cov_last.clone().pseudo_inverse(1e-12) else {
+        return true;
+    };
+    let wald = c.dot(&(&inv * &c));
+    let rank = info.cov_last.rank(1e-12 * info.cov_last.norm()).max(1);
+    wald > chi2_quantile_upper(MAGNITUDE_ALPHA, rank)
+}
+
 /// Another candidate explaining at least this share of a kept effect's
 /// chi-square drop on its own is named beside it as indistinguishable.
 const TWIN_SHARE: f64 = 0.98;
@@ -164,8 +196,9 @@ fn paired_gain_z(before: &[Vector3<f64>], after: &[Vector3<f64>]) -> f64 {
         .filter(|v| *v != 0.0)
         .collect();
     let n = d.len() as f64;
+    // Fewer than two poses changed: no evidence either way.
     if n < 2.0 {
-        return f64::INFINITY;
+        return 0.0;
     }
     d.sort_by(|a, b| a.abs().total_cmp(&b.abs()));
     let w_plus: f64 = d
@@ -337,7 +370,9 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
                     driver: ctx.thermal_driver,
                     tau_h,
                 },
-                taus.len(),
+                // The family's look-elsewhere count is one test per
+                // time constant.
+                1,
                 match (ctx.thermal_driver, tau_h) {
                     (ThermalDriver::Temperature, _) => "temperature".into(),
                     (ThermalDriver::Time, None) => "time (no temperature)".into(),
@@ -958,7 +993,7 @@ pub fn analyse(
             // on its partner to mop up the misplaced step; with the step
             // refined, each member must still be significant given the
             // other (the step alone is proposed separately).
-            if !single && cs.iter().any(|c| c.scanned > 1) {
+            if !single && cs.iter().any(|c| c.kind.change_time_s().is_some()) {
                 let thresholds: Vec<f64> =
                     prop.members.iter().map(|m| scored[m.0].threshold).collect();
                 if !pair_holds(session, &ctx, &p, &free, &accepted, &cs, &thresholds) {
@@ -997,9 +1032,8 @@ pub fn analyse(
             // by the rig's geometry, three strings most: there the gain is
             // seen on the readings first).
             let gain_z_3d = paired_gain_z(&e_before, &e_after);
-            if !session.test.is_empty()
-                && !(ra < rb && gain_z > HELD_OUT_Z && gain_z_3d > -HELD_OUT_Z)
-            {
+            let held_out_gain = ra < rb && gain_z > HELD_OUT_Z && gain_z_3d > -HELD_OUT_Z;
+            if !session.test.is_empty() && !held_out_gain {
                 let names: Vec<String> = cs
                     .iter()
                     .map(|c| format!("{} ({})", c.kind.name(), c.what))
@@ -1028,8 +1062,9 @@ pub fn analyse(
             let weak = cs.iter().enumerate().find_map(|(mi, c)| {
                 let e = &eff_new[accepted.len() + mi];
                 let at = n_acc_coef + cs[..mi].iter().map(|c| c.kind.n_coef()).sum::<usize>();
-                let (mag, sig, unit) = magnitude(&ctx, session, e, &fit.block(at, e.kind.n_coef()));
-                (!(mag.abs() > MAGNITUDE_Z * sig))
+                let info = fit.block(at, e.kind.n_coef());
+                let (mag, sig, unit) = magnitude(&ctx, session, e, &info);
+                (!distinguishable_from_zero(e, &info, mag, sig))
                     .then(|| format!("{} ({}): {mag:.4} ± {sig:.4} {unit}", c.kind.name(), c.what))
             });
             if let Some(w) = weak {
@@ -1071,9 +1106,10 @@ pub fn analyse(
                             })
                     })
                     .collect();
+                // A member that cannot be refitted alone shows nothing.
                 let weakest = alone
                     .iter()
-                    .map(|a| a.map_or(f64::INFINITY, |(_, z)| z))
+                    .map(|a| a.map_or(f64::NEG_INFINITY, |(_, z)| z))
                     .fold(f64::INFINITY, f64::min);
                 if !session.test.is_empty() && weakest <= PAIR_MEMBER_Z {
                     let names: Vec<String> = cs
@@ -1137,11 +1173,11 @@ pub fn analyse(
                     s.cols.len(),
                     s.threshold,
                     n_tests,
-                    match (&c.kind, c.scanned > 1) {
-                        (Kind::ThermalExpansion { .. }, true) => {
+                    match &c.kind {
+                        Kind::ThermalExpansion { tau_h: Some(_), .. } => {
                             ", time constant scanned"
                         }
-                        (_, true) => {
+                        k if k.change_time_s().is_some() => {
                             ", change point scanned; figures at the nearest grid point, before refinement"
                         }
                         _ => "",
@@ -1565,7 +1601,7 @@ fn thermal_doubt(ctx: &Context, e: &EffectModel) -> Option<String> {
 /// its driver at the last hour recorded (h).
 fn warm_up_growth(ctx: &Context, tau_h: f64) -> f64 {
     let hours = ctx.poses.iter().map(|p| p.thermal).fold(0.0, f64::max);
-    tau_h * (1.0 - (-hours / tau_h).exp())
+    super::effects::warm_up(hours, tau_h)
 }
 
 /// Unit of an effect's magnitude (see [`magnitude`]).
@@ -1589,6 +1625,27 @@ fn fixed_unit(kind: &Kind) -> &'static str {
     }
 }
 
+/// The part of one pose's string residuals `r` (one per anchor, mm) that a
+/// displacement of T explains: least squares through the anchors' unit
+/// vectors at `t` (rig frame). The displacement (mm) and the residual
+/// energy it takes (`rᵀG(GᵀG)⁻¹Gᵀr`, mm²); `None` when the anchors do not
+/// fix a point.
+fn common_displacement(
+    anchors: &[Vector3<f64>],
+    t: &Vector3<f64>,
+    r: &[f64],
+) -> Option<(Vector3<f64>, f64)> {
+    let mut gtg = nalgebra::Matrix3::zeros();
+    let mut gtr = Vector3::zeros();
+    for (a, &rk) in anchors.iter().zip(r) {
+        let u = (t - a).normalize();
+        gtg += u * u.transpose();
+        gtr += u * rk;
+    }
+    let d = gtg.try_inverse()? * gtr;
+    Some((d, gtr.dot(&d)))
+}
+
 /// Share of the train string residual energy that a displacement of T per
 /// pose explains, and the share noise alone would give (3/m).
 fn robot_side_share(session: &Session, p: &[f64]) -> (Option<f64>, Option<f64>) {
@@ -1606,15 +1663,8 @@ fn robot_side_share(session: &Session, p: &[f64]) -> (Option<f64>, Option<f64>) 
             session
                 .chain
                 .point(p, &pose.q_rad, crate::kinematics::chain::OutputFrame::Rig);
-        let mut gtg = nalgebra::Matrix3::zeros();
-        let mut gtr = Vector3::zeros();
-        for (k, a) in session.anchors.iter().enumerate() {
-            let u = (t - a).normalize();
-            gtg += u * u.transpose();
-            gtr += u * r[k];
-        }
-        if let Some(inv) = gtg.try_inverse() {
-            robot += gtr.dot(&(inv * gtr));
+        if let Some((_, energy)) = common_displacement(&session.anchors, &t, &r) {
+            robot += energy;
         }
         total += r.iter().map(|v| v * v).sum::<f64>();
     }
@@ -1737,7 +1787,8 @@ fn unexplained(
         }
         for (z, projected) in tries {
             let Some(z) = z else { continue };
-            if !(zs[pk] >= z) {
+            // (NaN, not yet set, is replaced.)
+            if zs[pk].is_nan() || z > zs[pk] {
                 zs[pk] = z;
             }
             if z > zcrit && best.as_ref().is_none_or(|b| z > b.0) {
@@ -1774,7 +1825,7 @@ fn unexplained(
                 .enumerate()
                 .filter(|(_, z)| z.is_finite())
                 .max_by(|a, b| a.1.total_cmp(b.1))
-                .map(|(w, z)| (w, *z))?;
+                .map_or((0, f64::NAN), |(w, z)| (w, *z));
             (
                 w,
                 format!(
@@ -1859,22 +1910,18 @@ fn robot_side_excess(
     if m <= 3 || rpp != m {
         return None;
     }
-    let (mut robot, mut total) = (0.0, 0.0);
+    let (mut robot, mut total, mut n) = (0.0, 0.0, 0usize);
     for (pos, &i) in session.train.iter().enumerate() {
         let r = &res[pos * rpp..(pos + 1) * rpp];
-        let t = ctx.poses[i].point_rig;
-        let mut gtg = nalgebra::Matrix3::zeros();
-        let mut gtr = Vector3::zeros();
-        for (k, a) in session.anchors.iter().enumerate() {
-            let u = (t - a).normalize();
-            gtg += u * u.transpose();
-            gtr += u * r[k];
-        }
-        let inv = gtg.try_inverse()?;
-        robot += gtr.dot(&(inv * gtr));
+        // A pose whose anchors do not fix a point tells nothing here.
+        let Some((_, energy)) = common_displacement(&session.anchors, &ctx.poses[i].point_rig, r)
+        else {
+            continue;
+        };
+        robot += energy;
         total += r.iter().map(|v| v * v).sum::<f64>();
+        n += 1;
     }
-    let n = session.train.len();
     let d1 = (3 * n).checked_sub(n_params)?;
     let d2 = (m - 3) * n;
     let sensor = total - robot;
@@ -1915,15 +1962,8 @@ fn joint_components(
         let disp = if m == 0 {
             Vector3::new(r[0], r[1], r[2])
         } else {
-            let t = ctx.poses[i].point_rig;
-            let mut gtg = nalgebra::Matrix3::zeros();
-            let mut gtr = Vector3::zeros();
-            for (k, a) in session.anchors.iter().enumerate() {
-                let u = (t - a).normalize();
-                gtg += u * u.transpose();
-                gtr += u * r[k];
-            }
-            gtg.try_inverse().map_or(Vector3::zeros(), |inv| inv * gtr)
+            common_displacement(&session.anchors, &ctx.poses[i].point_rig, r)
+                .map_or(Vector3::zeros(), |(d, _)| d)
         };
         session.chain.point_jacobian(
             p,

@@ -384,6 +384,15 @@ pub fn nominal_lengths(robot: &Robot) -> Vec<(usize, f64)> {
     lengths
 }
 
+/// The direction a joint arrives from when it goes from `prev_rad` to
+/// `cur_rad`: the sign of the move, or `carried` (the direction before)
+/// when it does not move. One rule for the analysis, the simulator and
+/// compensation.
+pub fn step_direction(prev_rad: f64, cur_rad: f64, carried: f64) -> f64 {
+    let d = cur_rad - prev_rad;
+    if d.abs() > 1e-7 { d.signum() } else { carried }
+}
+
 /// Direction each joint last moved, from the row order: the sign of the
 /// change from the previous pose, carried over when a joint did not move.
 /// The first pose has no known approach and gets 0.
@@ -393,16 +402,20 @@ pub fn approach_directions(q: &[&[f64]]) -> Vec<Vec<f64>> {
     let mut out = Vec::with_capacity(q.len());
     for (i, qi) in q.iter().enumerate() {
         if i > 0 {
-            for j in 0..n {
-                let d = qi[j] - q[i - 1][j];
-                if d.abs() > 1e-7 {
-                    dir[j] = d.signum();
-                }
+            for (j, d) in dir.iter_mut().enumerate() {
+                *d = step_direction(q[i - 1][j], qi[j], *d);
             }
         }
         out.push(dir.clone());
     }
     out
+}
+
+/// A warm-up settling with time constant `tau`: its progress after `h`
+/// (both in the thermal driver's unit, hours or thousands of rows), `tau ·
+/// (1 - exp(-h / tau))`, which grows like `h` at first.
+pub fn warm_up(h: f64, tau: f64) -> f64 {
+    tau * (1.0 - (-h / tau).exp())
 }
 
 impl Context {
@@ -624,7 +637,7 @@ impl Context {
             }
             Kind::ThermalExpansion { tau_h, .. } => {
                 out.thermal[0] = match tau_h {
-                    Some(tau) => tau * (1.0 - (-pc.thermal / tau).exp()),
+                    Some(tau) => warm_up(pc.thermal, *tau),
                     None => pc.thermal,
                 }
             }
