@@ -65,6 +65,21 @@ pub struct TargetIn {
     pub rpy_deg: Option<[f64; 3]>,
 }
 
+/// How the joints arrive at the targets, for a calibration with a backlash.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ApproachIn {
+    /// Every joint moving in +q (the default; most teach programs finish
+    /// so).
+    Positive,
+    /// Every joint moving in -q.
+    Negative,
+    /// The robot visits the targets in request order: each joint arrives
+    /// from the previous target's compensated joints (solved one after the
+    /// other, on one thread).
+    InOrder,
+}
+
 /// What to compensate, and with which calibration.
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -96,6 +111,11 @@ pub struct CompensateRequest {
     /// (`payload_kg_used` is then null).
     #[serde(default)]
     pub payload_kg: Option<f64>,
+    /// How the joints arrive at the targets. Used when the calibration
+    /// accepted a backlash (default `positive`); ignored otherwise
+    /// (`approach_used` is then null).
+    #[serde(default)]
+    pub approach: Option<ApproachIn>,
 }
 
 /// Outcome of one target.
@@ -163,6 +183,9 @@ pub struct CompensateResponse {
     /// request's `payload_kg`, else the calibration session's, when the
     /// calibration has a compliance that depends on it; null otherwise.
     pub payload_kg_used: Option<f64>,
+    /// How the joints were taken to arrive: the request's `approach`, else
+    /// `positive`, when the calibration has a backlash; null otherwise.
+    pub approach_used: Option<ApproachIn>,
     /// Targets with status `ok`.
     pub n_ok: usize,
     /// One per target, in order.
@@ -338,6 +361,9 @@ pub struct CompensateQuery {
     /// Payload the robot carries at T (kg, 0 to 5000), for a calibration
     /// with a joint compliance (default: its session's median payload).
     pub payload_kg: Option<f64>,
+    /// How the joints arrive at the targets, for a calibration with a
+    /// backlash (default `positive`).
+    pub approach: Option<ApproachIn>,
 }
 
 impl CompensateQuery {
@@ -347,6 +373,7 @@ impl CompensateQuery {
             && self.orientation.is_none()
             && self.temp_c.is_none()
             && self.payload_kg.is_none()
+            && self.approach.is_none()
     }
 }
 
@@ -354,6 +381,7 @@ impl CompensateQuery {
 struct Conditions {
     temp_c: Option<f64>,
     payload_kg: Option<f64>,
+    approach: Option<ApproachIn>,
 }
 
 impl Conditions {
@@ -363,7 +391,8 @@ impl Conditions {
     fn adjust(&self, comp: &Compensator) -> Option<Compensator> {
         let temp_c = self.temp_c.filter(|_| comp.thermal().is_some());
         let payload_kg = self.payload_kg.filter(|_| comp.payload_kg().is_some());
-        if temp_c.is_none() && payload_kg.is_none() {
+        let negative = self.approach == Some(ApproachIn::Negative) && comp.has_backlash();
+        if temp_c.is_none() && payload_kg.is_none() && !negative {
             return None;
         }
         let mut c = comp.clone();
@@ -372,6 +401,9 @@ impl Conditions {
         }
         if let Some(p) = payload_kg {
             c = c.with_payload_kg(p);
+        }
+        if negative {
+            c = c.with_approach(&vec![-1.0; c.dof()]);
         }
         Some(c)
     }
@@ -448,7 +480,8 @@ fn wants_csv(headers: &HeaderMap) -> bool {
 /// produced it in the `X-Calibration-Id` and `X-Calibration-Version`
 /// headers (and `X-Temp-C-Used` when the calibration has thermal expansion
 /// driven by the temperature, `X-Payload-Kg-Used` when it has a joint
-/// compliance). Errors are always JSON.
+/// compliance, `X-Approach-Used` when it has a backlash). Errors are always
+/// JSON.
 #[utoipa::path(post, path = "/compensate", tag = "compensation",
     params(CompensateQuery),
     request_body(
@@ -465,7 +498,8 @@ fn wants_csv(headers: &HeaderMap) -> bool {
                 ("x-calibration-id" = i64, description = "Calibration used (on text/csv answers; JSON has it in the body)"),
                 ("x-calibration-version" = i64, description = "Its version (on text/csv answers)"),
                 ("x-temp-c-used" = f64, description = "Temperature (°C) the geometry was taken at, on text/csv answers when the calibration has thermal expansion driven by the temperature (JSON: `temp_c_used`)"),
-                ("x-payload-kg-used" = f64, description = "Payload (kg at T) the joint compliance was evaluated with, on text/csv answers when the calibration has a compliance that depends on it (JSON: `payload_kg_used`)"))),
+                ("x-payload-kg-used" = f64, description = "Payload (kg at T) the joint compliance was evaluated with, on text/csv answers when the calibration has a compliance that depends on it (JSON: `payload_kg_used`)"),
+                ("x-approach-used" = String, description = "`positive`, `negative` or `in_order`: how the joints were taken to arrive, on text/csv answers when the calibration has a backlash (JSON: `approach_used`)"))),
         (status = 400, description = "Malformed JSON or query string", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody),
         (status = 409, description = "The robot has no active calibration", body = ErrorBody),
@@ -487,7 +521,7 @@ pub async fn compensate(
             if !query.is_empty() {
                 return Err(ApiError::invalid(
                     "robot_id",
-                    "with a JSON body, robot_id, calibration_id, orientation, temp_c and payload_kg go in the body, not the query string",
+                    "with a JSON body, robot_id, calibration_id, orientation, temp_c, payload_kg and approach go in the body, not the query string",
                 ));
             }
             let req: CompensateRequest = parse_json(&body.bytes)?;
@@ -515,6 +549,7 @@ pub async fn compensate(
                 Conditions {
                     temp_c: req.temp_c,
                     payload_kg: req.payload_kg,
+                    approach: req.approach,
                 },
                 Inputs::Json { targets, batch },
             )
@@ -533,6 +568,7 @@ pub async fn compensate(
                 Conditions {
                     temp_c: query.temp_c,
                     payload_kg: query.payload_kg,
+                    approach: query.approach,
                 },
                 Inputs::Csv(body.bytes),
             )
@@ -603,7 +639,19 @@ pub async fn compensate(
     let adjusted = conditions.adjust(&cached.compensator);
     let used = adjusted.as_ref().unwrap_or(&cached.compensator);
     let (temp_c_used, payload_kg_used) = (used.temperature_c(), used.payload_kg());
-    let results = solve(&app, cached.clone(), adjusted, targets, orientation).await?;
+    let approach_used = used
+        .has_backlash()
+        .then(|| conditions.approach.unwrap_or(ApproachIn::Positive));
+    let in_order = approach_used == Some(ApproachIn::InOrder);
+    let results = solve(
+        &app,
+        cached.clone(),
+        adjusted,
+        targets,
+        orientation,
+        in_order,
+    )
+    .await?;
     if csv_out {
         let mut out = Vec::with_capacity(64 + results.len() * (16 + 14 * dof));
         crate::compensate::write_csv(&mut out, dof, &results)
@@ -630,6 +678,17 @@ pub async fn compensate(
             if let Some(v) = value.and_then(|v| HeaderValue::from_str(&v.to_string()).ok()) {
                 resp.headers_mut().insert(HeaderName::from_static(name), v);
             }
+            if let Some(a) = approach_used {
+                let v = match a {
+                    ApproachIn::Positive => "positive",
+                    ApproachIn::Negative => "negative",
+                    ApproachIn::InOrder => "in_order",
+                };
+                resp.headers_mut().insert(
+                    HeaderName::from_static("x-approach-used"),
+                    HeaderValue::from_static(v),
+                );
+            }
         }
         return Ok(resp);
     }
@@ -641,6 +700,7 @@ pub async fn compensate(
         version: cached.version,
         temp_c_used,
         payload_kg_used,
+        approach_used,
         n_ok,
         results,
     })
@@ -709,13 +769,27 @@ fn runs_inline(targets: &[Target]) -> bool {
 /// Compensate `targets` in order: inline when tiny (see
 /// [`INLINE_MAX_JOINT_TARGETS`]), else on the compute threads.
 /// `adjusted` replaces the cached compensator (another temperature).
+/// `in_order`: the robot visits the targets in order and each joint
+/// arrives from the previous target (a backlash): one after the other, on
+/// one compute thread.
 async fn solve(
     app: &AppState,
     cached: Arc<Cached>,
     adjusted: Option<Compensator>,
     targets: Vec<Target>,
     orientation: bool,
+    in_order: bool,
 ) -> ApiResult<Vec<Compensated>> {
+    if in_order {
+        return app
+            .compute
+            .run(move || {
+                let comp = adjusted.as_ref().unwrap_or(&cached.compensator);
+                crate::compensate::compensate_in_order(comp, &targets, orientation)
+            })
+            .await
+            .ok_or_else(|| ApiError::Internal("compensation failed (see the log)".into()));
+    }
     if runs_inline(&targets) {
         return Ok(crate::compensate::compensate_all(
             adjusted.as_ref().unwrap_or(&cached.compensator),

@@ -150,6 +150,7 @@ async fn payload_kg_used_is_null_without_a_compliance() {
     };
     let plain = ask(json!({})).await;
     assert!(plain["payload_kg_used"].is_null(), "{plain}");
+    assert!(plain["approach_used"].is_null(), "no backlash: {plain}");
     let with = ask(json!({"payload_kg": 25.0})).await;
     assert!(with["payload_kg_used"].is_null(), "{with}");
     assert_eq!(with["results"], plain["results"]);

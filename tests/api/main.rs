@@ -3,6 +3,7 @@
 //! fresh SQLite file (the store conformance suite also runs on PostgreSQL).
 
 mod bad_requests;
+mod compensate_backlash;
 mod compensate_csv;
 mod compensate_payload;
 mod compensate_thermal;
