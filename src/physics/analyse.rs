@@ -47,6 +47,41 @@ pub const HELD_OUT_Z: f64 = 2.0;
 /// beyond the other alone by this paired z (positive evidence that it
 /// adds something; the pair as a whole passes [`HELD_OUT_Z`]).
 pub const PAIR_MEMBER_Z: f64 = 1.0;
+/// Other candidates of this round on the same joint or sensor that explain
+/// on their own at least [`TWIN_SHARE`] of what the kept effect `kind`
+/// (scored as `kept`) explains, one per effect, described: a positioner
+/// whose gravity torque is a pure sinusoid of the joint makes compliance
+/// and a once-per-turn error the same model, and the name is then a choice
+/// the finding must own up to. `members` are the kept proposal's.
+fn indistinguishable(
+    scored: &[Scored],
+    cands: &[Candidate],
+    members: &[(usize, f64)],
+    kind: &Kind,
+    kept: &Scored,
+) -> Vec<String> {
+    let mut out: Vec<&Candidate> = Vec::new();
+    for o in scored {
+        let c = &cands[o.idx];
+        let k = &c.kind;
+        let member = members.iter().any(|m| scored[m.0].idx == o.idx);
+        let twin = !member
+            && (k.joint().is_some() || k.sensor().is_some())
+            && k.name() != kind.name()
+            && k.joint() == kind.joint()
+            && k.sensor() == kind.sensor()
+            && o.drop >= TWIN_SHARE * kept.drop;
+        // One per effect (a step scanned over the session would otherwise
+        // be listed at every position).
+        if twin && !out.iter().any(|x| x.kind.name() == k.name()) {
+            out.push(c);
+        }
+    }
+    out.iter()
+        .map(|c| format!("{} ({})", c.kind.name(), c.what))
+        .collect()
+}
+
 /// Two-sided false-alarm rate of [`MAGNITUDE_Z`] sigma, for magnitudes
 /// that are a norm of several coefficients (tested as a block).
 const MAGNITUDE_ALPHA: f64 = 0.0455;
@@ -1195,35 +1230,7 @@ pub fn analyse(
                     Some(doubt) => format!("{evidence}; {doubt}"),
                     None => evidence,
                 };
-                // Another effect of the catalogue on the same joint or
-                // sensor that explains as much on its own (a positioner
-                // whose gravity torque is a pure sinusoid of the joint
-                // makes compliance and a once-per-turn error the same
-                // model): the name is then a choice, and is said to be.
-                let twins: Vec<String> = scored
-                    .iter()
-                    .filter(|o| {
-                        let k = &cands[o.idx].kind;
-                        let member = prop.members.iter().any(|m| scored[m.0].idx == o.idx);
-                        !member
-                            && (k.joint().is_some() || k.sensor().is_some())
-                            && k.name() != e.kind.name()
-                            && k.joint() == e.kind.joint()
-                            && k.sensor() == e.kind.sensor()
-                            && o.drop >= TWIN_SHARE * s.drop
-                    })
-                    .fold(Vec::<&Scored>::new(), |mut seen, o| {
-                        // One per effect (a step scanned over the session
-                        // would otherwise be listed at every position).
-                        let name = cands[o.idx].kind.name();
-                        if !seen.iter().any(|x| cands[x.idx].kind.name() == name) {
-                            seen.push(o);
-                        }
-                        seen
-                    })
-                    .iter()
-                    .map(|o| format!("{} ({})", cands[o.idx].kind.name(), cands[o.idx].what))
-                    .collect();
+                let twins = indistinguishable(&scored, &cands, &prop.members, &e.kind, s);
                 let evidence = if twins.is_empty() {
                     evidence
                 } else {
