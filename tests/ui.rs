@@ -145,3 +145,87 @@ async fn report_html_renders_the_stored_calibration() {
     no_outside_reference("report.html", &html);
     app.stop().await;
 }
+
+/// The Compensate view offers the run-time conditions `POST /compensate`
+/// takes (temperature, payload, approach), sends each only when filled in,
+/// and shows which ones the answer says were used (`temp_c_used`,
+/// `payload_kg_used`, `approach_used`), as the answer gave them. A static
+/// check of the script; the browser test runs it against the service.
+#[test]
+fn the_compensate_view_sends_the_conditions_and_shows_the_used_ones() {
+    use drawcal::http::compensate::{ApproachIn, CompensateResponse};
+    let js = drawcal::http::ui::APP_JS;
+    let html = drawcal::http::ui::INDEX_HTML;
+    for needle in [
+        // The inputs; the approach's default sends nothing.
+        "id=\"comp-temp\"",
+        "id=\"comp-payload\"",
+        "<select id=\"comp-approach\"><option value=\"\">default (not sent)</option>",
+        // Sent only when filled in, under the API's names.
+        "if (s === \"\") return undefined;",
+        "if (temp !== undefined) req.temp_c = temp;",
+        "if (payload !== undefined) req.payload_kg = payload;",
+        "if ($(\"#comp-approach\").value) req.approach = $(\"#comp-approach\").value;",
+        // The answer's *_used fields, rendered (null: not used).
+        "used: r.temp_c_used",
+        "used: r.payload_kg_used",
+        "used: r.approach_used",
+        "conds.filter(c => c.used != null)",
+        "conds.filter(c => c.used == null)",
+        "id=\"comp-used-${c.key}\" data-value=\"${c.used == null ? \"\" : esc(c.used)}\"",
+        "${usedHtml(r, req)}",
+        "Not used by this calibration",
+        // Which conditions matter, from the selected calibration's findings.
+        "x.parameters.driver === \"temperature\"",
+        "of(\"thermal_expansion\")",
+        "of(\"joint_compliance\")",
+        "of(\"backlash\")",
+        "api(\"GET\", `/calibrations/${calId}`)",
+        "conditionHints(out.report)",
+    ] {
+        assert!(js.contains(needle), "app.js lacks {needle}");
+    }
+    // The select's values are the API's approach names.
+    for a in [
+        ApproachIn::Positive,
+        ApproachIn::Negative,
+        ApproachIn::InOrder,
+    ] {
+        let name = serde_json::to_value(a).unwrap();
+        let name = name.as_str().unwrap();
+        assert!(
+            js.contains(&format!("<option value=\"{name}\">")),
+            "no option {name}"
+        );
+        assert!(
+            js.contains(&format!("{name}: ")),
+            "APPROACH_TEXT lacks {name}"
+        );
+    }
+    // The answer's field names are the ones the script reads.
+    let answer = serde_json::to_value(CompensateResponse {
+        robot_id: 1,
+        calibration_id: 1,
+        version: 1,
+        temp_c_used: None,
+        payload_kg_used: None,
+        approach_used: None,
+        n_ok: 0,
+        results: vec![],
+    })
+    .unwrap();
+    for field in ["temp_c_used", "payload_kg_used", "approach_used"] {
+        assert!(answer.get(field).is_some(), "the API answers {field}");
+        assert!(js.contains(&format!("r.{field}")), "app.js reads {field}");
+    }
+    // The request's field names too: every condition is accepted by the
+    // API's request type.
+    let req: Result<drawcal::http::compensate::CompensateRequest, _> =
+        serde_json::from_value(serde_json::json!({
+            "robot_id": 1, "targets": [], "temp_c": 30.0, "payload_kg": 12.0,
+            "approach": "in_order"
+        }));
+    assert!(req.is_ok(), "{req:?}");
+    // A relevant condition is styled.
+    assert!(html.contains(".cond[data-relevant=true]{"));
+}

@@ -5,7 +5,11 @@
 //! the API gave it, the poses, the identification with its progress, the
 //! calibration view whose tables hold the engine's numbers and whose plots
 //! drew (each finding's evidence plot with its held-out RMS before and
-//! after among them), activation, and compensation to CSV. A calibration
+//! after among them), activation, and compensation to CSV, then again
+//! with a temperature, a payload and an approach filled in: the page says
+//! which of them the answer used (the payload: this calibration accepted a
+//! joint compliance) with the API's value, and lists the other two as not
+//! used. A calibration
 //! from joint angles in radians (er3a_paper_like converted, through the
 //! API): its view shows the report's warnings in a box above activation
 //! and the physics note saying the analysis was not run. Then the UR10
@@ -610,7 +614,88 @@ async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
     assert!(csv.starts_with(
         "target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,residual_mm,iterations,status,message\n"
     ));
+    // The run-time conditions: which matter comes from the calibration's
+    // findings (this one accepted a joint compliance, so the payload; no
+    // temperature-driven thermal expansion, no backlash), and the answer
+    // says which were used. None was filled in: nothing was sent, and the
+    // page shows the payload the API used by default and the other two as
+    // not used.
+    let findings = rep["findings"].as_array().unwrap();
+    let has = |effect: &str| findings.iter().any(|f| f["effect"] == effect);
+    let by_temp = findings
+        .iter()
+        .any(|f| f["effect"] == "thermal_expansion" && f["parameters"]["driver"] == "temperature");
+    assert!(has("joint_compliance"), "{ds} accepted a joint compliance");
+    for (key, relevant) in [
+        ("temp", by_temp),
+        ("payload", has("joint_compliance")),
+        ("approach", has("backlash")),
+    ] {
+        let got = d
+            .wait(
+                &format!("document.querySelector('#comp-cond-{key}').dataset.relevant"),
+                20,
+            )
+            .await;
+        assert_eq!(got, Value::String(relevant.to_string()), "{key} relevant");
+    }
+    check_used(&d, &api, &json!({})).await;
     d.screenshot("compensate").await;
+
+    // Temperature, payload and approach filled in: all three sent; the
+    // answer used the payload (compliance) and not the other two; the CSV
+    // holds the joints the API gives for that payload.
+    d.type_in("#comp-temp", "30").await;
+    d.type_in("#comp-payload", "12").await;
+    d.click("#comp-approach option[value=\"negative\"]").await;
+    d.click("#comp-run").await;
+    d.wait(
+        "document.querySelector('#comp-used-payload') && document.querySelector('#comp-used-payload').dataset.sent === '12'",
+        30,
+    )
+    .await;
+    let sent = json!({"temp_c": 30.0, "payload_kg": 12.0, "approach": "negative"});
+    let mut body = json!({"robot_id": 1, "orientation": false,
+        "targets": [{"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]}]});
+    for (k, v) in sent.as_object().unwrap() {
+        body[k] = v.clone();
+    }
+    let heavy = ok_json(app.post_json("/compensate", &body).await, 200).await;
+    assert_eq!(heavy["payload_kg_used"].as_f64(), Some(12.0), "{heavy}");
+    assert!(heavy["temp_c_used"].is_null(), "{heavy}");
+    assert!(heavy["approach_used"].is_null(), "{heavy}");
+    check_used(&d, &heavy, &sent).await;
+    let csv = d
+        .js("return document.querySelector('#comp-csv').value")
+        .await;
+    let row: Vec<f64> = csv
+        .as_str()
+        .unwrap()
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .skip(1)
+        .take(6)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let q_heavy = heavy["results"][0]["q_deg"].as_array().unwrap();
+    for (j, q) in q_heavy.iter().enumerate() {
+        let b = num(q);
+        assert!(
+            (row[j] - b).abs() <= 1e-12 * b.abs().max(1.0),
+            "q{} at 12 kg: {} vs {b}",
+            j + 1,
+            row[j]
+        );
+    }
+    let moved = q_heavy
+        .iter()
+        .zip(api["results"][0]["q_deg"].as_array().unwrap())
+        .map(|(a, b)| (num(a) - num(b)).abs())
+        .fold(0.0, f64::max);
+    assert!(moved > 1e-6, "12 kg moved the page's joints ({moved} deg)");
+    d.screenshot("compensate-conditions").await;
 
     // A calibration whose input looks wrong: er3a_paper_like with its
     // joint angles in radians, identified through the API. Its view shows
@@ -893,4 +978,80 @@ fn num_eq(a: &Value, b: &Value) -> bool {
         (Some(x), Some(y)) => x == y,
         _ => false,
     }
+}
+
+/// The page's account of the conditions the answer `api` says were used
+/// (`temp_c_used`, `payload_kg_used`, `approach_used`), `sent` being what
+/// was filled in: a used one with the API's value, and with "none given"
+/// when it was not sent; one the answer gives as null listed as not used
+/// (with the value given, when one was).
+async fn check_used(d: &Driver, api: &Value, sent: &Value) {
+    let text = d
+        .wait("document.querySelector('#comp-used') && document.querySelector('#comp-used').innerText", 20)
+        .await;
+    let text = text.as_str().unwrap().to_string();
+    for (key, field, input, shown) in [
+        ("temp", "temp_c_used", "temp_c", "{} °C"),
+        ("payload", "payload_kg_used", "payload_kg", "payload {} kg"),
+        (
+            "approach",
+            "approach_used",
+            "approach",
+            "joints arriving {}",
+        ),
+    ] {
+        let got = d
+            .js(&format!(
+                "const e = document.querySelector('#comp-used-{key}'); return e && [e.dataset.value, e.dataset.sent, e.innerText, !!e.closest('.muted')]"
+            ))
+            .await;
+        let got = got
+            .as_array()
+            .unwrap_or_else(|| panic!("no #comp-used-{key}: {text}"));
+        let (value, sent_shown, words, in_unused) =
+            (&got[0], &got[1], got[2].as_str().unwrap(), got[3] == true);
+        let given = &sent[input];
+        if given.is_null() {
+            assert_eq!(sent_shown, "", "{key} was not sent");
+        } else {
+            assert!(
+                num_eq(sent_shown, given) || sent_shown == given,
+                "{key} sent {given}, page {sent_shown}"
+            );
+        }
+        let used = &api[field];
+        if used.is_null() {
+            assert_eq!(value, "", "{key}: the API did not use it; page {value}");
+            assert!(in_unused, "{key} listed as not used: {text}");
+            assert!(text.contains("Not used by this calibration"), "{text}");
+            if let Some(g) = given.as_f64() {
+                assert!(words.contains(&format!("({g} ")), "{key}: {words}");
+            } else if let Some(g) = given.as_str() {
+                assert!(words.contains(&format!("({g} given)")), "{key}: {words}");
+            }
+        } else {
+            assert!(!in_unused, "{key} used: {text}");
+            if let Some(u) = used.as_str() {
+                assert_eq!(value, u, "{key}");
+                let t = match u {
+                    "positive" => "in +q",
+                    "negative" => "in −q",
+                    _ => "in order",
+                };
+                assert!(words.contains(&shown.replace("{}", t)), "{key}: {words}");
+            } else {
+                assert!(num_eq(value, used), "{key}: page {value}, API {used}");
+                assert!(
+                    words.contains(&shown.replace("{}", &num(used).to_string())),
+                    "{key}: {words}"
+                );
+            }
+            assert_eq!(
+                words.contains("none given"),
+                given.is_null(),
+                "{key}: {words}"
+            );
+        }
+    }
+    eprintln!("compensate view: {text}");
 }

@@ -383,8 +383,67 @@ function parseTargets(text) {
   });
 }
 
+// The run-time conditions POST /compensate takes. Each is used only when
+// the calibration accepted the effect that needs it; the answer says which
+// were used (temp_c_used, payload_kg_used, approach_used; null when the
+// condition does not matter for that calibration) and the page shows that,
+// never its own guess.
+const APPROACH_TEXT = {positive: "in +q", negative: "in −q", in_order: "in order"};
+
+// Which conditions the selected calibration's findings make relevant, from
+// the report as GET /calibrations/{id} gave it: thermal_expansion driven by
+// the temperature → temperature, joint_compliance → payload, backlash →
+// approach. Only a hint: the inputs stay usable either way.
+function conditionHints(report) {
+  const f = (report && report.findings) || [];
+  const of = effect => f.filter(x => x.effect === effect);
+  const param = (list, key) => { const x = list.find(x => x.parameters && x.parameters[key] != null); return x ? x.parameters[key] : null; };
+  const joints = list => { const j = list.map(x => x.joint).filter(j => j != null); return j.length ? ` of joint ${j.join(", ")}` : ""; };
+  const thermal = of("thermal_expansion");
+  const byTemp = thermal.filter(x => x.parameters && x.parameters.driver === "temperature");
+  const compliance = of("joint_compliance");
+  const backlash = of("backlash");
+  const refT = param(byTemp, "reference_temp_c"), refP = param(compliance, "reference_payload_kg");
+  return {
+    temp: byTemp.length
+      ? {relevant: true, text: `matters: thermal expansion driven by the temperature; default: ${refT != null ? `the reference ${esc(refT)} °C` : "the calibration's reference temperature"}`}
+      : {relevant: false, text: thermal.length
+        ? `not used: this calibration's thermal expansion is driven by ${esc(thermal.map(x => x.parameters && x.parameters.driver).filter(Boolean).join(", ") || "something other than the temperature")}, which compensation leaves out`
+        : "no thermal expansion driven by the temperature among the findings"},
+    payload: compliance.length
+      ? {relevant: true, text: `matters: joint compliance${joints(compliance)}; default: ${refP != null ? `the session's ${esc(refP)} kg` : "0 kg (the session recorded no payload)"}`}
+      : {relevant: false, text: "no joint compliance among the findings"},
+    approach: backlash.length
+      ? {relevant: true, text: `matters: backlash${joints(backlash)}; default: every joint moving in +q`}
+      : {relevant: false, text: "no backlash among the findings"},
+  };
+}
+
+// The conditions the answer says were used, as it gave them; `req` only
+// says which ones this page sent (a condition used but not sent is the
+// calibration's default).
+function usedHtml(r, req) {
+  const conds = [
+    {key: "temp", sent: req.temp_c, used: r.temp_c_used, name: "temperature",
+      show: v => `${esc(v)} °C`, given: v => `${esc(v)} °C`, dflt: "the calibration's reference temperature"},
+    {key: "payload", sent: req.payload_kg, used: r.payload_kg_used, name: "payload",
+      show: v => `payload ${esc(v)} kg`, given: v => `${esc(v)} kg`, dflt: "the calibration session's payload"},
+    {key: "approach", sent: req.approach, used: r.approach_used, name: "approach",
+      show: v => `joints arriving ${esc(APPROACH_TEXT[v] || v)}`, given: v => esc(v), dflt: "every joint moving in +q"},
+  ];
+  const span = (c, text) => `<span id="comp-used-${c.key}" data-value="${c.used == null ? "" : esc(c.used)}" data-sent="${c.sent == null ? "" : esc(c.sent)}">${text}</span>`;
+  const used = conds.filter(c => c.used != null)
+    .map(c => span(c, c.show(c.used) + (c.sent == null ? ` (none given: ${c.dflt})` : "")));
+  const unused = conds.filter(c => c.used == null)
+    .map(c => span(c, c.name + (c.sent == null ? "" : ` (${c.given(c.sent)} given)`)));
+  return `<p id="comp-used">${used.length ? `Compensated for ${used.join(", ")}.` : "Compensated without run-time conditions."}` +
+    (unused.length ? ` <span class="muted">Not used by this calibration (it does not depend on ${unused.length > 1 ? "them" : "it"}): ${unused.join(", ")}.</span>` : "") + "</p>";
+}
+
 async function compensateView() {
   const robots = await all("/robots");
+  const cond = (key, label, input, unit) => `<div class="cond" id="comp-cond-${key}" data-relevant="">
+      <label>${label} ${input}${unit}</label> <small class="cond-hint" id="comp-hint-${key}"></small></div>`;
   view().innerHTML = `<h2>Compensate targets</h2>
     <fieldset><legend>Targets (targets.csv)</legend>
       <label>robot <select id="comp-robot">${robots.map(r => `<option value="${r.id}">${esc(r.serial_number)}${r.active_calibration_id != null ? " (calibration #" + r.active_calibration_id + ")" : " (no active calibration)"}</option>`).join("")}</select></label>
@@ -392,16 +451,71 @@ async function compensateView() {
       <label><input type="checkbox" id="comp-orient"> hold orientation</label><br>
       <textarea id="comp-targets" rows="8">target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg
 t1,10,-20,30,0,40,0</textarea><br>
-      or load a file <input type="file" id="comp-file" accept=".csv"> <button id="comp-run">Compensate</button>
+      or load a file <input type="file" id="comp-file" accept=".csv">
+      <fieldset id="comp-conditions"><legend>Run-time conditions (optional: sent only when filled in)</legend>
+        <div id="comp-cal-info" class="muted"></div>
+        ${cond("temp", "temperature", '<input type="text" id="comp-temp" size="6" inputmode="decimal" placeholder="-50 to 150">', " °C")}
+        ${cond("payload", "payload at T", '<input type="text" id="comp-payload" size="6" inputmode="decimal" placeholder="0 to 5000">', " kg")}
+        ${cond("approach", "joints arrive", `<select id="comp-approach"><option value="">default (not sent)</option>
+          <option value="positive">positive: every joint moving in +q</option><option value="negative">negative: every joint moving in −q</option>
+          <option value="in_order">in order: each joint from the previous target</option></select>`, "")}
+      </fieldset>
+      <button id="comp-run">Compensate</button>
       <div id="comp-msg"></div></fieldset><div id="comp-out"></div>`;
   $("#comp-file").onchange = async () => { $("#comp-targets").value = await fileText($("#comp-file")); };
+
+  // The selected calibration's findings say which conditions matter.
+  let asked = 0, debounce = null;
+  const hints = async () => {
+    const ask = ++asked;
+    const robot = robots.find(r => r.id === +$("#comp-robot").value);
+    const typed = $("#comp-cal").value.trim();
+    const calId = typed ? +typed : robot ? robot.active_calibration_id : null;
+    const info = $("#comp-cal-info");
+    const show = (h, text) => {
+      if (ask !== asked) return;
+      info.innerHTML = text;
+      for (const key of ["temp", "payload", "approach"]) {
+        $(`#comp-cond-${key}`).dataset.relevant = h ? String(h[key].relevant) : "";
+        $(`#comp-hint-${key}`).innerHTML = h ? h[key].text : "";
+      }
+    };
+    if (calId == null || !Number.isInteger(calId) || calId < 1) {
+      show(null, typed ? "no calibration selected: the calibration id is not a number" : "the robot has no active calibration: name one to see which conditions matter");
+      return;
+    }
+    try {
+      const out = await api("GET", `/calibrations/${calId}`);
+      show(conditionHints(out.report), `which conditions matter, from calibration <a href="#/calibration/${calId}">#${calId}</a>'s findings:`);
+    } catch (e) {
+      show(null, `no findings to go by (calibration #${calId}: ${esc(e.message)}); the conditions are sent anyway when filled in`);
+    }
+  };
+  $("#comp-robot").onchange = hints;
+  $("#comp-cal").oninput = () => { clearTimeout(debounce); debounce = setTimeout(hints, 300); };
+  hints();
+
   $("#comp-run").onclick = async () => {
     const msg = $("#comp-msg");
     msg.innerHTML = "";
+    $("#comp-out").innerHTML = "";
+    // A condition filled in must be a number; its range is the API's to check.
+    const condition = (sel, name) => {
+      const s = $(sel).value.trim();
+      if (s === "") return undefined;
+      const v = Number(s);
+      if (!isFinite(v)) throw new Error(`${name}: '${s}' is not a number`);
+      return v;
+    };
     try {
       const req = {robot_id: +$("#comp-robot").value, orientation: $("#comp-orient").checked,
         targets: parseTargets($("#comp-targets").value)};
       if ($("#comp-cal").value.trim()) req.calibration_id = +$("#comp-cal").value;
+      const temp = condition("#comp-temp", "temperature");
+      if (temp !== undefined) req.temp_c = temp;
+      const payload = condition("#comp-payload", "payload");
+      if (payload !== undefined) req.payload_kg = payload;
+      if ($("#comp-approach").value) req.approach = $("#comp-approach").value;
       const r = await api("POST", "/compensate", req);
       const dof = Math.max(0, ...r.results.map(x => x.q_deg ? x.q_deg.length : 0));
       const head = ["target", ...Array.from({length: dof}, (_, j) => `q${j + 1}_deg`), "residual_mm", "iterations", "status", "message"];
@@ -412,6 +526,7 @@ t1,10,-20,30,0,40,0</textarea><br>
       const url = URL.createObjectURL(new Blob([csv], {type: "text/csv"}));
       $("#comp-out").innerHTML = `<p>calibration #${r.calibration_id} v${r.version}: ${r.n_ok} of ${r.results.length} ok.
         <a id="comp-download" href="${url}" download="compensated.csv">Download compensated.csv</a></p>
+        ${usedHtml(r, req)}
         <textarea id="comp-csv" rows="8" readonly>${esc(csv)}</textarea>`;
     } catch (e) { showError(msg, e); }
   };
