@@ -678,17 +678,17 @@ pub async fn compensate(
             if let Some(v) = value.and_then(|v| HeaderValue::from_str(&v.to_string()).ok()) {
                 resp.headers_mut().insert(HeaderName::from_static(name), v);
             }
-            if let Some(a) = approach_used {
-                let v = match a {
-                    ApproachIn::Positive => "positive",
-                    ApproachIn::Negative => "negative",
-                    ApproachIn::InOrder => "in_order",
-                };
-                resp.headers_mut().insert(
-                    HeaderName::from_static("x-approach-used"),
-                    HeaderValue::from_static(v),
-                );
-            }
+        }
+        if let Some(a) = approach_used {
+            let v = match a {
+                ApproachIn::Positive => "positive",
+                ApproachIn::Negative => "negative",
+                ApproachIn::InOrder => "in_order",
+            };
+            resp.headers_mut().insert(
+                HeaderName::from_static("x-approach-used"),
+                HeaderValue::from_static(v),
+            );
         }
         return Ok(resp);
     }
