@@ -10,7 +10,7 @@ use drawcal::kinematics::chain::{Chain, OutputFrame};
 use drawcal::kinematics::rpy_matrix;
 use drawcal::model::{BasePose, Robot, Target, TargetKind};
 use drawcal::physics::effects::{Basis, Context, PoseInput};
-use drawcal::physics::simulate::{self, EffectSpec, Spec};
+use drawcal::physics::simulate::{self, Spec};
 use nalgebra::{Matrix3, Vector3};
 
 fn base_rt(b: &BasePose) -> (Matrix3<f64>, Vector3<f64>) {
@@ -82,41 +82,22 @@ fn calibrated(spec: serde_json::Value, effect: &str, joint: Option<usize>) -> Ca
 
 #[test]
 fn compensation_with_compliance_beats_geometry_only() {
-    let spec = Spec {
-        robot: "er3a".into(),
-        rig: None,
-        n_poses: 120,
-        test_fraction: 0.3,
-        seed: 4242,
-        deviations: Default::default(),
-        base_in_rig: None,
-        noise: Default::default(),
-        session: Default::default(),
-        effects: vec![EffectSpec {
-            effect: "joint_compliance".into(),
-            joint: Some(2),
-            sensor: None,
-            harmonic: None,
-            phase_deg: None,
-            direction: None,
-            at_fraction: None,
-            magnitude: None,
-            size_x_noise: Some(10.0),
-        }],
-    };
-    let sim = simulate::generate(&spec).unwrap();
-    let true_robot: Robot = serde_json::from_value(sim.truth["true_robot"].clone()).unwrap();
-    let true_base: BasePose = serde_json::from_value(sim.truth["base_in_rig"].clone()).unwrap();
-    let (rt, tt) = base_rt(&true_base);
-
-    let with = identify(
-        &sim.robot,
-        &sim.rig,
-        &sim.dataset,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
+    let Calibrated {
+        sim,
+        report: with,
+        true_robot,
+        rt,
+        tt,
+    } = calibrated(
+        serde_json::json!({
+            "robot": "er3a",
+            "n_poses": 120,
+            "seed": 4242,
+            "effects": [{"effect": "joint_compliance", "joint": 2, "size_x_noise": 10}]
+        }),
+        "joint_compliance",
+        Some(2),
+    );
     let without = identify(
         &sim.robot,
         &sim.rig,
@@ -128,13 +109,6 @@ fn compensation_with_compliance_beats_geometry_only() {
         &NoProgress,
     )
     .unwrap();
-    assert!(
-        with.findings
-            .iter()
-            .any(|f| f.effect == "joint_compliance" && f.joint == Some(2)),
-        "{:#?}",
-        with.findings
-    );
     assert!(without.findings.is_empty());
 
     // Where the real robot puts T (rig frame) when commanded `q`: the true

@@ -6,18 +6,7 @@
 
 use serde_json::{Value, json};
 
-use crate::compensate_thermal::q_of;
-use crate::helpers::{TestApp, err_json};
-use crate::openapi::validate_response;
-
-fn q_at(answer: &Value, k: usize) -> Vec<f64> {
-    answer["results"][k]["q_deg"]
-        .as_array()
-        .unwrap_or_else(|| panic!("{answer}"))
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect()
-}
+use crate::helpers::{TestApp, err_json, q_at};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn approach_follows_a_backlash_calibration() {
@@ -31,14 +20,7 @@ async fn approach_follows_a_backlash_calibration() {
     let (robot, _, _) = app.calibrate_simulated(spec, "BACKLASH-1").await;
     let ask = |body: Value| {
         let app = &app;
-        async move {
-            validate_response(
-                "post",
-                "/compensate",
-                app.post_json("/compensate", &body).await,
-            )
-            .await
-        }
+        async move { app.compensate(&body).await }
     };
     // Joint 2 goes down from the first target to the second.
     let targets = json!([
@@ -50,9 +32,9 @@ async fn approach_follows_a_backlash_calibration() {
     let negative =
         ask(json!({"robot_id": robot, "targets": targets, "approach": "negative"})).await;
     assert_eq!(negative["approach_used"], "negative");
-    let moved = q_of(&negative)
+    let moved = q_at(&negative, 0)
         .iter()
-        .zip(q_of(&default))
+        .zip(q_at(&default, 0))
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
     assert!(

@@ -8,8 +8,7 @@
 
 use serde_json::{Value, json};
 
-use crate::compensate_thermal::q_of;
-use crate::helpers::{TestApp, err_json};
+use crate::helpers::{TestApp, err_json, q_at};
 use crate::openapi::validate_response;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -27,14 +26,7 @@ async fn payload_kg_moves_a_compliant_calibration_and_is_reported() {
     let target = json!({"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]});
     let ask = |body: Value| {
         let app = &app;
-        async move {
-            validate_response(
-                "post",
-                "/compensate",
-                app.post_json("/compensate", &body).await,
-            )
-            .await
-        }
+        async move { app.compensate(&body).await }
     };
 
     let default = ask(json!({"robot_id": robot, "target": target})).await;
@@ -45,15 +37,15 @@ async fn payload_kg_moves_a_compliant_calibration_and_is_reported() {
 
     let heavy = ask(json!({"robot_id": robot, "target": target, "payload_kg": 12.0})).await;
     assert_eq!(heavy["payload_kg_used"].as_f64(), Some(12.0));
-    let moved = q_of(&heavy)
+    let moved = q_at(&heavy, 0)
         .iter()
-        .zip(q_of(&default))
+        .zip(q_at(&default, 0))
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
     assert!(moved > 1e-3, "8 kg more moves the joints ({moved} deg)");
     // The session's payload given explicitly: the same as none.
     let same = ask(json!({"robot_id": robot, "target": target, "payload_kg": 4.0})).await;
-    assert_eq!(q_of(&same), q_of(&default));
+    assert_eq!(q_at(&same, 0), q_at(&default, 0));
     // A batch on the compute threads, with a temperature that does not
     // matter here, uses the payload too.
     let batch: Vec<Value> = (0..8)
@@ -139,14 +131,7 @@ async fn payload_kg_used_is_null_without_a_compliance() {
         body.as_object_mut()
             .unwrap()
             .extend(extra.as_object().unwrap().clone());
-        async move {
-            validate_response(
-                "post",
-                "/compensate",
-                app.post_json("/compensate", &body).await,
-            )
-            .await
-        }
+        async move { app.compensate(&body).await }
     };
     let plain = ask(json!({})).await;
     assert!(plain["payload_kg_used"].is_null(), "{plain}");

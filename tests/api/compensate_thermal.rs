@@ -6,7 +6,7 @@
 
 use serde_json::{Value, json};
 
-use crate::helpers::{TestApp, err_json};
+use crate::helpers::{TestApp, err_json, q_at};
 use crate::openapi::validate_response;
 
 /// A robot with an active calibration of a simulated er3a session with
@@ -22,15 +22,6 @@ async fn thermal_calibration(app: &TestApp) -> (i64, i64, f64) {
     (robot, cal, sim.dataset.poses[0].temp_c.unwrap())
 }
 
-pub(crate) fn q_of(answer: &Value) -> Vec<f64> {
-    answer["results"][0]["q_deg"]
-        .as_array()
-        .unwrap_or_else(|| panic!("{answer}"))
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect()
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn temp_c_moves_a_thermal_calibration_and_is_reported() {
     let app = TestApp::spawn("compthermal").await;
@@ -38,14 +29,7 @@ async fn temp_c_moves_a_thermal_calibration_and_is_reported() {
     let target = json!({"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]});
     let ask = |body: Value| {
         let app = &app;
-        async move {
-            validate_response(
-                "post",
-                "/compensate",
-                app.post_json("/compensate", &body).await,
-            )
-            .await
-        }
+        async move { app.compensate(&body).await }
     };
 
     // No temperature: the reference, and it says so.
@@ -60,9 +44,9 @@ async fn temp_c_moves_a_thermal_calibration_and_is_reported() {
     let warm = ask(json!({"robot_id": robot, "target": target, "temp_c": warm_t})).await;
     assert_eq!(warm["results"][0]["status"], "ok", "{warm}");
     assert_eq!(warm["temp_c_used"].as_f64(), Some(warm_t));
-    let moved = q_of(&warm)
+    let moved = q_at(&warm, 0)
         .iter()
-        .zip(q_of(&at_ref))
+        .zip(q_at(&at_ref, 0))
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
     assert!(
@@ -71,10 +55,10 @@ async fn temp_c_moves_a_thermal_calibration_and_is_reported() {
     );
     // The reference temperature given explicitly: the same as none.
     let same = ask(json!({"robot_id": robot, "target": target, "temp_c": t_ref})).await;
-    assert_eq!(q_of(&same), q_of(&at_ref));
+    assert_eq!(q_at(&same, 0), q_at(&at_ref, 0));
     // The cache still holds the reference: asking again without one.
     let again = ask(json!({"robot_id": robot, "target": target})).await;
-    assert_eq!(q_of(&again), q_of(&at_ref));
+    assert_eq!(q_at(&again, 0), q_at(&at_ref, 0));
 
     // A batch big enough for the compute threads uses the temperature too.
     let batch: Vec<Value> = (0..8)

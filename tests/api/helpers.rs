@@ -299,6 +299,17 @@ impl TestApp {
         (robot, cal, sim)
     }
 
+    /// `POST /compensate` with a JSON body: the answer, checked against
+    /// openapi.yaml (a 200 expected).
+    pub async fn compensate(&self, body: &Value) -> Value {
+        crate::openapi::validate_response(
+            "post",
+            "/compensate",
+            self.post_json("/compensate", body).await,
+        )
+        .await
+    }
+
     /// Poll a job until it ends (bounded by a generous number of polls).
     pub async fn wait_job(&self, job_id: i64, max_wait: Duration) -> Value {
         let polls = (max_wait.as_millis() / 100).max(1);
@@ -398,4 +409,14 @@ pub fn slow_job_fn(
         }
         Err(drawcal::Error::Numerical("stand-in engine finished".into()))
     })
+}
+
+/// The compensated joints (deg) of result `k` of a `/compensate` answer.
+pub fn q_at(answer: &Value, k: usize) -> Vec<f64> {
+    answer["results"][k]["q_deg"]
+        .as_array()
+        .unwrap_or_else(|| panic!("{answer}"))
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect()
 }
