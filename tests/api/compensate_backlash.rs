@@ -20,7 +20,7 @@ async fn approach_follows_a_backlash_calibration() {
     let (robot, _, _) = app.calibrate_simulated(spec, "BACKLASH-1").await;
     let ask = |body: Value| {
         let app = &app;
-        async move { app.compensate(&body).await }
+        async move { crate::openapi::compensate(app, &body).await }
     };
     // Joint 2 goes down from the first target to the second.
     let targets = json!([

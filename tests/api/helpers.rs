@@ -299,17 +299,6 @@ impl TestApp {
         (robot, cal, sim)
     }
 
-    /// `POST /compensate` with a JSON body: the answer, checked against
-    /// openapi.yaml (a 200 expected).
-    pub async fn compensate(&self, body: &Value) -> Value {
-        crate::openapi::validate_response(
-            "post",
-            "/compensate",
-            self.post_json("/compensate", body).await,
-        )
-        .await
-    }
-
     /// Poll a job until it ends (bounded by a generous number of polls).
     pub async fn wait_job(&self, job_id: i64, max_wait: Duration) -> Value {
         let polls = (max_wait.as_millis() / 100).max(1);

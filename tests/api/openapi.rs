@@ -117,6 +117,17 @@ pub fn check(spec: &Value, schema: &Value, v: &Value, at: &str) -> Result<(), St
     Ok(())
 }
 
+/// `POST /compensate` with a JSON body: the answer, checked against
+/// openapi.yaml (a 200 expected).
+pub async fn compensate(app: &crate::helpers::TestApp, body: &Value) -> Value {
+    validate_response(
+        "post",
+        "/compensate",
+        app.post_json("/compensate", body).await,
+    )
+    .await
+}
+
 /// Check a live response against the spec's schema for its route and
 /// status, and return the JSON body.
 pub async fn validate_response(method: &str, path: &str, r: reqwest::Response) -> Value {
