@@ -1,6 +1,8 @@
 //! The `drawcal` binary as a user runs it: identify, then compensate with
 //! the report, then locate.
 
+mod common;
+
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -315,22 +317,8 @@ fn radians_in_degree_columns_are_warned_about() {
     let dir = std::env::temp_dir().join(format!("drawcal-cli-rad-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let poses = std::fs::read_to_string(data("poses.csv")).unwrap();
-    let mut lines = poses.lines();
-    let header = lines.next().unwrap();
-    let mut out = vec![header.to_string()];
-    for line in lines {
-        let cells: Vec<String> = line
-            .split(',')
-            .enumerate()
-            .map(|(i, c)| match i {
-                1..=6 => format!("{:.6}", c.parse::<f64>().unwrap().to_radians()),
-                _ => c.to_string(),
-            })
-            .collect();
-        out.push(cells.join(","));
-    }
     let rad = dir.join("radians.csv");
-    std::fs::write(&rad, out.join("\n")).unwrap();
+    std::fs::write(&rad, common::q_columns_in_radians(&poses, None)).unwrap();
     let report = dir.join("report.json");
     let run = bin()
         .args(["identify", "--robot"])

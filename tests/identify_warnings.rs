@@ -28,43 +28,15 @@ fn warnings_of(robot: &Robot, rig: &Rig, data: &Dataset) -> Vec<String> {
 
 /// A dataset's poses.csv with the joint columns of the given data rows
 /// (0-based; every row when `None`) rewritten in radians.
-fn in_radians(name: &str, dof: usize, rows: Option<&[usize]>) -> String {
+fn in_radians(name: &str, rows: Option<&[usize]>) -> String {
     let text = std::fs::read_to_string(common::dir(name).join("poses.csv")).unwrap();
-    let mut lines = text.lines();
-    let header = lines.next().unwrap();
-    let cols: Vec<usize> = header
-        .split(',')
-        .enumerate()
-        .filter(|(_, h)| (1..=dof).any(|j| *h == format!("q{j}_deg")))
-        .map(|(i, _)| i)
-        .collect();
-    assert_eq!(cols.len(), dof);
-    let mut out = vec![header.to_string()];
-    for (r, line) in lines.enumerate() {
-        if rows.is_some_and(|rows| !rows.contains(&r)) {
-            out.push(line.to_string());
-            continue;
-        }
-        let cells: Vec<String> = line
-            .split(',')
-            .enumerate()
-            .map(|(i, c)| {
-                if cols.contains(&i) {
-                    format!("{:.6}", c.parse::<f64>().unwrap().to_radians())
-                } else {
-                    c.to_string()
-                }
-            })
-            .collect();
-        out.push(cells.join(","));
-    }
-    out.join("\n")
+    common::q_columns_in_radians(&text, rows)
 }
 
 #[test]
 fn a_file_in_radians_is_identified_with_a_warning() {
     let (robot, rig, _) = common::load("er3a_paper_like");
-    let csv = in_radians("er3a_paper_like", robot.dof(), None);
+    let csv = in_radians("er3a_paper_like", None);
     let data = Dataset::from_csv(csv.as_bytes(), &robot, &rig).unwrap();
     let report = identify(&robot, &rig, &data, &no_physics(), &NoProgress).unwrap();
     assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
@@ -112,7 +84,7 @@ fn the_shared_datasets_in_degrees_are_not_warned_about() {
 #[test]
 fn single_poses_in_radians_are_named() {
     let (robot, rig, _) = common::load("er3a_paper_like");
-    let csv = in_radians("er3a_paper_like", robot.dof(), Some(&[6]));
+    let csv = in_radians("er3a_paper_like", Some(&[6]));
     let data = Dataset::from_csv(csv.as_bytes(), &robot, &rig).unwrap();
     let w = warnings_of(&robot, &rig, &data);
     assert_eq!(w.len(), 1, "{w:?}");
@@ -123,7 +95,7 @@ fn single_poses_in_radians_are_named() {
     );
     // Many: five described, the rest listed by id.
     let rows: Vec<usize> = (0..8).collect();
-    let csv = in_radians("er3a_paper_like", robot.dof(), Some(&rows));
+    let csv = in_radians("er3a_paper_like", Some(&rows));
     let data = Dataset::from_csv(csv.as_bytes(), &robot, &rig).unwrap();
     let w = warnings_of(&robot, &rig, &data);
     assert_eq!(w.len(), 6, "{w:?}");

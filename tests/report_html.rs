@@ -1,6 +1,8 @@
 //! `drawcal report --html` and the HTML renderer: the file holds the
 //! report's numbers, its plots drew, and it references nothing outside.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -372,31 +374,12 @@ fn pose_columns_keep_numeric_columns_by_pose_id() {
     );
 }
 
-/// A dataset's poses.csv with every joint angle (`q*_deg`) rewritten in
-/// radians: input that parses but looks wrong.
+/// A dataset's poses.csv with every joint angle rewritten in radians.
 fn in_radians(name: &str) -> String {
-    let text = std::fs::read_to_string(data(name).join("poses.csv")).unwrap();
-    let mut lines = text.lines();
-    let header = lines.next().unwrap();
-    let is_q = |h: &str| h.starts_with('q') && h.ends_with("_deg");
-    let cols: Vec<bool> = header.split(',').map(is_q).collect();
-    assert!(cols.iter().any(|&q| q));
-    let mut out = vec![header.to_string()];
-    for line in lines {
-        let cells: Vec<String> = line
-            .split(',')
-            .zip(&cols)
-            .map(|(c, &q)| {
-                if q {
-                    format!("{:.6}", c.parse::<f64>().unwrap().to_radians())
-                } else {
-                    c.to_string()
-                }
-            })
-            .collect();
-        out.push(cells.join(","));
-    }
-    out.join("\n") + "\n"
+    common::q_columns_in_radians(
+        &std::fs::read_to_string(data(name).join("poses.csv")).unwrap(),
+        None,
+    )
 }
 
 /// The box of the report's `warnings`, from its opening tag to its end.

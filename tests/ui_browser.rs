@@ -26,6 +26,7 @@
 //! `DRAWCAL_UI_SCREENSHOTS=1` writes a screenshot of each view to
 //! `docs/ui/`.
 
+mod common;
 #[allow(dead_code)]
 #[path = "api/helpers.rs"]
 mod helpers;
@@ -708,7 +709,7 @@ async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
         app.post_raw(
             &format!("/sessions/{rs}/poses"),
             Some("text/csv"),
-            in_radians(&read(rad, "poses.csv")),
+            common::q_columns_in_radians(&read(rad, "poses.csv"), None),
         )
         .await,
         200,
@@ -945,32 +946,6 @@ async fn check_evidence(d: &Driver, findings: &[Value], what: &str) -> (usize, O
         }
     }
     (findings.len(), unexplained)
-}
-
-/// poses.csv with every joint angle (`q*_deg`) rewritten in radians.
-fn in_radians(csv: &str) -> String {
-    let mut lines = csv.lines();
-    let header = lines.next().unwrap();
-    let q: Vec<bool> = header
-        .split(',')
-        .map(|h| h.starts_with('q') && h.ends_with("_deg"))
-        .collect();
-    let mut out = vec![header.to_string()];
-    for line in lines {
-        let cells: Vec<String> = line
-            .split(',')
-            .zip(&q)
-            .map(|(c, &q)| {
-                if q {
-                    format!("{:.6}", c.parse::<f64>().unwrap().to_radians())
-                } else {
-                    c.to_string()
-                }
-            })
-            .collect();
-        out.push(cells.join(","));
-    }
-    out.join("\n") + "\n"
 }
 
 fn num_eq(a: &Value, b: &Value) -> bool {

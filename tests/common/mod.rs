@@ -63,3 +63,35 @@ pub fn drop_columns(csv: &str, names: &[&str]) -> String {
         .collect::<Vec<_>>()
         .join("\n")
 }
+
+/// A poses.csv text with the joint angles (`q*_deg`) of the given data
+/// rows (0-based; every row when `None`) rewritten in radians: input that
+/// parses but looks wrong.
+pub fn q_columns_in_radians(csv: &str, rows: Option<&[usize]>) -> String {
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap_or("");
+    let q: Vec<bool> = header
+        .split(',')
+        .map(|h| h.starts_with('q') && h.ends_with("_deg"))
+        .collect();
+    let mut out = vec![header.to_string()];
+    for (r, line) in lines.enumerate() {
+        if rows.is_some_and(|rows| !rows.contains(&r)) {
+            out.push(line.to_string());
+            continue;
+        }
+        let cells: Vec<String> = line
+            .split(',')
+            .zip(&q)
+            .map(|(c, &q)| {
+                if q {
+                    format!("{:.6}", c.parse::<f64>().unwrap().to_radians())
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect();
+        out.push(cells.join(","));
+    }
+    out.join("\n") + "\n"
+}
