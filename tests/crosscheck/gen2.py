@@ -18,6 +18,10 @@ Env: XC_OUT (default /tmp/xcheck2/ds), XCHECK_DATA (default tests/data),
 import json, math, os, sys, copy, subprocess, time
 import numpy as np
 
+# The rotations and translations are the first simulator's (one definition).
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from sim import rotx, roty, rotz, trans, rpy_to_R  # noqa: E402
+
 OUT = os.environ.get("XC_OUT", "/tmp/xcheck2/ds")
 SRC = os.environ.get("XCHECK_DATA", "tests/data")
 TOOL = os.environ.get("XCHECK_TOOL", "target/release/drawcal")
@@ -25,27 +29,6 @@ D2R = math.pi / 180.0
 
 
 # ---------------------------------------------------------------- kinematics
-def rotx(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1, 0, 0, 0], [0, c, -s, 0], [0, s, c, 0], [0, 0, 0, 1.0]])
-
-
-def roty(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1.0]])
-
-
-def rotz(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
-
-
-def trans(x, y, z):
-    T = np.eye(4)
-    T[:3, 3] = [x, y, z]
-    return T
-
-
 def link_T(J, q, conv):
     th = (q + J["theta_offset_deg"]) * D2R
     if conv == "mdh":
@@ -78,11 +61,6 @@ def axes(joints, q_deg, conv):
             out.append((T[:3, 3].copy(), T[:3, 2].copy()))
         T = T @ link_T(J, q, conv)
     return out
-
-
-def rpy_to_R(rpy_deg):
-    r, p, y = [v * D2R for v in rpy_deg]
-    return (rotz(y) @ roty(p) @ rotx(r))[:3, :3]
 
 
 def gravity_torques(robot, q_deg):
