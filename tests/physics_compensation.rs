@@ -47,6 +47,31 @@ struct Calibrated {
     tt: Vector3<f64>,
 }
 
+impl Calibrated {
+    /// Where the real robot puts T (rig frame) when commanded `q` carrying
+    /// `payload_kg`: the true geometry at the angles the true (single-pose)
+    /// effects deflect it to.
+    fn true_point(&self, q: &[f64], payload_kg: Option<f64>) -> Vector3<f64> {
+        let ctx = Context::new(
+            &self.sim.robot,
+            vec![],
+            0.0,
+            &Matrix3::identity(),
+            &[PoseInput {
+                q_rad: q,
+                time_s: None,
+                temp_c: None,
+                payload_kg,
+                point_rig: Vector3::zeros(),
+            }],
+        );
+        let mut buf = Basis::default();
+        let dq = ctx.apply(&self.sim.effects, 0, &mut buf).dq;
+        let qe: Vec<f64> = q.iter().zip(&dq).map(|(a, b)| a + b).collect();
+        self.rt * point(&self.true_robot, &qe) + self.tt
+    }
+}
+
 fn calibrated(spec: serde_json::Value, effect: &str, joint: Option<usize>) -> Calibrated {
     let spec: Spec = serde_json::from_value(spec).unwrap();
     let sim = simulate::generate(&spec).unwrap();
@@ -82,13 +107,7 @@ fn calibrated(spec: serde_json::Value, effect: &str, joint: Option<usize>) -> Ca
 
 #[test]
 fn compensation_with_compliance_beats_geometry_only() {
-    let Calibrated {
-        sim,
-        report: with,
-        true_robot,
-        rt,
-        tt,
-    } = calibrated(
+    let cal = calibrated(
         serde_json::json!({
             "robot": "er3a",
             "n_poses": 120,
@@ -98,6 +117,7 @@ fn compensation_with_compliance_beats_geometry_only() {
         "joint_compliance",
         Some(2),
     );
+    let (sim, with) = (&cal.sim, &cal.report);
     let without = identify(
         &sim.robot,
         &sim.rig,
@@ -113,25 +133,7 @@ fn compensation_with_compliance_beats_geometry_only() {
 
     // Where the real robot puts T (rig frame) when commanded `q`: the true
     // geometry at the angles the true compliance deflects it to.
-    let true_t = |q: &[f64]| -> Vector3<f64> {
-        let ctx = Context::new(
-            &sim.robot,
-            vec![],
-            0.0,
-            &Matrix3::identity(),
-            &[PoseInput {
-                q_rad: q,
-                time_s: None,
-                temp_c: None,
-                payload_kg: None,
-                point_rig: Vector3::zeros(),
-            }],
-        );
-        let mut buf = Basis::default();
-        let dq = ctx.apply(&sim.effects, 0, &mut buf).dq;
-        let qe: Vec<f64> = q.iter().zip(&dq).map(|(a, b)| a + b).collect();
-        rt * point(&true_robot, &qe) + tt
-    };
+    let true_t = |q: &[f64]| cal.true_point(q, None);
 
     // Targets: nominal joint poses across the workspace (the dataset's test
     // poses). Each calibration states the target in its own base frame: the
@@ -307,13 +309,7 @@ fn compensation_at_the_running_temperature_beats_the_reference() {
 /// and without (ur5: unit-mass regressors, the payload's lever fitted from
 /// the swaps).
 fn check_payload_compensation(robot: &str, seed: u64) {
-    let Calibrated {
-        sim,
-        report,
-        true_robot,
-        rt,
-        tt,
-    } = calibrated(
+    let cal = calibrated(
         serde_json::json!({
             "robot": robot,
             "n_poses": 120,
@@ -324,6 +320,7 @@ fn check_payload_compensation(robot: &str, seed: u64) {
         "joint_compliance",
         Some(2),
     );
+    let (sim, report) = (&cal.sim, &cal.report);
     let comp = Compensator::from_report(&report).unwrap();
     assert_eq!(
         comp.payload_kg(),
@@ -335,25 +332,7 @@ fn check_payload_compensation(robot: &str, seed: u64) {
     assert_eq!(loaded.payload_kg(), Some(run_kg));
 
     // The real robot carrying `run_kg`, commanded `q` (rig frame).
-    let true_t = |q: &[f64]| -> Vector3<f64> {
-        let ctx = Context::new(
-            &sim.robot,
-            vec![],
-            0.0,
-            &Matrix3::identity(),
-            &[PoseInput {
-                q_rad: q,
-                time_s: None,
-                temp_c: None,
-                payload_kg: Some(run_kg),
-                point_rig: Vector3::zeros(),
-            }],
-        );
-        let mut buf = Basis::default();
-        let dq = ctx.apply(&sim.effects, 0, &mut buf).dq;
-        let qe: Vec<f64> = q.iter().zip(&dq).map(|(a, b)| a + b).collect();
-        rt * point(&true_robot, &qe) + tt
-    };
+    let true_t = |q: &[f64]| cal.true_point(q, Some(run_kg));
     let (rb, tb) = base_rt(&report.base_in_rig);
     let (mut assumed, mut given) = (vec![], vec![]);
     for (k, p) in sim.dataset.poses.iter().enumerate().step_by(3) {
