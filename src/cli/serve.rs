@@ -31,6 +31,14 @@ pub struct ServeArgs {
     /// it is handed back to the queue (seconds).
     #[arg(long, env = "DRAWCAL_SHUTDOWN_GRACE_SECS", default_value_t = 10)]
     pub shutdown_grace_secs: u64,
+    /// Threads of the async runtime (HTTP I/O, the store, small inline
+    /// compensations); numerical work has its own threads, one per core.
+    /// Default: half the cores, at least one. Measured on 2 cores
+    /// (BENCHMARKS.md, "Service load"): one runtime thread gives the same
+    /// throughput as two and a p99 under half as long, because the compute
+    /// threads and the clients keep the other core busy anyway.
+    #[arg(long, env = "DRAWCAL_RUNTIME_THREADS", default_value_t = default_runtime_threads())]
+    pub runtime_threads: usize,
     /// Log lines on stderr: `text` (key=value) or `json` (one object per
     /// line, for log collectors). Either way every line logged while a
     /// request is handled carries its request id.
@@ -58,6 +66,11 @@ impl std::fmt::Display for LogFormat {
     }
 }
 
+/// Half the cores available to this process, rounded up.
+fn default_runtime_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get().div_ceil(2))
+}
+
 fn redact(url: &str) -> String {
     // postgres://user:password@host/db -> postgres://user:***@host/db
     match (url.find("://"), url.rfind('@')) {
@@ -77,16 +90,20 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
     if args.workers == 0 {
         return Err("--workers must be at least 1".into());
     }
+    if args.runtime_threads == 0 {
+        return Err("--runtime-threads must be at least 1".into());
+    }
     if args.job_lease_secs == 0 {
         return Err("--job-lease-secs must be at least 1".into());
     }
     init_tracing(args.log_format);
     // Through the log (not eprintln) so that JSON logs are JSON throughout.
     tracing::info!(
-        "drawcal serve: listen={} database={} workers={} max_upload_bytes={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
+        "drawcal serve: listen={} database={} workers={} runtime_threads={} max_upload_bytes={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
         args.listen,
         redact(&args.database),
         args.workers,
+        args.runtime_threads,
         args.max_upload_bytes,
         args.job_lease_secs,
         args.shutdown_grace_secs,
@@ -105,6 +122,7 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
     };
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
+        .worker_threads(args.runtime_threads)
         .thread_name("drawcal-http")
         .build()?;
     rt.block_on(async move {

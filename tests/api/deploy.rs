@@ -203,6 +203,44 @@ async fn binary_runs_as_the_dockerfile_says() {
     );
 }
 
+/// Threads of process `pid` named `name` (Linux: /proc/PID/task/*/comm).
+fn threads_named(pid: u32, name: &str) -> usize {
+    std::fs::read_dir(format!("/proc/{pid}/task"))
+        .unwrap()
+        .filter(|t| {
+            let comm = std::fs::read_to_string(t.as_ref().unwrap().path().join("comm"));
+            comm.is_ok_and(|c| c.trim() == name)
+        })
+        .count()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn runtime_threads_flag_sets_the_http_threads_and_is_printed() {
+    let stage = parse_dockerfile();
+    let client = reqwest::Client::new();
+    for n in ["1", "3"] {
+        let data = fresh_dir(&format!("runtime-threads-{n}"));
+        let port = free_port();
+        let mut child = start(&stage, &data, port, &[("DRAWCAL_RUNTIME_THREADS", n)]);
+        wait_ready(&client, &format!("http://127.0.0.1:{port}"), &mut child).await;
+        // The runtime's workers exist from the start; nothing has asked for
+        // a blocking thread (which would carry the same name) yet.
+        let threads = threads_named(child.id(), "drawcal-http");
+        signal(&child, "-TERM");
+        child.wait().unwrap();
+        assert_eq!(
+            threads.to_string(),
+            n,
+            "runtime threads with DRAWCAL_RUNTIME_THREADS={n}"
+        );
+        let log = std::fs::read_to_string(data.join(format!("server-{port}.log"))).unwrap();
+        assert!(
+            log.contains(&format!("runtime_threads={n} ")),
+            "the start line names the runtime threads: {log}"
+        );
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sigkill_during_a_job_then_restart_completes_it() {
     let stage = parse_dockerfile();

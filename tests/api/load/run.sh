@@ -15,11 +15,15 @@
 #      omission): latency at a given load rather than at saturation.
 # PARTS selects (default "single batch identify"); DUR the wrk duration;
 # LOG_LEVEL the server's RUST_LOG (default warn), LOG_FORMAT its log format.
+# The generator shares the server's machine: WRK_THREADS (default 1) keeps it
+# to one core's worth, as the server's default of one runtime thread per two
+# cores expects; SERVER_CPUS and WRK_CPUS (taskset lists, e.g. 0 and 1) pin
+# the two apart.
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
 BIN=${1:-target/release/drawcal}
 DUR=${DUR:-15s}
-WRK_THREADS=${WRK_THREADS:-2}
+WRK_THREADS=${WRK_THREADS:-1}
 PORT=${PORT:-18080}
 PARTS=${PARTS:-single batch identify}
 has() { [[ " $PARTS " == *" $1 "* ]]; }
@@ -27,7 +31,7 @@ BASE=http://127.0.0.1:$PORT
 WORK=$(mktemp -d)
 trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true; rm -rf "$WORK"' EXIT
 
-DATABASE_URL=sqlite://$WORK/bench.db RUST_LOG=${LOG_LEVEL:-warn} DRAWCAL_LOG_FORMAT=${LOG_FORMAT:-text} "$BIN" serve --listen 127.0.0.1:$PORT --workers 1 2>"$WORK/server.log" &
+DATABASE_URL=sqlite://$WORK/bench.db RUST_LOG=${LOG_LEVEL:-warn} DRAWCAL_LOG_FORMAT=${LOG_FORMAT:-text} ${SERVER_CPUS:+taskset -c $SERVER_CPUS} "$BIN" serve --listen 127.0.0.1:$PORT --workers 1 2>"$WORK/server.log" &
 SERVER=$!
 until curl -sf $BASE/ready >/dev/null; do sleep 0.2; done
 
@@ -63,7 +67,7 @@ json.dump({"robot_id": robot, "targets": [{"target": f"t{i}", "q_deg": q()} for 
 PY
 if has single; then
   echo "### single target, 64 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
-  BODY=$WORK/one.json wrk -t$WRK_THREADS -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
+  BODY=$WORK/one.json ${WRK_CPUS:+taskset -c $WRK_CPUS} wrk -t$WRK_THREADS -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
 fi
 if has batch; then
   echo "### batch of 10,000 targets, 2 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
