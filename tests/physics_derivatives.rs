@@ -127,6 +127,7 @@ fn string_effects_match_finite_differences() {
             ),
             (Kind::SensorScale { sensor_index: 1 }, vec![1e-4]),
             (Kind::SensorOffset { sensor_index: 2 }, vec![0.1]),
+            (Kind::SensorDrift { sensor_index: 0 }, vec![0.2]),
             (Kind::CableSag, vec![0.05]),
             (
                 Kind::AnchorStep {

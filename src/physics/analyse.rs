@@ -481,6 +481,11 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
         }
     }
     if m > 0 {
+        let drift_clock = if ctx.timed {
+            "time (a steady creep)"
+        } else {
+            "row order (a steady creep; no time_s)"
+        };
         for k in 0..m {
             push(
                 Kind::SensorScale { sensor_index: k },
@@ -491,6 +496,11 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
                 Kind::SensorOffset { sensor_index: k },
                 1,
                 format!("a constant on string {}", k + 1),
+            );
+            push(
+                Kind::SensorDrift { sensor_index: k },
+                1,
+                format!("{} on string {}", drift_clock, k + 1),
             );
         }
         push(Kind::CableSag, 1, "horizontal span of the strings".into());
@@ -1526,7 +1536,9 @@ fn magnitude(
         }
         Kind::ThermalExpansion { .. } => Box::new(|c: &[f64]| c[0] * 1e6),
         Kind::SensorScale { .. } => Box::new(|c: &[f64]| c[0] * 1e6),
-        Kind::SensorOffset { .. } | Kind::CableSag => Box::new(|c: &[f64]| c[0]),
+        Kind::SensorOffset { .. } | Kind::SensorDrift { .. } | Kind::CableSag => {
+            Box::new(|c: &[f64]| c[0])
+        }
         Kind::AnchorStep { .. } => {
             Box::new(|c: &[f64]| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
         }
@@ -1549,6 +1561,7 @@ fn magnitude(
                 "ppm (growth over the session, a warm-up settling with a time constant of {tau:.2} h)"
             ),
         },
+        Kind::SensorDrift { .. } if !ctx.timed => "mm per 1000 rows".into(),
         other => fixed_unit(other).into(),
     };
     let c = &e.coef;
@@ -1625,6 +1638,7 @@ fn fixed_unit(kind: &Kind) -> &'static str {
         },
         Kind::SensorScale { .. } => "ppm",
         Kind::SensorOffset { .. } => "mm",
+        Kind::SensorDrift { .. } => "mm/h",
         Kind::CableSag => "mm/m^3",
         Kind::AnchorStep { .. } => "mm",
         Kind::RigStep { .. } => "mm (RMS displacement of T after the move)",

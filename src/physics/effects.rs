@@ -97,6 +97,13 @@ pub enum Kind {
         /// 0-based sensor.
         sensor_index: usize,
     },
+    /// String `sensor_index` reads `v · h` too long, `h` the hours since
+    /// the first pose (thousands of rows without a recorded clock): its
+    /// zero creeps during the session.
+    SensorDrift {
+        /// 0-based sensor.
+        sensor_index: usize,
+    },
     /// Every string hangs under its own weight and reads longer than the
     /// chord by `c · h² · d` (h horizontal span, d length, in m; c in mm/m³).
     CableSag,
@@ -130,6 +137,7 @@ impl Kind {
             Kind::ThermalExpansion { .. } => "thermal_expansion",
             Kind::SensorScale { .. } => "sensor_scale",
             Kind::SensorOffset { .. } => "sensor_offset",
+            Kind::SensorDrift { .. } => "sensor_drift",
             Kind::CableSag => "cable_sag",
             Kind::AnchorStep { .. } => "anchor_step",
             Kind::RigStep { .. } => "rig_step",
@@ -152,6 +160,7 @@ impl Kind {
         match self {
             Kind::SensorScale { sensor_index }
             | Kind::SensorOffset { sensor_index }
+            | Kind::SensorDrift { sensor_index }
             | Kind::AnchorStep { sensor_index, .. } => Some(*sensor_index),
             _ => None,
         }
@@ -248,6 +257,10 @@ impl Kind {
             ),
             Kind::SensorOffset { sensor_index } => format!(
                 "string {} reads long or short by a constant (zero offset of the sensor)",
+                sensor_index + 1
+            ),
+            Kind::SensorDrift { sensor_index } => format!(
+                "the zero of string {} creeps steadily during the session (the encoder or its electronics drifting as they warm up)",
                 sensor_index + 1
             ),
             Kind::CableSag => {
@@ -646,6 +659,7 @@ impl Context {
                 out.dl[k] = (pc.point_rig - self.anchors[k]).norm() - self.r_mm;
             }
             Kind::SensorOffset { sensor_index } => out.dl[*sensor_index] = 1.0,
+            Kind::SensorDrift { sensor_index } => out.dl[*sensor_index] = self.clock_h(pc),
             Kind::CableSag => {
                 for k in 0..m {
                     let v = pc.point_rig - self.anchors[k];
@@ -668,10 +682,18 @@ impl Context {
                     self.rigid_basis(pc, 1.0, out);
                 }
             }
-            Kind::RigDrift => {
-                let t_first = self.poses.first().map_or(0.0, |p| p.time_s);
-                self.rigid_basis(pc, (pc.time_s - t_first) / 3600.0, out);
-            }
+            Kind::RigDrift => self.rigid_basis(pc, self.clock_h(pc), out),
+        }
+    }
+
+    /// The session clock of a steady drift at pose `pc`: hours since the
+    /// first pose, or thousands of rows without a recorded `time_s`.
+    pub fn clock_h(&self, pc: &PoseContext) -> f64 {
+        let first = self.poses.first().map_or(0.0, |p| p.time_s);
+        if self.timed {
+            (pc.time_s - first) / 3600.0
+        } else {
+            (pc.time_s - first) / 1000.0
         }
     }
 

@@ -7,13 +7,14 @@ use crate::identify::{self, IdentifyOptions, NoProgress, Session};
 use crate::rng::Rng;
 
 /// The effects drawn at random.
-pub const CATALOGUE: [&str; 10] = [
+pub const CATALOGUE: [&str; 11] = [
     "joint_compliance",
     "backlash",
     "joint_periodic",
     "thermal_expansion",
     "sensor_scale",
     "sensor_offset",
+    "sensor_drift",
     "cable_sag",
     "anchor_step",
     "rig_step",
@@ -83,7 +84,9 @@ pub fn draw_effect(rng: &mut Rng, joints: &[usize], n_strings: usize, size: f64)
     let sensors: Vec<usize> = (1..=n_strings).collect();
     let (joint, sensor) = match name {
         "joint_compliance" | "backlash" | "joint_periodic" => (Some(pick(rng, joints)), None),
-        "sensor_scale" | "sensor_offset" | "anchor_step" => (None, Some(pick(rng, &sensors))),
+        "sensor_scale" | "sensor_offset" | "sensor_drift" | "anchor_step" => {
+            (None, Some(pick(rng, &sensors)))
+        }
         _ => (None, None),
     };
     EffectSpec {

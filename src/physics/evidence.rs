@@ -103,6 +103,11 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             let (label, unit) = ctx.time_axis();
             d(label.into(), unit)
         }
+        Kind::SensorDrift { .. } if ctx.timed => d("hours since the session began".into(), "h"),
+        Kind::SensorDrift { .. } => d(
+            "rows since the first (no time_s), thousands".into(),
+            "1000 rows",
+        ),
         Kind::AnchorStep { t0_s, .. } => {
             let (label, unit) = ctx.time_axis();
             d(format!("{label} (step {})", ctx.when(*t0_s)), unit)
@@ -150,6 +155,7 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
         Kind::SensorScale { sensor_index } => {
             (pc.point_rig - ctx.anchors[*sensor_index]).norm() - ctx.r_mm
         }
+        Kind::SensorDrift { .. } => ctx.clock_h(pc),
         Kind::SensorOffset { .. } | Kind::AnchorStep { .. } if !ctx.timed => pc.time_s + 1.0,
         Kind::SensorOffset { .. } | Kind::AnchorStep { .. } => pc.time_s,
         Kind::CableSag => {

@@ -217,7 +217,7 @@ pub struct EffectSpec {
     pub at_fraction: Option<f64>,
     /// Magnitude in report units: compliance deg/(N*m), backlash deg (half
     /// dead band), periodic deg (amplitude), thermal ppm/K, sensor_scale
-    /// ppm, sensor_offset mm, cable_sag mm/m^3, anchor_step mm, rig_step mm
+    /// ppm, sensor_offset mm, sensor_drift mm/h, cable_sag mm/m^3, anchor_step mm, rig_step mm
     /// (translation; plus as many mrad of rotation about a random axis),
     /// rig_drift mm/h (likewise mrad/h).
     #[serde(default)]
@@ -798,6 +798,12 @@ fn effect_model(
             },
             vec![mag],
         ),
+        "sensor_drift" => (
+            Kind::SensorDrift {
+                sensor_index: sensor()?,
+            },
+            vec![mag],
+        ),
         "cable_sag" => (Kind::CableSag, vec![mag]),
         "anchor_step" => {
             let dir = match es.direction {
@@ -860,6 +866,7 @@ pub fn report_magnitude(e: &EffectModel, ctx: &Context) -> (f64, &'static str) {
         Kind::ThermalExpansion { .. } => (c[0] * 1e6, "ppm/K"),
         Kind::SensorScale { .. } => (c[0] * 1e6, "ppm"),
         Kind::SensorOffset { .. } => (c[0], "mm"),
+        Kind::SensorDrift { .. } => (c[0], "mm/h"),
         Kind::CableSag => (c[0], "mm/m^3"),
         Kind::AnchorStep { .. } => ((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt(), "mm"),
         Kind::RigStep { .. } => (
