@@ -107,15 +107,27 @@ fn calibrated(spec: serde_json::Value, effect: &str, joint: Option<usize>) -> Ca
 
 #[test]
 fn compensation_with_compliance_beats_geometry_only() {
+    check_joint_effect_compensation("er3a", 4242, "joint_compliance", 2);
+}
+
+#[test]
+fn compensation_with_a_joint_scale_error_beats_geometry_only() {
+    check_joint_effect_compensation("ur5", 4243, "joint_scale", 2);
+}
+
+/// A pose-dependent joint effect about ten times the point noise, on
+/// `joint`: compensation with the accepted effect puts the true T on the
+/// target far better than geometry alone.
+fn check_joint_effect_compensation(robot: &str, seed: u64, effect: &str, joint: usize) {
     let cal = calibrated(
         serde_json::json!({
-            "robot": "er3a",
+            "robot": robot,
             "n_poses": 120,
-            "seed": 4242,
-            "effects": [{"effect": "joint_compliance", "joint": 2, "size_x_noise": 10}]
+            "seed": seed,
+            "effects": [{"effect": effect, "joint": joint, "size_x_noise": 10}]
         }),
-        "joint_compliance",
-        Some(2),
+        effect,
+        Some(joint),
     );
     let (sim, with) = (&cal.sim, &cal.report);
     let without = identify(
@@ -132,7 +144,7 @@ fn compensation_with_compliance_beats_geometry_only() {
     assert!(without.findings.is_empty());
 
     // Where the real robot puts T (rig frame) when commanded `q`: the true
-    // geometry at the angles the true compliance deflects it to.
+    // geometry at the angles the true effect deflects it to.
     let true_t = |q: &[f64]| cal.true_point(q, None);
 
     // Targets: nominal joint poses across the workspace (the dataset's test
@@ -178,8 +190,8 @@ fn compensation_with_compliance_beats_geometry_only() {
         targets.len()
     );
     eprintln!("{msg}");
-    // The compliance is about ten times the point noise: geometry alone
-    // cannot model a pose-dependent deflection, the accepted effect can.
+    // The effect is about ten times the point noise: geometry alone cannot
+    // model a pose-dependent deflection, the accepted effect can.
     assert!(r_geo < r_raw, "{msg}");
     assert!(r_phys < 0.5 * r_geo, "{msg}");
     // With the effect modelled, what remains is estimation noise of the

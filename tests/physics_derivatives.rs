@@ -125,6 +125,7 @@ fn string_effects_match_finite_differences() {
                 },
                 vec![2e-5],
             ),
+            (Kind::JointScale { joint_index: 2 }, vec![3e-4]),
             (Kind::SensorScale { sensor_index: 1 }, vec![1e-4]),
             (Kind::SensorOffset { sensor_index: 2 }, vec![0.1]),
             (Kind::SensorDrift { sensor_index: 0 }, vec![0.2]),

@@ -91,15 +91,15 @@ fn a_partner_riding_on_the_lead_is_not_kept() {
     assert_eq!(names, ["thermal_expansion"], "{findings:#?}");
 }
 
-/// A once-per-third-revolution error (third harmonic: the catalogue tries
-/// the first two) leaves a robot-side residual far above what the strings'
+/// A four-times-per-revolution error (fourth harmonic: the catalogue tries
+/// the first three) leaves a robot-side residual far above what the strings'
 /// own disagreement explains; it is reported as unexplained with where it
 /// lives, not silently dropped.
 #[test]
 fn an_error_outside_the_catalogue_is_reported_as_unexplained() {
     let sim = simulated(serde_json::json!({
         "robot": "er3a", "n_poses": 120, "seed": 41,
-        "effects": [{"effect": "joint_periodic", "joint": 1, "harmonic": 3, "size_x_noise": 8}]
+        "effects": [{"effect": "joint_periodic", "joint": 1, "harmonic": 4, "size_x_noise": 8}]
     }));
     let (findings, rms) = analyse(&sim, &sim.dataset);
     let u = findings
@@ -185,7 +185,7 @@ fn a_mass_free_compliance_is_one_finding() {
 fn an_error_outside_the_catalogue_is_located_on_its_joint_with_points() {
     let sim = simulated(serde_json::json!({
         "robot": "er3a", "n_poses": 150, "seed": 43,
-        "effects": [{"effect": "joint_periodic", "joint": 1, "harmonic": 3, "size_x_noise": 8}]
+        "effects": [{"effect": "joint_periodic", "joint": 1, "harmonic": 4, "size_x_noise": 8}]
     }));
     // Tracker-style points: the true T plus the simulated point noise.
     let truth = sim.truth["true_points_mm"].as_array().unwrap();

@@ -133,6 +133,10 @@ const MIN_SEGMENT_POSES: usize = 8;
 const SCAN_EFFECTIVE_MAX: usize = 100;
 /// Leading candidates for which a jointly tested partner is sought.
 const PAIR_LEADS: usize = 4;
+/// Highest harmonic of a joint's periodic error tried: once per
+/// revolution (eccentricity), twice (an elliptic bearing or encoder disc)
+/// and three times (a three-lobed gear or an encoder read by three heads).
+pub const MAX_HARMONIC: u32 = 3;
 /// Proposals (single effects or pairs) tried per round.
 const TRIES: usize = 4;
 /// Warm-up time constants tried for thermal expansion driven by time, as
@@ -145,6 +149,12 @@ const WARM_UP_TAU_FRACTIONS: [f64; 4] = [0.125, 0.25, 0.5, 1.0];
 struct Proposal {
     score: f64,
     members: Vec<(usize, f64)>,
+    /// Drop of the train SSE over the accepted model (mm²).
+    drop: f64,
+    /// Sum of the members' Bonferroni thresholds.
+    threshold: f64,
+    /// Residual variance per reading with the proposal fitted (mm²).
+    s2: f64,
 }
 
 /// Held-out residuals in the space of what was measured (string readings
@@ -367,7 +377,12 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
                 format!("the direction joint {} approached from", j + 1),
             );
         }
-        for h in 1..=2 {
+        push(
+            Kind::JointScale { joint_index: j },
+            1,
+            format!("joint {} angle, in proportion (a scale error)", j + 1),
+        );
+        for h in 1..=MAX_HARMONIC {
             push(
                 Kind::JointPeriodic {
                     joint_index: j,
@@ -830,6 +845,8 @@ struct Scored {
     drop: f64,
     chi2: f64,
     threshold: f64,
+    /// Residual variance per reading with the candidate fitted (mm²).
+    s2: f64,
 }
 
 /// Run the analysis after `geometric()`.
@@ -921,6 +938,7 @@ pub fn analyse(
                 drop,
                 chi2,
                 threshold,
+                s2,
             });
         }
         // Rank by the chi-square in excess of its own Bonferroni threshold
@@ -940,6 +958,9 @@ pub fn analyse(
             .map(|&i| Proposal {
                 score: scored[i].chi2 - scored[i].threshold,
                 members: vec![(i, scored[i].chi2)],
+                drop: scored[i].drop,
+                threshold: scored[i].threshold,
+                s2: scored[i].s2,
             })
             .collect();
         for &w in sig.iter().take(PAIR_LEADS) {
@@ -966,11 +987,15 @@ pub fn analyse(
                 if chi_c <= scored[c].threshold || chi_w <= scored[w].threshold {
                     continue;
                 }
-                let score = (d - base_drop) / s2 - scored[w].threshold - scored[c].threshold;
+                let threshold = scored[w].threshold + scored[c].threshold;
+                let score = (d - base_drop) / s2 - threshold;
                 if best.as_ref().is_none_or(|b| score > b.score) {
                     best = Some(Proposal {
                         score,
                         members: vec![(w, chi_w), (c, chi_c)],
+                        drop: d - base_drop,
+                        threshold,
+                        s2,
                     });
                 }
             }
@@ -985,6 +1010,17 @@ pub fn analyse(
                     proposals.push(bp);
                 }
             }
+        }
+        // Ranked on one scale: every proposal's drop over the smallest
+        // residual variance of the round. With its own, a pair that fits
+        // three more coefficients of noise divides a large drop by a
+        // slightly smaller variance and outranks the one effect that is
+        // the truth (two harmonics of a joint beating its scale error);
+        // on one scale the extra coefficients must explain more than their
+        // thresholds charge.
+        let s2_ref = proposals.iter().map(|p| p.s2).fold(f64::INFINITY, f64::min);
+        for p in &mut proposals {
+            p.score = p.drop / s2_ref - p.threshold;
         }
         proposals.sort_by(|x, y| y.score.total_cmp(&x.score));
         let cv0 = cv_sse(&nm, &a, &b, &base);
@@ -1526,6 +1562,7 @@ fn magnitude(
         }
         Kind::Backlash { .. } => Box::new(move |c: &[f64]| c[0] * deg),
         Kind::JointPeriodic { .. } => Box::new(move |c: &[f64]| c[0].hypot(c[1]) * deg),
+        Kind::JointScale { .. } => Box::new(|c: &[f64]| c[0] * 1e6),
         // A settling warm-up: its initial rate per hour says little at a
         // glance; the growth it reached over the session does.
         Kind::ThermalExpansion {
@@ -1631,6 +1668,7 @@ fn fixed_unit(kind: &Kind) -> &'static str {
         Kind::JointCompliance { .. } => "deg (RMS deflection)",
         Kind::Backlash { .. } => "deg (half dead band)",
         Kind::JointPeriodic { .. } => "deg (amplitude)",
+        Kind::JointScale { .. } => "ppm (of the joint angle)",
         Kind::ThermalExpansion { driver, .. } => match driver {
             super::effects::ThermalDriver::Temperature => "ppm/K",
             super::effects::ThermalDriver::Time => "ppm/h",

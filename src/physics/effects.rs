@@ -74,6 +74,13 @@ pub enum Kind {
         /// Harmonic h (1 = once per revolution).
         harmonic: u32,
     },
+    /// `dq = s · q` of joint `joint_index`: the joint turns by a slightly
+    /// different angle than commanded, in proportion to the angle from its
+    /// zero (a gear-ratio or encoder-scale error).
+    JointScale {
+        /// 0-based joint.
+        joint_index: usize,
+    },
     /// Every nominal a and d scales by `1 + k · driver`. Driven by time or
     /// row order with `tau_h`, by the warm-up curve `tau_h · (1 - exp(-h /
     /// tau_h))` of the driver `h` (hours, or thousands of rows, since the
@@ -134,6 +141,7 @@ impl Kind {
             Kind::JointCompliance { .. } => "joint_compliance",
             Kind::Backlash { .. } => "backlash",
             Kind::JointPeriodic { .. } => "joint_periodic",
+            Kind::JointScale { .. } => "joint_scale",
             Kind::ThermalExpansion { .. } => "thermal_expansion",
             Kind::SensorScale { .. } => "sensor_scale",
             Kind::SensorOffset { .. } => "sensor_offset",
@@ -150,7 +158,8 @@ impl Kind {
         match self {
             Kind::JointCompliance { joint_index, .. }
             | Kind::Backlash { joint_index }
-            | Kind::JointPeriodic { joint_index, .. } => Some(*joint_index),
+            | Kind::JointPeriodic { joint_index, .. }
+            | Kind::JointScale { joint_index } => Some(*joint_index),
             _ => None,
         }
     }
@@ -175,6 +184,7 @@ impl Kind {
             Kind::JointCompliance { .. }
                 | Kind::Backlash { .. }
                 | Kind::JointPeriodic { .. }
+                | Kind::JointScale { .. }
                 | Kind::ThermalExpansion { .. }
                 | Kind::RigStep { .. }
                 | Kind::RigDrift
@@ -232,6 +242,10 @@ impl Kind {
                 "the angle of joint {} is off by a sinusoid repeating {} time(s) per revolution (gear or encoder eccentricity)",
                 joint_index + 1,
                 harmonic
+            ),
+            Kind::JointScale { joint_index } => format!(
+                "joint {} turns by a slightly different angle than commanded, in proportion to the angle (gear-ratio or encoder-scale error)",
+                joint_index + 1
             ),
             Kind::ThermalExpansion { driver, tau_h } => match (driver, tau_h) {
                 (ThermalDriver::Temperature, _) => {
@@ -648,6 +662,7 @@ impl Context {
                 out.dq[j] = s;
                 out.dq[n + j] = c;
             }
+            Kind::JointScale { joint_index } => out.dq[*joint_index] = pc.q_rad[*joint_index],
             Kind::ThermalExpansion { tau_h, .. } => {
                 out.thermal[0] = match tau_h {
                     Some(tau) => warm_up(pc.thermal, *tau),

@@ -7,10 +7,11 @@ use crate::identify::{self, IdentifyOptions, NoProgress, Session};
 use crate::rng::Rng;
 
 /// The effects drawn at random.
-pub const CATALOGUE: [&str; 11] = [
+pub const CATALOGUE: [&str; 12] = [
     "joint_compliance",
     "backlash",
     "joint_periodic",
+    "joint_scale",
     "thermal_expansion",
     "sensor_scale",
     "sensor_offset",
@@ -83,17 +84,24 @@ pub fn draw_effect(rng: &mut Rng, joints: &[usize], n_strings: usize, size: f64)
     let pick = |rng: &mut Rng, v: &[usize]| v[(rng.uniform() * v.len() as f64) as usize % v.len()];
     let sensors: Vec<usize> = (1..=n_strings).collect();
     let (joint, sensor) = match name {
-        "joint_compliance" | "backlash" | "joint_periodic" => (Some(pick(rng, joints)), None),
+        "joint_compliance" | "backlash" | "joint_periodic" | "joint_scale" => {
+            (Some(pick(rng, joints)), None)
+        }
         "sensor_scale" | "sensor_offset" | "sensor_drift" | "anchor_step" => {
             (None, Some(pick(rng, &sensors)))
         }
         _ => (None, None),
     };
+    // Every harmonic the analysis tries, equally often.
+    let harmonic = (name == "joint_periodic").then(|| {
+        let h: Vec<usize> = (1..=super::analyse::MAX_HARMONIC as usize).collect();
+        pick(rng, &h) as u32
+    });
     EffectSpec {
         effect: name.into(),
         joint,
         sensor,
-        harmonic: None,
+        harmonic,
         phase_deg: None,
         direction: None,
         at_fraction: None,

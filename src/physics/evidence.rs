@@ -85,7 +85,7 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             format!("direction joint {} approached from", joint_index + 1),
             "±1; 0 unknown",
         ),
-        Kind::JointPeriodic { joint_index, .. } => {
+        Kind::JointPeriodic { joint_index, .. } | Kind::JointScale { joint_index } => {
             d(format!("joint {} angle", joint_index + 1), "deg")
         }
         Kind::ThermalExpansion { driver, .. } => match driver {
@@ -150,7 +150,9 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
             buf.dq[*joint_index]
         }
         Kind::Backlash { joint_index } => pc.direction[*joint_index],
-        Kind::JointPeriodic { joint_index, .. } => pc.q_rad[*joint_index].to_degrees(),
+        Kind::JointPeriodic { joint_index, .. } | Kind::JointScale { joint_index } => {
+            pc.q_rad[*joint_index].to_degrees()
+        }
         Kind::ThermalExpansion { .. } => pc.thermal,
         Kind::SensorScale { sensor_index } => {
             (pc.point_rig - ctx.anchors[*sensor_index]).norm() - ctx.r_mm

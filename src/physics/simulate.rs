@@ -216,7 +216,7 @@ pub struct EffectSpec {
     #[serde(default)]
     pub at_fraction: Option<f64>,
     /// Magnitude in report units: compliance deg/(N*m), backlash deg (half
-    /// dead band), periodic deg (amplitude), thermal ppm/K, sensor_scale
+    /// dead band), periodic deg (amplitude), joint_scale ppm, thermal ppm/K, sensor_scale
     /// ppm, sensor_offset mm, sensor_drift mm/h, cable_sag mm/m^3, anchor_step mm, rig_step mm
     /// (translation; plus as many mrad of rotation about a random axis),
     /// rig_drift mm/h (likewise mrad/h).
@@ -779,6 +779,12 @@ fn effect_model(
                 vec![rad * ph.cos(), rad * ph.sin()],
             )
         }
+        "joint_scale" => (
+            Kind::JointScale {
+                joint_index: joint()?,
+            },
+            vec![mag * 1e-6],
+        ),
         "thermal_expansion" => (
             Kind::ThermalExpansion {
                 driver: ctx.thermal_driver,
@@ -863,6 +869,7 @@ pub fn report_magnitude(e: &EffectModel, ctx: &Context) -> (f64, &'static str) {
         Kind::JointCompliance { .. } => (c[0] * deg, "deg/(N*m)"),
         Kind::Backlash { .. } => (c[0] * deg, "deg (half dead band)"),
         Kind::JointPeriodic { .. } => (c[0].hypot(c[1]) * deg, "deg (amplitude)"),
+        Kind::JointScale { .. } => (c[0] * 1e6, "ppm (of the joint angle)"),
         Kind::ThermalExpansion { .. } => (c[0] * 1e6, "ppm/K"),
         Kind::SensorScale { .. } => (c[0] * 1e6, "ppm"),
         Kind::SensorOffset { .. } => (c[0], "mm"),
