@@ -226,3 +226,41 @@ fn an_error_outside_the_catalogue_is_located_on_its_joint_with_points() {
     assert_eq!(u.parameters["ordering"], "joint 1 angle", "{}", u.evidence);
     assert_eq!(u.parameters["along_joint_motion"], true, "{}", u.evidence);
 }
+
+/// A local bump of joint 3's angle (out of the catalogue; from the second
+/// cross-check, `tests/data/xcheck_bump_j3`) is approximated by harmonics
+/// and a scale error of joint 3 whose magnitudes (up to 1.9 deg) cancel
+/// each other down to a few hundredths of a degree: every such finding
+/// says so, and the rest is reported `unexplained`.
+#[test]
+fn terms_of_one_joint_that_cancel_are_called_a_series() {
+    let (robot, rig, data) = common::load("xcheck_bump_j3");
+    let opts = IdentifyOptions::default();
+    let s = Session::new(&robot, &rig, &data, &opts).unwrap();
+    let g = geometric(&s, &opts, &NoProgress).unwrap();
+    let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
+    let on_j3: Vec<&Finding> = a.findings.iter().filter(|f| f.joint == Some(3)).collect();
+    assert!(on_j3.len() >= 2, "{:#?}", a.findings);
+    for f in &on_j3 {
+        assert!(
+            f.evidence
+                .contains("effects kept on joint 3 largely cancel each other"),
+            "{}",
+            f.evidence
+        );
+    }
+    assert!(
+        a.findings.iter().any(|f| f.effect == "unexplained"),
+        "{:#?}",
+        a.findings
+    );
+    // Terms of other joints, and single terms, carry no such doubt.
+    assert!(
+        a.findings
+            .iter()
+            .filter(|f| f.joint != Some(3))
+            .all(|f| !f.evidence.contains("largely cancel")),
+        "{:#?}",
+        a.findings
+    );
+}

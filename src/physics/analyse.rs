@@ -1364,6 +1364,18 @@ pub fn analyse(
         }
     }
 
+    // Terms of one joint that cancel each other are a series fitted to an
+    // angle error of another shape, not separate physics: say so.
+    for (j, largest_deg, net_deg, k) in cancelling_terms(session, &ctx, &accepted) {
+        let doubt = format!(
+            "doubt: the {k} effects kept on joint {} largely cancel each other (up to {largest_deg:.4} deg RMS each over the train poses, {net_deg:.4} deg together): together they describe an error of joint {}'s angle that none of them is alone; read them as one angle error of that joint, not as separate physics",
+            j + 1,
+            j + 1
+        );
+        for f in findings.iter_mut().filter(|f| f.joint == Some(j + 1)) {
+            f.evidence = format!("{}; {doubt}", f.evidence);
+        }
+    }
     // Anything left that varies smoothly?
     if let Some(f) = unexplained(session, &ctx, &p, &accepted, free.len()) {
         findings.push(f);
@@ -1622,6 +1634,64 @@ fn magnitude(
         }
     }
     (v, var.max(0.0).sqrt(), unit)
+}
+
+/// The effects of one joint cancel each other when the largest one's RMS
+/// angle change is this many times their sum's.
+const CANCEL_RATIO: f64 = 3.0;
+
+/// Joints whose accepted effects (two or more) largely cancel each other
+/// over the train poses: `(joint, largest effect's RMS dq, net RMS dq (deg),
+/// number of effects)`.
+fn cancelling_terms(
+    session: &Session,
+    ctx: &Context,
+    accepted: &[EffectModel],
+) -> Vec<(usize, f64, f64, usize)> {
+    let n = ctx.n_joints;
+    let mut buf = super::effects::Basis::default();
+    let mut out = Vec::new();
+    for j in 0..n {
+        let on_j: Vec<&EffectModel> = accepted
+            .iter()
+            .filter(|e| e.kind.joint() == Some(j))
+            .collect();
+        if on_j.len() < 2 {
+            continue;
+        }
+        // Per train pose, each effect's angle change and their sum; the
+        // constant part of each is the joint's zero offset (the geometry
+        // takes it), so spreads are compared about the mean.
+        let rows: Vec<Vec<f64>> = session
+            .train
+            .iter()
+            .map(|&i| {
+                on_j.iter()
+                    .map(|e| {
+                        ctx.basis(&e.kind, i, &mut buf);
+                        e.coef
+                            .iter()
+                            .enumerate()
+                            .map(|(c, v)| v * buf.dq[c * n + j])
+                            .sum()
+                    })
+                    .collect()
+            })
+            .collect();
+        let spread = |f: &dyn Fn(&[f64]) -> f64| {
+            let v: Vec<f64> = rows.iter().map(|r| f(r)).collect();
+            let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+            (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+        };
+        let largest = (0..on_j.len())
+            .map(|k| spread(&|r: &[f64]| r[k]))
+            .fold(0.0, f64::max);
+        let net = spread(&|r: &[f64]| r.iter().sum());
+        if largest > CANCEL_RATIO * net {
+            out.push((j, largest.to_degrees(), net.to_degrees(), on_j.len()));
+        }
+    }
+    out
 }
 
 /// Largest growth of a metal arm's links over a session that thermal
