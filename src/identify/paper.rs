@@ -50,20 +50,27 @@ pub fn one_step(session: &Session, before: &Params) -> Result<Params> {
             b[3 * k + c] = measured[c] - nominal[c];
         }
     }
-    // Moore-Penrose with the usual tolerance max(m, n) · eps · σ_max. A QR
-    // first reduces the tall A to its square R (same singular values), so
-    // the SVD is of a 5n × 5n matrix rather than of A itself.
+    // Moore-Penrose with the usual tolerance max(m, n) · eps · σ_max. When A
+    // is tall, a QR first reduces it to its square R (same singular
+    // values), so the SVD is of a 5n × 5n matrix rather than of A itself;
+    // with fewer train rows than columns the SVD of A itself gives the
+    // minimum-norm step.
     let k = cols_used.len();
-    let qr = a.qr();
-    let mut qtb = b;
-    qr.q_tr_mul(&mut qtb);
-    let r = qr.r();
-    let svd = r.svd(true, true);
-    let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
-    let tol = rows.max(k) as f64 * f64::EPSILON * smax;
-    let x = svd
-        .solve(&qtb.rows(0, k).into_owned(), tol)
-        .map_err(|e| Error::Numerical(e.to_string()))?;
+    let solve = |m: DMatrix<f64>, rhs: DVector<f64>| {
+        let svd = m.svd(true, true);
+        let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
+        let tol = rows.max(k) as f64 * f64::EPSILON * smax;
+        svd.solve(&rhs, tol)
+            .map_err(|e| Error::Numerical(e.to_string()))
+    };
+    let x = if rows >= k {
+        let qr = a.qr();
+        let mut qtb = b;
+        qr.q_tr_mul(&mut qtb);
+        solve(qr.r(), qtb.rows(0, k).into_owned())?
+    } else {
+        solve(a, b)?
+    };
     let mut out = before.clone();
     for (j, &col) in cols_used.iter().enumerate() {
         out.values[col] += x[j];

@@ -1,0 +1,46 @@
+//! Small recordings: every prefix of the shared datasets from one pose up,
+//! identified with the default options (the paper's method beside, the
+//! physics analysis after). Each gives a report or a clear error, never a
+//! panic. Found by hand: with fewer train rows than the paper method's
+//! columns (fewer than about 10 train poses of a 6-axis arm) its
+//! pseudo-inverse sliced past the end of a matrix and the CLI panicked.
+
+mod common;
+
+use drawcal::identify::{IdentifyOptions, NoProgress, identify};
+use drawcal::model::Dataset;
+
+#[test]
+fn every_prefix_identifies_or_says_why() {
+    for name in [
+        "er3a_paper_like",
+        "ur5_geometric",
+        "real_positioner2ax_rosi",
+        "er3a_compliance_j2",
+    ] {
+        let (robot, rig, _) = common::load(name);
+        let csv = std::fs::read_to_string(common::dir(name).join("poses.csv")).unwrap();
+        let lines: Vec<&str> = csv.lines().collect();
+        let mut reports = 0;
+        for n in 1..=24.min(lines.len() - 1) {
+            let prefix = lines[..=n].join("\n");
+            let Ok(data) = Dataset::from_csv(prefix.as_bytes(), &robot, &rig) else {
+                continue;
+            };
+            match identify(
+                &robot,
+                &rig,
+                &data,
+                &IdentifyOptions::default(),
+                &NoProgress,
+            ) {
+                Ok(rep) => {
+                    reports += 1;
+                    assert!(rep.stats.train.after.rms_mm.is_finite(), "{name} n={n}");
+                }
+                Err(e) => assert!(!e.to_string().is_empty(), "{name} n={n}"),
+            }
+        }
+        assert!(reports > 0, "{name}: no prefix calibrated");
+    }
+}
