@@ -20,10 +20,18 @@ pub struct BodyLimit {
 }
 
 impl BodyLimit {
-    /// The message of the 413 answer: the limit and how to raise it.
-    pub fn too_large_message(&self) -> String {
+    /// The message of the 413 answer to a request on `path`: the limit,
+    /// how to raise it, and how to split what that route takes.
+    pub fn too_large_message(&self, path: &str) -> String {
+        let split = if path.ends_with("/poses") {
+            "send the poses in several batches (each POST to /sessions/{id}/poses appends)"
+        } else if path == "/compensate" {
+            "split the targets over several requests"
+        } else {
+            "send a smaller body"
+        };
         format!(
-            "request body too large: the service accepts at most {} bytes ({}) per request; raise the limit by starting it with a larger --max-upload-bytes (environment DRAWCAL_MAX_UPLOAD_BYTES), or send poses in several batches",
+            "request body too large: the service accepts at most {} bytes ({}) per request; raise the limit by starting it with a larger --max-upload-bytes (environment DRAWCAL_MAX_UPLOAD_BYTES), or {split}",
             self.max_upload_bytes,
             human_bytes(self.max_upload_bytes)
         )
@@ -68,10 +76,11 @@ impl<S: Send + Sync> FromRequest<S> for RawBody {
                     .to_ascii_lowercase()
             });
         let limit = req.extensions().get::<BodyLimit>().copied();
+        let path = req.uri().path().to_owned();
         let bytes = Bytes::from_request(req, state).await.map_err(|r| {
             if r.status() == StatusCode::PAYLOAD_TOO_LARGE {
                 ApiError::PayloadTooLarge(match limit {
-                    Some(l) => l.too_large_message(),
+                    Some(l) => l.too_large_message(&path),
                     None => format!("request body too large: {}", r.body_text()),
                 })
             } else {
@@ -179,14 +188,21 @@ mod tests {
 
     #[test]
     fn the_limit_is_said_in_bytes_and_mib_with_the_flag() {
-        let m = BodyLimit {
+        let limit = BodyLimit {
             max_upload_bytes: 16 * 1024 * 1024,
-        }
-        .too_large_message();
+        };
+        let m = limit.too_large_message("/sessions/3/poses");
         assert!(
             m.contains("16777216 bytes (16 MiB)") && m.contains("--max-upload-bytes"),
             "{m}"
         );
+        // What to split depends on the route.
+        assert!(m.contains("poses in several batches"), "{m}");
+        let m = limit.too_large_message("/compensate");
+        assert!(m.contains("targets over several requests"), "{m}");
+        assert!(!m.contains("poses"), "{m}");
+        let m = limit.too_large_message("/models");
+        assert!(m.contains("a smaller body") && !m.contains("poses"), "{m}");
         assert_eq!(human_bytes(64 * 1024), "64 KiB");
         assert_eq!(human_bytes(1536 * 1024), "1.5 MiB");
         assert_eq!(human_bytes(100), "100 B");

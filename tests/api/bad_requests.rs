@@ -502,7 +502,8 @@ async fn bad_requests_are_refused_and_change_nothing() {
     assert!(
         m.contains("65536 bytes (64 KiB)")
             && m.contains("--max-upload-bytes")
-            && m.contains("DRAWCAL_MAX_UPLOAD_BYTES"),
+            && m.contains("DRAWCAL_MAX_UPLOAD_BYTES")
+            && m.contains("poses in several batches"),
         "{e}"
     );
 
@@ -609,8 +610,10 @@ async fn bad_requests_are_refused_and_change_nothing() {
         .post(app.url("/compensate"))
         .header("connection", "close")
         .json(&json!({"robot_id": robot_id, "targets": many}));
-    // (over 64 KiB: the body limit answers first)
-    refused(&app, big_app_req, 413, "payload_too_large", None, None).await;
+    // (over 64 KiB: the body limit answers first; the advice fits the route)
+    let e = refused(&app, big_app_req, 413, "payload_too_large", None, None).await;
+    let m = e["message"].as_str().unwrap();
+    assert!(m.contains("targets over several requests"), "{m}");
 
     // The session still holds exactly the first batch.
     let s = ok_json(app.get(&format!("/sessions/{sid}")).await, 200).await;
