@@ -1368,7 +1368,7 @@ pub fn analyse(
     // angle error of another shape, not separate physics: say so.
     for (j, largest_deg, net_deg, k) in cancelling_terms(session, &ctx, &accepted) {
         let doubt = format!(
-            "doubt: the {k} effects kept on joint {} largely cancel each other (up to {largest_deg:.4} deg RMS each over the train poses, {net_deg:.4} deg together): together they describe an error of joint {}'s angle that none of them is alone; read them as one angle error of that joint, not as separate physics",
+            "doubt: the {k} effects kept on joint {} largely cancel each other (each spreads the angle by up to {largest_deg:.4} deg over the train poses, together by {net_deg:.4} deg): together they describe an error of joint {}'s angle that none of them is alone; read them as one angle error of that joint, not as separate physics",
             j + 1,
             j + 1
         );
@@ -1636,13 +1636,14 @@ fn magnitude(
     (v, var.max(0.0).sqrt(), unit)
 }
 
-/// The effects of one joint cancel each other when the largest one's RMS
-/// angle change is this many times their sum's.
+/// The effects of one joint cancel each other when the largest one's
+/// spread of angle change over the train poses is this many times their
+/// sum's.
 const CANCEL_RATIO: f64 = 3.0;
 
 /// Joints whose accepted effects (two or more) largely cancel each other
-/// over the train poses: `(joint, largest effect's RMS dq, net RMS dq (deg),
-/// number of effects)`.
+/// over the train poses: `(joint, largest effect's spread of dq, their
+/// sum's spread (standard deviations, deg), number of effects)`.
 fn cancelling_terms(
     session: &Session,
     ctx: &Context,
