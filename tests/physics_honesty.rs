@@ -16,12 +16,7 @@ fn simulated(spec: serde_json::Value) -> simulate::Simulated {
 
 /// Findings and final held-out RMS of the analysis on `data`.
 fn analyse(sim: &simulate::Simulated, data: &Dataset) -> (Vec<Finding>, f64) {
-    let opts = IdentifyOptions::default();
-    let s = Session::new(&sim.robot, &sim.rig, data, &opts).unwrap();
-    let g = geometric(&s, &opts, &NoProgress).unwrap();
-    let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
-    let e = &a.test_errors;
-    let rms = (e.iter().map(|v| v.norm_squared()).sum::<f64>() / e.len() as f64).sqrt();
+    let (a, rms) = common::analyse_blind(&sim.robot, &sim.rig, data);
     (a.findings, rms)
 }
 
@@ -235,10 +230,7 @@ fn an_error_outside_the_catalogue_is_located_on_its_joint_with_points() {
 #[test]
 fn terms_of_one_joint_that_cancel_are_called_a_series() {
     let (robot, rig, data) = common::load("xcheck_bump_j3");
-    let opts = IdentifyOptions::default();
-    let s = Session::new(&robot, &rig, &data, &opts).unwrap();
-    let g = geometric(&s, &opts, &NoProgress).unwrap();
-    let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
+    let (a, _) = common::analyse_blind(&robot, &rig, &data);
     let on_j3: Vec<&Finding> = a.findings.iter().filter(|f| f.joint == Some(3)).collect();
     assert!(on_j3.len() >= 2, "{:#?}", a.findings);
     for f in &on_j3 {

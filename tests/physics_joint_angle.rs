@@ -4,26 +4,25 @@
 //! right joint. Before they were in the catalogue both were reported
 //! `unexplained` or approximated by the first two harmonics of the joint.
 
-use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric};
+mod common;
+
 use drawcal::physics::{self, simulate};
 
-/// Simulate one effect and analyse the recording blind.
+/// Simulate one effect and analyse the recording blind: the recording, the
+/// analysis, its final held-out 3-D RMS (mm).
 fn run(
     robot: &str,
     seed: u64,
     n_poses: usize,
     effect: serde_json::Value,
-) -> (simulate::Simulated, physics::Analysis) {
+) -> (simulate::Simulated, physics::Analysis, f64) {
     let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
         "robot": robot, "n_poses": n_poses, "seed": seed, "effects": [effect]
     }))
     .unwrap();
     let sim = simulate::generate(&spec).unwrap();
-    let opts = IdentifyOptions::default();
-    let s = Session::new(&sim.robot, &sim.rig, &sim.dataset, &opts).unwrap();
-    let g = geometric(&s, &opts, &NoProgress).unwrap();
-    let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
-    (sim, a)
+    let (a, rms) = common::analyse_blind(&sim.robot, &sim.rig, &sim.dataset);
+    (sim, a, rms)
 }
 
 fn named(a: &physics::Analysis) -> Vec<(&str, Option<usize>)> {
@@ -38,7 +37,7 @@ fn a_joint_scale_error_is_named_alone_with_its_size() {
     for (robot, joint, seed) in [("er3a", 1, 11), ("ur5", 3, 12), ("arm4_mdh", 2, 13)] {
         let effect =
             serde_json::json!({"effect": "joint_scale", "joint": joint, "size_x_noise": 5});
-        let (sim, a) = run(robot, seed, 100, effect);
+        let (sim, a, final_rms) = run(robot, seed, 100, effect);
         assert_eq!(
             named(&a),
             [("joint_scale", Some(joint))],
@@ -54,8 +53,6 @@ fn a_joint_scale_error_is_named_alone_with_its_size() {
             f.magnitude,
             f.sigma
         );
-        let n = a.test_errors.len() as f64;
-        let final_rms = (a.test_errors.iter().map(|e| e.norm_squared()).sum::<f64>() / n).sqrt();
         assert!(
             final_rms < 0.7 * f.test_rms_before_mm,
             "{robot}: held-out {} -> {final_rms}",
@@ -74,7 +71,7 @@ fn a_joint_scale_error_is_named_alone_with_its_size() {
 #[test]
 fn a_third_harmonic_is_named_with_its_harmonic() {
     let effect = serde_json::json!({"effect": "joint_periodic", "joint": 1, "harmonic": 3, "size_x_noise": 8});
-    let (_, a) = run("er3a", 41, 120, effect);
+    let (_, a, _) = run("er3a", 41, 120, effect);
     assert_eq!(
         named(&a),
         [("joint_periodic", Some(1))],
@@ -93,6 +90,6 @@ fn a_third_harmonic_is_named_with_its_harmonic() {
 #[test]
 fn one_effect_beats_two_that_approximate_it() {
     let effect = serde_json::json!({"effect": "joint_scale", "joint": 2, "size_x_noise": 5});
-    let (_, a) = run("er3a", 195668, 80, effect);
+    let (_, a, _) = run("er3a", 195668, 80, effect);
     assert_eq!(named(&a), [("joint_scale", Some(2))], "{:#?}", a.findings);
 }

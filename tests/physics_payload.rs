@@ -5,7 +5,6 @@
 
 mod common;
 
-use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric};
 use drawcal::model::Dataset;
 use drawcal::physics::{self, simulate};
 
@@ -23,13 +22,7 @@ fn simulated(robot: &str, seed: u64) -> simulate::Simulated {
 
 /// The analysis, its findings and the final held-out RMS.
 fn analyse(sim: &simulate::Simulated, data: &Dataset) -> (physics::Analysis, f64) {
-    let opts = IdentifyOptions::default();
-    let s = Session::new(&sim.robot, &sim.rig, data, &opts).unwrap();
-    let g = geometric(&s, &opts, &NoProgress).unwrap();
-    let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
-    let e = &a.test_errors;
-    let rms = (e.iter().map(|v| v.norm_squared()).sum::<f64>() / e.len() as f64).sqrt();
-    (a, rms)
+    common::analyse_blind(&sim.robot, &sim.rig, data)
 }
 
 /// The same recording with the payload column removed.

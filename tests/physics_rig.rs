@@ -4,7 +4,9 @@
 //! point lands where it was put, the held-out error drops, and compensation
 //! ignores it (the robot did not change, the rig did).
 
-use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric};
+mod common;
+
+use drawcal::identify::{IdentifyOptions, Session};
 use drawcal::model::{Dataset, Rig};
 use drawcal::physics::{self, simulate};
 
@@ -19,10 +21,7 @@ fn spec(robot: &str, effect: &str, seed: u64) -> simulate::Spec {
 }
 
 fn analyse(sim: &simulate::Simulated, rig: &Rig, data: &Dataset) -> physics::Analysis {
-    let opts = IdentifyOptions::default();
-    let s = Session::new(&sim.robot, rig, data, &opts).unwrap();
-    let g = geometric(&s, &opts, &NoProgress).unwrap();
-    physics::analyse(&s, &g, &opts, &NoProgress).unwrap()
+    common::analyse_blind(&sim.robot, rig, data).0
 }
 
 fn named(a: &physics::Analysis) -> Vec<&str> {

@@ -7,7 +7,6 @@
 
 mod common;
 
-use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric};
 use drawcal::model::Dataset;
 use drawcal::physics::{self, simulate};
 
@@ -24,13 +23,7 @@ fn simulated(robot: &str, sensor: usize, seed: u64, size: f64) -> simulate::Simu
 
 /// The analysis, and the held-out 3-D RMS of its final model (mm).
 fn analyse(sim: &simulate::Simulated, data: &Dataset) -> (physics::Analysis, f64) {
-    let opts = IdentifyOptions::default();
-    let s = Session::new(&sim.robot, &sim.rig, data, &opts).unwrap();
-    let g = geometric(&s, &opts, &NoProgress).unwrap();
-    let a = physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
-    let n = a.test_errors.len().max(1) as f64;
-    let final_rms = (a.test_errors.iter().map(|e| e.norm_squared()).sum::<f64>() / n).sqrt();
-    (a, final_rms)
+    common::analyse_blind(&sim.robot, &sim.rig, data)
 }
 
 #[test]

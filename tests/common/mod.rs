@@ -6,6 +6,24 @@ use std::path::PathBuf;
 
 use drawcal::model::{Dataset, Rig, Robot};
 
+/// The geometric fit and the physics analysis with the default options, as
+/// `drawcal identify` runs them: the analysis and the held-out 3-D RMS of
+/// its final model (mm).
+pub fn analyse_blind(
+    robot: &Robot,
+    rig: &Rig,
+    data: &Dataset,
+) -> (drawcal::physics::Analysis, f64) {
+    use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric};
+    let opts = IdentifyOptions::default();
+    let s = Session::new(robot, rig, data, &opts).unwrap();
+    let g = geometric(&s, &opts, &NoProgress).unwrap();
+    let a = drawcal::physics::analyse(&s, &g, &opts, &NoProgress).unwrap();
+    let e = &a.test_errors;
+    let rms = (e.iter().map(|v| v.norm_squared()).sum::<f64>() / e.len().max(1) as f64).sqrt();
+    (a, rms)
+}
+
 pub fn dir(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data")
