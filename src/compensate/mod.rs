@@ -55,7 +55,7 @@ use crate::kinematics::chain::{Chain, OutputFrame};
 use crate::kinematics::ik::{self, ClosedFormIk};
 use crate::kinematics::{JointParam, Params, rpy_matrix};
 use crate::model::{Convention, Robot, Target, TargetKind};
-use crate::physics::JointEffects;
+use crate::physics::{EffectModel, JointEffects};
 use crate::rng::Rng;
 
 /// Outcome of one target.
@@ -415,6 +415,22 @@ impl Compensator {
     /// use [`Compensator::at_temperature`] for the temperature the robot
     /// runs at. A time-driven one is left out (see the module docs).
     pub fn from_report(report: &Report) -> Result<Self> {
+        // A report may have been edited by hand: check what compensation
+        // relies on before any index is used.
+        for (field, robot) in [
+            ("nominal_robot", &report.nominal_robot),
+            ("calibrated_robot", &report.calibrated_robot),
+        ] {
+            robot
+                .validate()
+                .map_err(|e| Error::field(field, e.to_string()))?;
+        }
+        for (i, f) in report.findings.iter().enumerate() {
+            if let Ok(e) = serde_json::from_value::<EffectModel>(f.parameters.clone()) {
+                e.check(report.nominal_robot.dof())
+                    .map_err(|m| Error::field(format!("findings[{i}].parameters"), m))?;
+            }
+        }
         let mut comp = Self::new(&report.nominal_robot, &report.calibrated_robot)?;
         if let Some(info) = thermal_of(report) {
             comp.thermal = Some(Arc::new(Thermal {

@@ -5,6 +5,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::model::{BasePose, Robot};
 
+/// A number this crate wrote: JSON has no NaN, so serde_json writes it as
+/// `null`; read that back as NaN (an unknown, not a malformed report).
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
 /// Current report format tag.
 pub const REPORT_FORMAT: &str = "drawcal report v1";
 
@@ -107,7 +113,9 @@ pub struct ParamEstimate {
     pub value: f64,
     /// Deviation from the starting value (mm or deg).
     pub deviation: f64,
-    /// 1 sigma (mm or deg).
+    /// 1 sigma (mm or deg); `null` in JSON when the data leave it unknown
+    /// (a singular covariance), read back as NaN.
+    #[serde(deserialize_with = "nan_if_null")]
     pub sigma: f64,
     /// Unit.
     pub unit: String,

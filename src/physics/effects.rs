@@ -307,6 +307,40 @@ pub struct EffectModel {
 }
 
 impl EffectModel {
+    /// Check an effect read from a report against the robot it belongs to:
+    /// its joint within the `n_joints`, mass-free compliance regressors
+    /// among the link frames, the tool and the payload, as many finite
+    /// coefficients as the effect has. What is wrong, for a human.
+    pub fn check(&self, n_joints: usize) -> std::result::Result<(), String> {
+        if let Some(j) = self.kind.joint() {
+            if j >= n_joints {
+                return Err(format!(
+                    "joint_index {j} (0-based) but the robot has {n_joints} joints"
+                ));
+            }
+        }
+        if let Kind::JointCompliance { regressors, .. } = &self.kind {
+            if let Some(r) = regressors.iter().find(|&&r| r > n_joints + 1) {
+                return Err(format!(
+                    "regressor {r}: link frames are 0..{n_joints}, the tool {n_joints}, the payload {}",
+                    n_joints + 1
+                ));
+            }
+        }
+        if self.coef.len() != self.kind.n_coef() {
+            return Err(format!(
+                "{} coefficients for {}, which has {}",
+                self.coef.len(),
+                self.kind.name(),
+                self.kind.n_coef()
+            ));
+        }
+        if self.coef.iter().any(|c| !c.is_finite()) {
+            return Err("a coefficient is not a finite number".into());
+        }
+        Ok(())
+    }
+
     /// The effect with every coefficient zero (a candidate before its fit).
     pub fn zero(kind: Kind) -> Self {
         EffectModel {
