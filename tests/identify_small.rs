@@ -59,3 +59,28 @@ fn every_prefix_identifies_or_says_why() {
         assert!(reports > 0, "{name}: no prefix calibrated");
     }
 }
+
+/// A split column that marks every pose train is not silently ignored: the
+/// hold-out the tool chooses instead says why.
+#[test]
+fn a_split_without_test_poses_says_so() {
+    let (robot, rig, _) = common::load("er3a_paper_like");
+    let csv = std::fs::read_to_string(common::dir("er3a_paper_like").join("poses.csv")).unwrap();
+    let all_train = csv.replace(",test", ",train");
+    let data = Dataset::from_csv(all_train.as_bytes(), &robot, &rig).unwrap();
+    let rep = identify(
+        &robot,
+        &rig,
+        &data,
+        &IdentifyOptions::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        rep.split_source
+            .starts_with("chosen: the split column marks no pose test; 15 of 50 poses held out"),
+        "{}",
+        rep.split_source
+    );
+    assert_eq!(rep.stats.test.n, 15);
+}

@@ -296,15 +296,24 @@ fn split_source(data: &Dataset, session: &Session, opts: &IdentifyOptions) -> St
     let from_file = data.poses.iter().any(|p| p.split == Some(Split::Test))
         && data.poses.iter().any(|p| p.split == Some(Split::Train));
     if from_file {
-        "file".into()
-    } else {
-        format!(
-            "chosen: {} of {} poses held out at random (seed {})",
-            session.test.len(),
-            data.poses.len(),
-            opts.seed
-        )
+        return "file".into();
     }
+    // A split column that marks only one kind cannot be used as it is:
+    // say so, rather than seem to ignore it.
+    let marked = |k: Split| data.poses.iter().any(|p| p.split == Some(k));
+    let why = if marked(Split::Train) {
+        "the split column marks no pose test; "
+    } else if marked(Split::Test) {
+        "the split column marks no pose train; "
+    } else {
+        ""
+    };
+    format!(
+        "chosen: {why}{} of {} poses held out at random (seed {}; --holdout sets the fraction)",
+        session.test.len(),
+        data.poses.len(),
+        opts.seed
+    )
 }
 
 /// Rigid transform (R, t) minimising `Σ |R a + t - b|²` (Kabsch).
