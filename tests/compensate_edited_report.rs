@@ -1,8 +1,9 @@
 //! A report edited by hand (or damaged) before `drawcal compensate` reads
 //! it: every index compensation relies on is checked first, and a bad one
-//! is an error naming the field, never a panic. Found by a fuzzing run:
-//! a finding's joint index past the robot's joints, joint limits in the
-//! wrong order, 13+ joints or none all panicked inside compensation.
+//! is an error naming the field, never a panic or a silently dropped
+//! effect. Found by a fuzzing run: a finding's joint index past the
+//! robot's joints, joint limits in the wrong order, 13+ joints or none all
+//! panicked inside compensation.
 
 mod common;
 
@@ -72,6 +73,20 @@ fn bad_indices_and_robots_are_named_errors() {
             Box::new(
                 |v: &mut serde_json::Value| v["findings"][0]["parameters"] = serde_json::json!({"kind": "joint_periodic", "joint_index": 1, "harmonic": 1, "coef": [1e-3]}),
             ),
+            "findings[0].parameters",
+        ),
+        (
+            "a mass-free compliance on a robot with link masses",
+            Box::new(|v: &mut serde_json::Value| {
+                v["findings"][0]["parameters"]["regressors"] = serde_json::json!([6]);
+            }),
+            "findings[0].parameters",
+        ),
+        (
+            "a model that does not parse (compensation would drop it)",
+            Box::new(|v: &mut serde_json::Value| {
+                v["findings"][0]["parameters"]["joint_index"] = "2".into();
+            }),
             "findings[0].parameters",
         ),
         (

@@ -36,24 +36,26 @@ fn every_prefix_identifies_or_says_why() {
             let Ok(data) = Dataset::from_csv(prefix.as_bytes(), &robot, &rig) else {
                 continue;
             };
-            match identify(
-                &robot,
-                &rig,
-                &data,
-                &IdentifyOptions::default(),
-                &NoProgress,
-            ) {
-                Ok(rep) => {
-                    reports += 1;
-                    assert!(rep.stats.train.after.rms_mm.is_finite(), "{name} n={n}");
-                    // What identify writes, compensate and report read
-                    // back (an unknown sigma is written as null).
-                    let text = serde_json::to_string(&rep).unwrap();
-                    let back: Report =
-                        serde_json::from_str(&text).unwrap_or_else(|e| panic!("{name} n={n}: {e}"));
-                    Compensator::from_report(&back).unwrap_or_else(|e| panic!("{name} n={n}: {e}"));
+            // Also with nothing held out: no test statistics at all.
+            let no_test = IdentifyOptions {
+                holdout_fraction: 0.0,
+                ..IdentifyOptions::default()
+            };
+            for opts in [IdentifyOptions::default(), no_test] {
+                match identify(&robot, &rig, &data, &opts, &NoProgress) {
+                    Ok(rep) => {
+                        reports += 1;
+                        assert!(rep.stats.train.after.rms_mm.is_finite(), "{name} n={n}");
+                        // What identify writes, compensate and report read
+                        // back (an unknown sigma is written as null).
+                        let text = serde_json::to_string(&rep).unwrap();
+                        let back: Report = serde_json::from_str(&text)
+                            .unwrap_or_else(|e| panic!("{name} n={n}: {e}"));
+                        Compensator::from_report(&back)
+                            .unwrap_or_else(|e| panic!("{name} n={n}: {e}"));
+                    }
+                    Err(e) => assert!(!e.to_string().is_empty(), "{name} n={n}"),
                 }
-                Err(e) => assert!(!e.to_string().is_empty(), "{name} n={n}"),
             }
         }
         assert!(reports > 0, "{name}: no prefix calibrated");

@@ -246,7 +246,7 @@ fn terms_of_one_joint_that_cancel_are_called_a_series() {
         "{:#?}",
         a.findings
     );
-    // Terms of other joints, and single terms, carry no such doubt.
+    // Findings of other joints (and `unexplained`) carry no such doubt.
     assert!(
         a.findings
             .iter()

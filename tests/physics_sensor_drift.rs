@@ -67,18 +67,71 @@ fn a_drifting_string_is_named_alone_with_its_rate() {
     }
 }
 
+/// The simulated creep per thousand rows: the truth's rate (mm/h) times
+/// the hours a thousand rows of this session take on average (the poses
+/// are not evenly spaced in time: compared with a 10% allowance).
+fn truth_per_1000_rows(sim: &simulate::Simulated) -> f64 {
+    let times: Vec<f64> = sim.dataset.poses.iter().filter_map(|p| p.time_s).collect();
+    let hours_per_row = (times[times.len() - 1] - times[0]) / 3600.0 / (times.len() - 1) as f64;
+    sim.effects[0].coef[0] * hours_per_row * 1000.0
+}
+
 #[test]
 fn without_a_clock_the_row_order_stands_in() {
     let sim = simulated("er3a", 3, 8, 5.0);
     let csv = common::drop_columns(&sim.poses_csv, &["time_s"]);
     let data = Dataset::from_csv(csv.as_bytes(), &sim.robot, &sim.rig).unwrap();
     let (a, _) = analyse(&sim, &data);
-    let f = a
+    let named: Vec<_> = a
         .findings
         .iter()
-        .find(|f| f.effect == "sensor_drift")
-        .unwrap_or_else(|| panic!("no sensor_drift: {:#?}", a.findings));
-    assert_eq!(f.sensor, Some(3));
+        .map(|f| (f.effect.as_str(), f.sensor))
+        .collect();
+    assert_eq!(named, [("sensor_drift", Some(3))], "{:#?}", a.findings);
+    let f = &a.findings[0];
     assert_eq!(f.unit, "mm per 1000 rows");
     assert!(f.evidence.contains("row order"), "{}", f.evidence);
+    let truth_per_1000_rows = truth_per_1000_rows(&sim);
+    assert!(
+        (f.magnitude - truth_per_1000_rows).abs() < 3.0 * f.sigma + 0.1 * truth_per_1000_rows.abs(),
+        "{} ± {} mm per 1000 rows, truth {truth_per_1000_rows}",
+        f.magnitude,
+        f.sigma
+    );
+}
+
+/// A time_s column with a blank cell is no clock: the row order stands in
+/// for every row (before, the rows with a time kept their seconds and the
+/// blank one its row index, one clock mixing both).
+#[test]
+fn a_partly_filled_clock_is_the_row_order() {
+    let sim = simulated("er3a", 2, 9, 5.0);
+    let mut lines: Vec<String> = sim.poses_csv.lines().map(String::from).collect();
+    let col = lines[0].split(',').position(|c| c == "time_s").unwrap();
+    let mut cells: Vec<&str> = lines[40].split(',').collect();
+    cells[col] = "";
+    lines[40] = cells.join(",");
+    let data = Dataset::from_csv(lines.join("\n").as_bytes(), &sim.robot, &sim.rig).unwrap();
+    assert!(data.poses.iter().any(|p| p.time_s.is_none()));
+    let (a, _) = analyse(&sim, &data);
+    assert!(!a.context.timed);
+    let named: Vec<_> = a
+        .findings
+        .iter()
+        .map(|f| (f.effect.as_str(), f.sensor, f.unit.as_str()))
+        .collect();
+    assert_eq!(
+        named,
+        [("sensor_drift", Some(2), "mm per 1000 rows")],
+        "{:#?}",
+        a.findings
+    );
+    // Per thousand rows, not per thousand seconds of the rows that had one.
+    let (f, truth) = (&a.findings[0], truth_per_1000_rows(&sim));
+    assert!(
+        (f.magnitude - truth).abs() < 3.0 * f.sigma + 0.1 * truth.abs(),
+        "{} ± {} mm per 1000 rows, truth {truth}",
+        f.magnitude,
+        f.sigma
+    );
 }

@@ -97,18 +97,6 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
         return Err("--job-lease-secs must be at least 1".into());
     }
     init_tracing(args.log_format);
-    // Through the log (not eprintln) so that JSON logs are JSON throughout.
-    tracing::info!(
-        "drawcal serve: listen={} database={} workers={} runtime_threads={} max_upload_bytes={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
-        args.listen,
-        redact(&args.database),
-        args.workers,
-        args.runtime_threads,
-        args.max_upload_bytes,
-        args.job_lease_secs,
-        args.shutdown_grace_secs,
-        args.log_format
-    );
     let cfg = ServiceConfig {
         listen: args.listen,
         database_url: args.database.clone(),
@@ -125,6 +113,19 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
         .worker_threads(args.runtime_threads)
         .thread_name("drawcal-http")
         .build()?;
+    // Through the log (not eprintln) so that JSON logs are JSON throughout;
+    // the runtime's own count of its worker threads.
+    tracing::info!(
+        "drawcal serve: listen={} database={} workers={} runtime_threads={} max_upload_bytes={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
+        args.listen,
+        redact(&args.database),
+        args.workers,
+        rt.metrics().num_workers(),
+        args.max_upload_bytes,
+        args.job_lease_secs,
+        args.shutdown_grace_secs,
+        args.log_format
+    );
     rt.block_on(async move {
         let service = Service::start(&cfg, engine_job_fn())
             .await

@@ -425,11 +425,19 @@ impl Compensator {
                 .validate()
                 .map_err(|e| Error::field(field, e.to_string()))?;
         }
+        let robot = &report.nominal_robot;
+        let has_masses = robot.links.as_ref().is_some_and(|l| l.len() == robot.dof());
         for (i, f) in report.findings.iter().enumerate() {
-            if let Ok(e) = serde_json::from_value::<EffectModel>(f.parameters.clone()) {
-                e.check(report.nominal_robot.dof())
-                    .map_err(|m| Error::field(format!("findings[{i}].parameters"), m))?;
+            // `unexplained` has no model; every other finding must carry
+            // one that fits the robot, or compensation would drop it.
+            if f.effect == "unexplained" {
+                continue;
             }
+            let field = || format!("findings[{i}].parameters");
+            let e = serde_json::from_value::<EffectModel>(f.parameters.clone())
+                .map_err(|m| Error::field(field(), m.to_string()))?;
+            e.check(robot.dof(), has_masses)
+                .map_err(|m| Error::field(field(), m))?;
         }
         let mut comp = Self::new(&report.nominal_robot, &report.calibrated_robot)?;
         if let Some(info) = thermal_of(report) {

@@ -52,7 +52,7 @@ pub fn one_step(session: &Session, before: &Params) -> Result<Params> {
     }
     // Moore-Penrose with the usual tolerance max(m, n) · eps · σ_max. When A
     // is tall, a QR first reduces it to its square R (same singular
-    // values), so the SVD is of a 5n × 5n matrix rather than of A itself;
+    // values), so the SVD is of a k × k matrix rather than of A itself;
     // with fewer train rows than columns the SVD of A itself gives the
     // minimum-norm step.
     let k = cols_used.len();

@@ -5,8 +5,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::model::{BasePose, Robot};
 
-/// A number this crate wrote: JSON has no NaN, so serde_json writes it as
-/// `null`; read that back as NaN (an unknown, not a malformed report).
+/// A number this crate wrote: JSON has no NaN or infinity, so serde_json
+/// writes them as `null`; read that back as NaN (an unknown, not a
+/// malformed report). Every plain number of the report reads this way.
 fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
@@ -19,10 +20,13 @@ pub const REPORT_FORMAT: &str = "drawcal report v1";
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 pub struct ErrorStats {
     /// 3-D RMS (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub rms_mm: f64,
     /// 3-D mean (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub mean_mm: f64,
     /// 3-D max (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub max_mm: f64,
     /// Per axis x, y, z of the robot base frame.
     pub x: AxisStats,
@@ -36,10 +40,13 @@ pub struct ErrorStats {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 pub struct AxisStats {
     /// Max absolute error (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub max_abs_mm: f64,
     /// Mean absolute error (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub mean_abs_mm: f64,
     /// RMS (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub rms_mm: f64,
 }
 
@@ -70,14 +77,19 @@ pub struct Stats {
 pub struct JointDeviation {
     /// Joint number, 1-based.
     pub joint: usize,
+    #[serde(deserialize_with = "nan_if_null")]
     pub a_mm: f64,
     pub a_mm_sigma: Option<f64>,
+    #[serde(deserialize_with = "nan_if_null")]
     pub alpha_deg: f64,
     pub alpha_deg_sigma: Option<f64>,
+    #[serde(deserialize_with = "nan_if_null")]
     pub d_mm: f64,
     pub d_mm_sigma: Option<f64>,
+    #[serde(deserialize_with = "nan_if_null")]
     pub theta_offset_deg: f64,
     pub theta_offset_deg_sigma: Option<f64>,
+    #[serde(deserialize_with = "nan_if_null")]
     pub beta_deg: f64,
     pub beta_deg_sigma: Option<f64>,
 }
@@ -99,6 +111,7 @@ pub struct Identifiability {
     /// Parameters identified.
     pub n_identified: usize,
     /// Condition number of the column-scaled Jacobian of the identified set.
+    #[serde(deserialize_with = "nan_if_null")]
     pub condition_number: f64,
     /// Fixed parameters and their aliases.
     pub fixed: Vec<FixedParam>,
@@ -110,8 +123,10 @@ pub struct ParamEstimate {
     /// Name (`j2.theta`, `base.x`...).
     pub name: String,
     /// Value (mm or deg).
+    #[serde(deserialize_with = "nan_if_null")]
     pub value: f64,
     /// Deviation from the starting value (mm or deg).
+    #[serde(deserialize_with = "nan_if_null")]
     pub deviation: f64,
     /// 1 sigma (mm or deg); `null` in JSON when the data leave it unknown
     /// (a singular covariance), read back as NaN.
@@ -127,8 +142,10 @@ pub struct Outlier {
     /// Pose id.
     pub pose: String,
     /// Its residual RMS (mm) under the calibrated model.
+    #[serde(deserialize_with = "nan_if_null")]
     pub residual_mm: f64,
     /// Residual in units of the robust scale.
+    #[serde(deserialize_with = "nan_if_null")]
     pub score: f64,
 }
 
@@ -156,6 +173,7 @@ pub struct Convergence {
     /// Why it stopped.
     pub termination: String,
     /// Final RMS of the residuals it minimised (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub residual_rms_mm: f64,
 }
 
@@ -166,8 +184,10 @@ pub struct ClosedFormComparison {
     /// Poses compared.
     pub n: usize,
     /// RMS distance (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub rms_mm: f64,
     /// Max distance (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub max_mm: f64,
 }
 
@@ -184,8 +204,10 @@ pub struct Finding {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensor: Option<usize>,
     /// Fitted magnitude.
+    #[serde(deserialize_with = "nan_if_null")]
     pub magnitude: f64,
     /// Its 1-sigma.
+    #[serde(deserialize_with = "nan_if_null")]
     pub sigma: f64,
     /// Unit of magnitude and sigma.
     pub unit: String,
@@ -194,8 +216,10 @@ pub struct Finding {
     /// What located it.
     pub evidence: String,
     /// Held-out RMS before the effect was modelled (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub test_rms_before_mm: f64,
     /// Held-out RMS after (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub test_rms_after_mm: f64,
     /// The effect's fitted parameters, for compensation and re-use.
     #[serde(default)]
@@ -264,10 +288,13 @@ pub struct EvidencePoint {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensor: Option<usize>,
     /// The effect's driver at the pose.
+    #[serde(deserialize_with = "nan_if_null")]
     pub x: f64,
     /// Residual with the effect left out, on its signature (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub y: f64,
     /// The fitted effect along the same direction (mm).
+    #[serde(deserialize_with = "nan_if_null")]
     pub model: f64,
 }
 

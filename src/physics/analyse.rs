@@ -465,9 +465,10 @@ fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec
         .saturating_sub(1)
         .min(SCAN_EFFECTIVE_MAX)
         .div_ceil(STEP_GRID - 1);
-    // A drift is a rate: it needs a recorded clock. A step is a place in
-    // the session, which the row order gives too (else a rig that moved is
-    // only seen as every anchor stepping at once).
+    // A rig drift is six rates at once: it needs a recorded clock (a
+    // string's drift, one rate, and a warm-up take the row order). A step
+    // is a place in the session, which the row order gives too (else a rig
+    // that moved is only seen as every anchor stepping at once).
     if ctx.timed && times.len() > 2 {
         push(
             Kind::RigDrift,
@@ -956,7 +957,8 @@ pub fn analyse(
         let mut proposals: Vec<Proposal> = sig
             .iter()
             .map(|&i| Proposal {
-                score: scored[i].chi2 - scored[i].threshold,
+                // Scored on the round's common scale below.
+                score: 0.0,
                 members: vec![(i, scored[i].chi2)],
                 drop: scored[i].drop,
                 threshold: scored[i].threshold,
@@ -988,7 +990,9 @@ pub fn analyse(
                     continue;
                 }
                 let threshold = scored[w].threshold + scored[c].threshold;
-                let score = (d - base_drop) / s2 - threshold;
+                // Partners of one lead compared on the lead's variance
+                // (a partner fitting more noise gains nothing by it).
+                let score = (d - base_drop) / scored[w].s2 - threshold;
                 if best.as_ref().is_none_or(|b| score > b.score) {
                     best = Some(Proposal {
                         score,
@@ -1289,7 +1293,7 @@ pub fn analyse(
                 if let serde_json::Value::Object(o) = &mut params {
                     o.insert(
                         "units".into(),
-                        "internal: angles rad, lengths mm; compliance rad/(N*m) with masses, rad/m per unit-mass regressor without; thermal per K, per hour (initial rate with tau_h) or per 1000 rows".into(),
+                        "internal: angles rad, lengths mm; compliance rad/(N*m) with masses, rad/m per unit-mass regressor without; thermal per K, per hour (initial rate with tau_h) or per 1000 rows; joint scale rad per rad; string drift mm per hour or per 1000 rows".into(),
                     );
                     // The payload the compliance was fitted around: what
                     // compensation assumes the robot carries.

@@ -307,11 +307,13 @@ pub struct EffectModel {
 }
 
 impl EffectModel {
-    /// Check an effect read from a report against the robot it belongs to:
-    /// its joint within the `n_joints`, mass-free compliance regressors
-    /// among the link frames, the tool and the payload, as many finite
-    /// coefficients as the effect has. What is wrong, for a human.
-    pub fn check(&self, n_joints: usize) -> std::result::Result<(), String> {
+    /// Check an effect read from a report against the robot it belongs to
+    /// (`n_joints` joints, link masses or not): its joint among them, a
+    /// compliance in the form the robot's masses give (one coefficient with
+    /// masses, unit-mass regressors among the link frames, the tool and the
+    /// payload without), as many finite coefficients as the effect has.
+    /// What is wrong, for a human.
+    pub fn check(&self, n_joints: usize, has_masses: bool) -> std::result::Result<(), String> {
         if let Some(j) = self.kind.joint() {
             if j >= n_joints {
                 return Err(format!(
@@ -320,6 +322,14 @@ impl EffectModel {
             }
         }
         if let Kind::JointCompliance { regressors, .. } = &self.kind {
+            if regressors.is_empty() != has_masses {
+                return Err(if has_masses {
+                    "a compliance fitted with unit-mass regressors, but the robot has link masses"
+                        .into()
+                } else {
+                    "a compliance fitted with link masses, but the robot has none".into()
+                });
+            }
             if let Some(r) = regressors.iter().find(|&&r| r > n_joints + 1) {
                 return Err(format!(
                     "regressor {r}: link frames are 0..{n_joints}, the tool {n_joints}, the payload {}",
@@ -568,7 +578,12 @@ impl Context {
                 PoseContext {
                     q_rad: p.q_rad.to_vec(),
                     direction,
-                    time_s: p.time_s.unwrap_or(i as f64),
+                    // A partly filled time_s column is no clock: the row
+                    // index stands in throughout, never mixed with seconds.
+                    time_s: match p.time_s {
+                        Some(t) if timed => t,
+                        _ => i as f64,
+                    },
                     thermal,
                     point_rig: p.point_rig,
                     torque,

@@ -50,9 +50,20 @@ pub struct Outcome {
     pub worse_3d: usize,
 }
 
-/// Slot of an effect: which joint or sensor (1-based).
-fn slot(name: &str, joint: Option<usize>, sensor: Option<usize>) -> (String, Option<usize>) {
-    (name.to_string(), joint.or(sensor))
+/// Slot of an effect: its name, with the harmonic for a periodic joint
+/// error (a third harmonic named as a first is not right), and which joint
+/// or sensor (1-based).
+fn slot(
+    name: &str,
+    harmonic: Option<u64>,
+    joint: Option<usize>,
+    sensor: Option<usize>,
+) -> (String, Option<usize>) {
+    let name = match harmonic {
+        Some(h) if name == "joint_periodic" => format!("{name}_{h}x"),
+        _ => name.to_string(),
+    };
+    (name, joint.or(sensor))
 }
 
 /// Joints worth putting a joint effect on: T is at least 20 mm off the
@@ -80,7 +91,22 @@ pub fn movable_joints(robot: &crate::model::Robot) -> Vec<usize> {
 
 /// Draw one random effect for a robot with `n_strings` strings.
 pub fn draw_effect(rng: &mut Rng, joints: &[usize], n_strings: usize, size: f64) -> EffectSpec {
-    let name = CATALOGUE[(rng.uniform() * CATALOGUE.len() as f64) as usize % CATALOGUE.len()];
+    // Only what the arm and the rig can carry: joint effects need a joint
+    // that moves T, string effects need strings (tracker points have none).
+    let applicable: Vec<&str> = CATALOGUE
+        .iter()
+        .copied()
+        .filter(|&e| match e {
+            "joint_compliance" | "backlash" | "joint_periodic" | "joint_scale" => {
+                !joints.is_empty()
+            }
+            "sensor_scale" | "sensor_offset" | "sensor_drift" | "anchor_step" | "cable_sag" => {
+                n_strings > 0
+            }
+            _ => true,
+        })
+        .collect();
+    let name = applicable[(rng.uniform() * applicable.len() as f64) as usize % applicable.len()];
     let pick = |rng: &mut Rng, v: &[usize]| v[(rng.uniform() * v.len() as f64) as usize % v.len()];
     let sensors: Vec<usize> = (1..=n_strings).collect();
     let (joint, sensor) = match name {
@@ -136,8 +162,13 @@ pub fn run_case(
         .effects
         .iter()
         .map(|e| {
+            let harmonic = match e.kind {
+                super::Kind::JointPeriodic { harmonic, .. } => Some(u64::from(harmonic)),
+                _ => None,
+            };
             slot(
                 e.kind.name(),
+                harmonic,
                 e.kind.joint().map(|j| j + 1),
                 e.kind.sensor().map(|k| k + 1),
             )
@@ -160,7 +191,10 @@ pub fn run_case(
     let found = analysis
         .findings
         .iter()
-        .map(|f| slot(&f.effect, f.joint, f.sensor))
+        .map(|f| {
+            let harmonic = f.parameters.get("harmonic").and_then(|h| h.as_u64());
+            slot(&f.effect, harmonic, f.joint, f.sensor)
+        })
         .collect();
     let worse_3d = analysis
         .findings

@@ -117,9 +117,8 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             unit: "m".into(),
             per_string: true,
         },
-        // Effects added to the catalogue later: time as the driver.
-        #[allow(unreachable_patterns)]
-        _ => Driver {
+        // A moved rig: the session's clock (the row order without one).
+        Kind::RigStep { .. } | Kind::RigDrift => Driver {
             label: if ctx.timed {
                 "hours since the session began"
             } else {
@@ -127,7 +126,7 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             }
             .into(),
             unit: if ctx.timed { "h" } else { "row" }.into(),
-            per_string: !kind.robot_side() && kind.sensor().is_none(),
+            per_string: false,
         },
     }
 }
@@ -165,9 +164,8 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
             let vert = v.dot(&ctx.gravity_rig);
             (v.norm_squared() - vert * vert).max(0.0).sqrt() * 1e-3
         }
-        #[allow(unreachable_patterns)]
-        _ if !ctx.timed => pc.time_s + 1.0,
-        _ => (pc.time_s - ctx.poses.first().map_or(0.0, |p| p.time_s)) / 3600.0,
+        Kind::RigStep { .. } | Kind::RigDrift if !ctx.timed => pc.time_s + 1.0,
+        Kind::RigStep { .. } | Kind::RigDrift => ctx.clock_h(pc),
     }
 }
 

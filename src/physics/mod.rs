@@ -32,7 +32,7 @@ pub fn effects_of(findings: &[Finding]) -> Vec<EffectModel> {
 }
 
 /// The robot-side effects a calibration accepted (compliance, backlash,
-/// periodic joint errors), ready to evaluate at commanded joints: the joint
+/// periodic and scale errors of the joints), ready to evaluate at commanded joints: the joint
 /// really sits at `q + offsets_rad(q)`. To put T where the calibrated model
 /// puts it with angles `q_model`, command `q_model - offsets(q_model)` (one
 /// fixed-point step is enough: the offsets change by their own square).

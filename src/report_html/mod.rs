@@ -87,16 +87,18 @@ fn norm(v: &[f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
-/// A number as shown (4 decimals) with its full value in `data-value`.
+/// A number as shown (4 decimals) with its full value in `data-value`;
+/// an unknown one (NaN: a sigma the data leave open) as "-".
 fn num(v: f64) -> String {
-    format!(r#"<td class="num" data-value="{v}">{v:.4}</td>"#)
+    if v.is_finite() {
+        format!(r#"<td class="num" data-value="{v}">{v:.4}</td>"#)
+    } else {
+        r#"<td class="num">-</td>"#.into()
+    }
 }
 
 fn opt_num(v: Option<f64>) -> String {
-    match v {
-        Some(v) => num(v),
-        None => r#"<td class="num">-</td>"#.into(),
-    }
+    num(v.unwrap_or(f64::NAN))
 }
 
 const CSS: &str = r#"
@@ -723,4 +725,16 @@ pub fn render(r: &Report, title: &str, poses: Option<&PoseColumns>) -> String {
         render_fragment(r, poses),
         t = esc(title)
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_numbers_show_as_a_dash() {
+        assert_eq!(num(f64::NAN), r#"<td class="num">-</td>"#);
+        assert_eq!(opt_num(None), r#"<td class="num">-</td>"#);
+        assert_eq!(num(1.5), r#"<td class="num" data-value="1.5">1.5000</td>"#);
+    }
 }

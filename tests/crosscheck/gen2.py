@@ -875,8 +875,11 @@ def score_one(spec):
         # The README's catalogue name of an effect first simulated here as
         # out of the catalogue.
         name = CATALOGUE_NAME.get(e["effect"], e["effect"])
-        hit = [i for i, f in enumerate(F) if f["effect"] == name and (p is None or place(f) == p)]
-        wp = [i for i, f in enumerate(F) if f["effect"] == name]
+        # A periodic joint error is named right only with its harmonic.
+        same = lambda f: f["effect"] == name and (
+            name != "joint_periodic" or f.get("parameters", {}).get("harmonic") == e.get("harmonic", 1))
+        hit = [i for i, f in enumerate(F) if same(f) and (p is None or place(f) == p)]
+        wp = [i for i, f in enumerate(F) if same(f)]
         if hit:
             cats.append("right"); used.add(hit[0])
         elif wp:
