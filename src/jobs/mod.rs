@@ -155,6 +155,10 @@ impl Default for JobConfig {
     }
 }
 
+/// Longest interval between a running job's heartbeats (each also reads
+/// the cancel flag and records progress).
+const MAX_BEAT: Duration = Duration::from_millis(500);
+
 /// Progress shared between the engine thread and the heartbeat.
 struct JobProgress {
     cancel: AtomicBool,
@@ -357,7 +361,9 @@ impl Worker {
         // The engine runs on a blocking thread, never on the runtime.
         let mut handle = tokio::task::spawn_blocking(move || job_fn(&input, &*p));
 
-        let beat = (self.cfg.lease / 3).max(Duration::from_millis(50));
+        // Often enough that a cancel reaches the engine (and progress the
+        // client) within half a second, not only at the lease's pace.
+        let beat = (self.cfg.lease / 3).clamp(Duration::from_millis(50), MAX_BEAT);
         let mut lost_lease = false;
         let mut handed_back = false;
         let mut grace_deadline: Option<tokio::time::Instant> = None;
@@ -396,6 +402,27 @@ impl Worker {
             }
         };
         if lost_lease {
+            return;
+        }
+        // A cancel asked for while the engine was finishing still wins: the
+        // result is not stored (one last look at the flag).
+        let cancel_at_end = matches!(result, Ok(Ok(_)))
+            && !handed_back
+            && matches!(
+                self.store
+                    .heartbeat(
+                        id,
+                        &self.name,
+                        now_ms() + self.cfg.lease.as_millis() as i64,
+                        None,
+                        1.0
+                    )
+                    .await,
+                Ok(Some(true))
+            );
+        if cancel_at_end {
+            tracing::info!("cancel requested while the job finished: its result is not stored");
+            self.finish(id, "cancelled", None).await;
             return;
         }
         match result {

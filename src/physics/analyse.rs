@@ -886,6 +886,10 @@ pub fn analyse(
             break;
         }
         progress.update("physics analysis", round as f64 / (MAX_EFFECTS + 2) as f64);
+        // A round refits the whole model: the place to honour a cancel.
+        if progress.cancelled() {
+            return Err(crate::Error::Cancelled);
+        }
         let cands: Vec<Candidate> = candidates(session, &ctx, &accepted)
             .into_iter()
             .filter(|c| !rejected.iter().any(|r| same_slot(r, &c.kind)))

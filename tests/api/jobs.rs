@@ -308,3 +308,45 @@ async fn compensation_checks_targets_and_calibration_owner() {
     );
     app.stop().await;
 }
+
+/// Cancel with the real engine and the default 15 s lease: a job of about
+/// two seconds (the UR10 grid, 11,911 poses) asked to stop at once ends
+/// `cancelled` with no calibration. Before, the flag reached the engine
+/// only with the heartbeat every lease/3 = 5 s and the physics analysis
+/// never looked at it: such a job always ended `succeeded`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_running_engine_job_cancels_within_the_lease() {
+    let app = TestApp::spawn_with(
+        "cancel-engine",
+        Options {
+            max_upload_bytes: 4 * 1024 * 1024,
+            ..Options::default()
+        },
+    )
+    .await;
+    let ds = "real_ur10_ipa_grid";
+    let (_, _, _, sid) = app.setup(ds, "UR10-CANCEL").await;
+    ok_json(
+        app.post_raw(
+            &format!("/sessions/{sid}/poses"),
+            Some("text/csv"),
+            read(ds, "poses.csv"),
+        )
+        .await,
+        200,
+    )
+    .await;
+    let job = enqueue(&app, sid).await;
+    let c = ok_json(
+        app.post_raw(&format!("/jobs/{job}/cancel"), None, "").await,
+        202,
+    )
+    .await;
+    assert_eq!(c["cancel_requested"], true);
+    let j = app.wait_job(job, Duration::from_secs(60)).await;
+    assert_eq!(j["state"], "cancelled", "{j}");
+    assert_eq!(j["calibration_id"], serde_json::Value::Null);
+    let cals = ok_json(app.get("/calibrations").await, 200).await;
+    assert_eq!(cals["total"], 0, "{cals}");
+    app.stop().await;
+}
