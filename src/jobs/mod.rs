@@ -232,8 +232,10 @@ pub fn summarize(report: &Report, report_json: String) -> NewCalibration {
         method: report.method.clone(),
         n_poses: (stats.train.n + stats.test.n) as i64,
         n_test: stats.test.n as i64,
-        test_rms_before_mm: finite(stats.test.before.rms_mm),
-        test_rms_after_mm: finite(stats.test.after.rms_mm),
+        // No held-out poses: no held-out figure (the empty set's 0.0 would
+        // rank as the fleet's most accurate calibration).
+        test_rms_before_mm: finite(stats.test.before.rms_mm).filter(|_| stats.test.n > 0),
+        test_rms_after_mm: finite(stats.test.after.rms_mm).filter(|_| stats.test.n > 0),
         train_rms_after_mm: finite(stats.train.after.rms_mm),
         effects: effects.join(","),
         report_json,

@@ -350,3 +350,60 @@ async fn a_running_engine_job_cancels_within_the_lease() {
     assert_eq!(cals["total"], 0, "{cals}");
     app.stop().await;
 }
+
+/// A calibration with nothing held out (a `holdout_fraction` that rounds
+/// to no pose, on a file
+/// without a split column) has no held-out figures: null in the
+/// calibration and out of an accuracy filter. Before, the empty set's 0.0
+/// was stored and it ranked as the fleet's most accurate calibration.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn no_held_out_poses_no_held_out_accuracy() {
+    let app = TestApp::spawn("no-holdout").await;
+    let (_, _, _, sid) = app.setup(DS, "NO-HOLDOUT").await;
+    // The file without its split column.
+    let csv = read(DS, "poses.csv");
+    let no_split: String = csv
+        .lines()
+        .map(|l| l.rsplit_once(',').unwrap().0)
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(!no_split.lines().next().unwrap().contains("split"));
+    ok_json(
+        app.post_raw(
+            &format!("/sessions/{sid}/poses"),
+            Some("text/csv"),
+            no_split,
+        )
+        .await,
+        200,
+    )
+    .await;
+    let job = ok_json(
+        app.post_raw(
+            &format!("/sessions/{sid}/jobs"),
+            Some("application/json"),
+            // 0.001 of 50 poses rounds to none held out.
+            json!({"holdout_fraction": 0.001}).to_string(),
+        )
+        .await,
+        202,
+    )
+    .await;
+    let j = app
+        .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(120))
+        .await;
+    assert_eq!(j["state"], "succeeded", "{j}");
+    let cal = ok_json(
+        app.get(&format!("/calibrations/{}", j["calibration_id"]))
+            .await,
+        200,
+    )
+    .await;
+    let c = &cal["calibration"];
+    assert_eq!(c["n_test"], 0, "{c}");
+    assert!(c["test_rms_after_mm"].is_null(), "{c}");
+    assert!(c["test_rms_before_mm"].is_null(), "{c}");
+    let best = ok_json(app.get("/calibrations?max_test_rms_mm=0.001").await, 200).await;
+    assert_eq!(best["total"], 0, "{best}");
+    app.stop().await;
+}
