@@ -85,6 +85,18 @@ fn opt_num(x: Option<f64>) -> String {
     x.map(|v| format!("{v:.4}")).unwrap_or_default()
 }
 
+/// A free-text cell as a spreadsheet reads it safely: text a user typed
+/// (serial number, site, line, cell) that begins like a formula (`=`, `+`,
+/// `-`, `@`, tab, carriage return) gets a leading `'`, so an MES export
+/// opened in a spreadsheet shows it instead of running it.
+fn text_cell(s: &str) -> String {
+    if s.starts_with(['=', '+', '-', '@', '\t', '\r']) {
+        format!("'{s}")
+    } else {
+        s.to_string()
+    }
+}
+
 fn csv_response(rows: &[CalibrationRec]) -> ApiResult<Response> {
     let mut w = csv::WriterBuilder::new()
         .terminator(csv::Terminator::Any(b'\n'))
@@ -116,11 +128,11 @@ fn csv_response(rows: &[CalibrationRec]) -> ApiResult<Response> {
         w.write_record([
             c.id.to_string(),
             c.robot_id.to_string(),
-            c.serial_number.clone(),
+            text_cell(&c.serial_number),
             c.model_id.to_string(),
-            c.site.clone().unwrap_or_default(),
-            c.line.clone().unwrap_or_default(),
-            c.cell.clone().unwrap_or_default(),
+            text_cell(c.site.as_deref().unwrap_or_default()),
+            text_cell(c.line.as_deref().unwrap_or_default()),
+            text_cell(c.cell.as_deref().unwrap_or_default()),
             c.version.to_string(),
             c.created_at.clone(),
             c.method.clone(),
@@ -438,4 +450,18 @@ pub async fn list_activations(
     let page = p.page()?;
     let (items, total) = app.store.list_activations(id, page).await?;
     Ok(Json(Paged::new(items, total, page)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::text_cell;
+
+    #[test]
+    fn formula_like_text_is_quoted_for_spreadsheets() {
+        assert_eq!(text_cell("=1+1"), "'=1+1");
+        assert_eq!(text_cell("@SUM(A1)"), "'@SUM(A1)");
+        assert_eq!(text_cell("-2"), "'-2");
+        assert_eq!(text_cell("plant-1"), "plant-1");
+        assert_eq!(text_cell(""), "");
+    }
 }
