@@ -119,13 +119,20 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
             let path = e.path().to_string();
             let inner = e.into_inner();
             use serde_json::error::Category;
+            let field = (path != "." && !path.is_empty()).then_some(path);
             match inner.classify() {
-                Category::Syntax | Category::Eof | Category::Io => {
-                    Err(ApiError::MalformedJson(format!("malformed JSON: {inner}")))
-                }
+                Category::Io => Err(ApiError::MalformedJson(format!("malformed JSON: {inner}"))),
+                // The syntax pass above succeeded, so a "syntax" error here
+                // is the shape: a fixed-length array (a point, an angle
+                // triple) given more elements than it has.
+                Category::Syntax | Category::Eof => Err(ApiError::Invalid {
+                    message: format!("more elements than expected ({inner})"),
+                    field,
+                    row: None,
+                }),
                 Category::Data => Err(ApiError::Invalid {
                     message: inner.to_string(),
-                    field: (path != "." && !path.is_empty()).then_some(path),
+                    field,
                     row: None,
                 }),
             }
@@ -185,6 +192,27 @@ impl<S: Send + Sync, T: DeserializeOwned> FromRequestParts<S> for ApiQuery<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_too_long_fixed_array_is_invalid_input_naming_the_field() {
+        #[derive(serde::Deserialize, Debug)]
+        struct T {
+            #[allow(dead_code)]
+            xyz_mm: [f64; 3],
+        }
+        match parse_json::<T>(br#"{"xyz_mm": [1, 2, 3, 4]}"#) {
+            Err(ApiError::Invalid { field, message, .. }) => {
+                assert_eq!(field.as_deref(), Some("xyz_mm"));
+                assert!(message.contains("more elements than expected"), "{message}");
+            }
+            other => panic!("{other:?}"),
+        }
+        // Real syntax errors stay malformed JSON.
+        assert!(matches!(
+            parse_json::<T>(br#"{"xyz_mm": [1, 2, 3"#),
+            Err(ApiError::MalformedJson(_))
+        ));
+    }
 
     #[test]
     fn the_limit_is_said_in_bytes_and_mib_with_the_flag() {
