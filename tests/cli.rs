@@ -168,7 +168,6 @@ fn locate_compares_closed_form_and_least_squares() {
 /// effect.
 #[test]
 fn compensate_at_a_temperature() {
-    use drawcal::identify::{IdentifyOptions, NoProgress, identify};
     let dir = std::env::temp_dir().join(format!("drawcal-cli-temp-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let spec: drawcal::physics::simulate::Spec = serde_json::from_value(serde_json::json!({
@@ -179,14 +178,7 @@ fn compensate_at_a_temperature() {
     }))
     .unwrap();
     let sim = drawcal::physics::simulate::generate(&spec).unwrap();
-    let rep = identify(
-        &sim.robot,
-        &sim.rig,
-        &sim.dataset,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
+    let rep = common::identify_default(&sim.robot, &sim.rig, &sim.dataset);
     let t_ref = sim.dataset.poses[0].temp_c.unwrap();
     let mut json = serde_json::to_value(&rep).unwrap();
     let report = dir.join("thermal.json");

@@ -9,20 +9,12 @@ mod common;
 
 use drawcal::compensate::Compensator;
 use drawcal::identify::report::Report;
-use drawcal::identify::{IdentifyOptions, NoProgress, identify};
 use drawcal::model::{Target, TargetKind};
 
 /// The report of er3a_compliance_j2: one finding, joint 2 compliance.
 fn report() -> Report {
     let (robot, rig, data) = common::load("er3a_compliance_j2");
-    let rep = identify(
-        &robot,
-        &rig,
-        &data,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
+    let rep = common::identify_default(&robot, &rig, &data);
     assert_eq!(rep.findings[0].effect, "joint_compliance");
     rep
 }

@@ -240,14 +240,7 @@ fn chosen_split_is_reported_and_reproducible() {
 #[test]
 fn real_ur10_random_with_physics_reaches_the_goal() {
     let (robot, rig, data) = common::load("real_ur10_ipa_random");
-    let rep = identify(
-        &robot,
-        &rig,
-        &data,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
+    let rep = common::identify_default(&robot, &rig, &data);
     // The geometric model leaves 0.493 mm; the accepted effects must bring
     // the held-out RMS to the 0.49 mm goal, and every accepted effect must
     // have improved the held-out error.
@@ -264,14 +257,7 @@ fn real_ur10_random_with_physics_reaches_the_goal() {
 #[test]
 fn per_pose_string_residuals_include_the_accepted_effects() {
     let (robot, rig, data) = common::load("er3a_compliance_j2");
-    let rep = identify(
-        &robot,
-        &rig,
-        &data,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
+    let rep = common::identify_default(&robot, &rig, &data);
     assert!(
         rep.findings
             .iter()
@@ -299,14 +285,7 @@ fn uncertainties_come_from_the_final_model_with_its_effects() {
     // compliance) must report the sigmas of its own, much tighter, fit.
     let (robot, rig, data) = common::load("er3a_compliance_j2");
     let geo = identify(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
-    let fin = identify(
-        &robot,
-        &rig,
-        &data,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
+    let fin = common::identify_default(&robot, &rig, &data);
     assert!(!fin.findings.is_empty());
     let mut ratios: Vec<f64> = fin
         .parameters

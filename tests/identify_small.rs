@@ -70,14 +70,7 @@ fn a_split_without_test_poses_says_so() {
     let csv = std::fs::read_to_string(common::dir("er3a_paper_like").join("poses.csv")).unwrap();
     let all_train = csv.replace(",test", ",train");
     let data = Dataset::from_csv(all_train.as_bytes(), &robot, &rig).unwrap();
-    let rep = identify(
-        &robot,
-        &rig,
-        &data,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap();
+    let rep = common::identify_default(&robot, &rig, &data);
     assert!(
         rep.split_source
             .starts_with("chosen: the split column marks no pose test; 15 of 50 poses held out"),

@@ -664,16 +664,7 @@ async fn poses_in_radians_are_calibrated_with_a_warning() {
             .collect();
         rad.push(cells.join(","));
     }
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{sid}/poses"),
-            Some("text/csv"),
-            rad.join("\n"),
-        )
-        .await,
-        200,
-    )
-    .await;
+    app.upload_poses(sid, rad.join("\n")).await;
     let job = ok_json(
         app.post_json(&format!("/sessions/{sid}/jobs"), &json!({"physics": false}))
             .await,

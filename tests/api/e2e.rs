@@ -385,16 +385,7 @@ async fn poses_in_json_and_csv_batches_are_one_session() {
     for l in &rows[20..] {
         reordered.push(l.split(',').rev().collect::<Vec<_>>().join(","));
     }
-    let up = ok_json(
-        app.post_raw(
-            &format!("/sessions/{sid}/poses"),
-            Some("text/csv"),
-            reordered.join("\n"),
-        )
-        .await,
-        200,
-    )
-    .await;
+    let up = app.upload_poses(sid, reordered.join("\n")).await;
     assert_eq!(up["added"], 30);
     assert_eq!(up["session"]["n_poses"], 50);
     assert_eq!(up["session"]["n_batches"], 2);

@@ -193,9 +193,8 @@ impl TestApp {
         )
     }
 
-    /// Upload poses.csv to a session and run its identification job to
-    /// success; returns the finished job.
-    pub async fn identify_session(&self, session: i64, poses_csv: String) -> Value {
+    /// Upload a poses CSV to a session (must be accepted); the answer.
+    pub async fn upload_poses(&self, session: i64, poses_csv: String) -> Value {
         ok_json(
             self.post_raw(
                 &format!("/sessions/{session}/poses"),
@@ -205,7 +204,13 @@ impl TestApp {
             .await,
             200,
         )
-        .await;
+        .await
+    }
+
+    /// Upload poses.csv to a session and run its identification job to
+    /// success; returns the finished job.
+    pub async fn identify_session(&self, session: i64, poses_csv: String) -> Value {
+        self.upload_poses(session, poses_csv).await;
         let job = ok_json(
             self.post_raw(
                 &format!("/sessions/{session}/jobs"),

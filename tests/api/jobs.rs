@@ -14,16 +14,7 @@ const DS: &str = "er3a_paper_like";
 
 async fn session_with_poses(app: &TestApp, serial: &str) -> i64 {
     let (_, _, _, sid) = app.setup(DS, serial).await;
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{sid}/poses"),
-            Some("text/csv"),
-            read(DS, "poses.csv"),
-        )
-        .await,
-        200,
-    )
-    .await;
+    app.upload_poses(sid, read(DS, "poses.csv")).await;
     sid
 }
 
@@ -185,16 +176,7 @@ async fn shutdown_hands_a_running_job_back_and_restart_runs_it() {
 async fn compensation_checks_targets_and_calibration_owner() {
     let app = TestApp::spawn("comp").await;
     let (_, robot_a, _, sid) = app.setup(DS, "COMP-A").await;
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{sid}/poses"),
-            Some("text/csv"),
-            read(DS, "poses.csv"),
-        )
-        .await,
-        200,
-    )
-    .await;
+    app.upload_poses(sid, read(DS, "poses.csv")).await;
     let job = enqueue(&app, sid).await;
     let done = app.wait_job(job, Duration::from_secs(600)).await;
     assert_eq!(done["state"], "succeeded", "{done}");
@@ -326,16 +308,7 @@ async fn a_running_engine_job_cancels_within_the_lease() {
     .await;
     let ds = "real_ur10_ipa_grid";
     let (_, _, _, sid) = app.setup(ds, "UR10-CANCEL").await;
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{sid}/poses"),
-            Some("text/csv"),
-            read(ds, "poses.csv"),
-        )
-        .await,
-        200,
-    )
-    .await;
+    app.upload_poses(sid, read(ds, "poses.csv")).await;
     let job = enqueue(&app, sid).await;
     let c = ok_json(
         app.post_raw(&format!("/jobs/{job}/cancel"), None, "").await,
@@ -368,16 +341,7 @@ async fn no_held_out_poses_no_held_out_accuracy() {
         .collect::<Vec<_>>()
         .join("\n");
     assert!(!no_split.lines().next().unwrap().contains("split"));
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{sid}/poses"),
-            Some("text/csv"),
-            no_split,
-        )
-        .await,
-        200,
-    )
-    .await;
+    app.upload_poses(sid, no_split).await;
     let job = ok_json(
         app.post_raw(
             &format!("/sessions/{sid}/jobs"),

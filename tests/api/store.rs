@@ -461,16 +461,7 @@ async fn service_runs_on_postgres() {
     assert_eq!(ready["database"], "postgres");
     let ds = "er3a_paper_like";
     let (_, robot, _, sid) = app.setup(ds, "PG-1").await;
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{sid}/poses"),
-            Some("text/csv"),
-            read(ds, "poses.csv"),
-        )
-        .await,
-        200,
-    )
-    .await;
+    app.upload_poses(sid, read(ds, "poses.csv")).await;
     let job = ok_json(
         app.post_raw(&format!("/sessions/{sid}/jobs"), None, "")
             .await,

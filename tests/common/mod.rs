@@ -6,6 +6,16 @@ use std::path::PathBuf;
 
 use drawcal::model::{Dataset, Rig, Robot};
 
+/// `drawcal identify` with the default options on a loaded dataset.
+pub fn identify_default(
+    robot: &Robot,
+    rig: &Rig,
+    data: &Dataset,
+) -> drawcal::identify::report::Report {
+    use drawcal::identify::{IdentifyOptions, NoProgress, identify};
+    identify(robot, rig, data, &IdentifyOptions::default(), &NoProgress).unwrap()
+}
+
 /// The geometric fit and the physics analysis with the default options, as
 /// `drawcal identify` runs them: the analysis and the held-out 3-D RMS of
 /// its final model (mm).
