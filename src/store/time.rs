@@ -45,6 +45,17 @@ pub fn ms_to_rfc3339(ms: i64) -> String {
     format!("{y:04}-{m:02}-{d:02}T{h:02}:{mi:02}:{s:02}.{milli:03}Z")
 }
 
+/// Days in a month of the proleptic Gregorian calendar.
+fn days_in_month(year: u32, month: u32) -> u32 {
+    let leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
+    match month {
+        2 if leap => 29,
+        2 => 28,
+        4 | 6 | 9 | 11 => 30,
+        _ => 31,
+    }
+}
+
 /// Normalise a date-range bound given by a client: `YYYY-MM-DD` (the start
 /// of that day, or its last millisecond when `end_of_day`) or
 /// `YYYY-MM-DDTHH:MM:SS[.fff]Z`. `None` if it is neither.
@@ -60,9 +71,10 @@ pub fn normalize_bound(s: &str, end_of_day: bool) -> Option<String> {
     {
         return None;
     }
+    let year: u32 = s[0..4].parse().ok()?;
     let month: u32 = s[5..7].parse().ok()?;
     let day: u32 = s[8..10].parse().ok()?;
-    if !(1..=12).contains(&month) || !(1..=31).contains(&day) {
+    if !(1..=12).contains(&month) || day < 1 || day > days_in_month(year, month) {
         return None;
     }
     let date = &s[..10];
@@ -82,6 +94,10 @@ pub fn normalize_bound(s: &str, end_of_day: bool) -> Option<String> {
         || b[16] != b':'
         || !digits(17..19)
     {
+        return None;
+    }
+    let field = |r: std::ops::Range<usize>| s[r].parse::<u32>().unwrap_or(u32::MAX);
+    if field(11..13) > 23 || field(14..16) > 59 || field(17..19) > 59 {
         return None;
     }
     let rest = &s[19..];
@@ -135,6 +151,15 @@ mod tests {
         );
         assert!(normalize_bound("yesterday", false).is_none());
         assert!(normalize_bound("2026-13-02", false).is_none());
+        // Days that do not exist, and times past the clock.
+        assert!(normalize_bound("2026-02-29", false).is_none());
+        assert!(normalize_bound("2026-04-31", false).is_none());
+        assert!(normalize_bound("2024-02-29", false).is_some());
+        assert!(normalize_bound("2000-02-29", false).is_some());
+        assert!(normalize_bound("1900-02-29", false).is_none());
+        assert!(normalize_bound("2026-01-02T24:00:00Z", false).is_none());
+        assert!(normalize_bound("2026-01-02T23:60:00Z", false).is_none());
+        assert!(normalize_bound("2026-01-02T23:59:60Z", false).is_none());
         assert!(normalize_bound("2026-01-02T03:04:05+01:00", false).is_none());
     }
 }

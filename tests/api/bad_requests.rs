@@ -277,6 +277,16 @@ async fn bad_requests_are_refused_and_change_nothing() {
         None,
     )
     .await;
+    // A day that does not exist is refused, not silently rolled over.
+    refused(
+        &app,
+        c.get(app.url("/calibrations?to=2026-02-30")),
+        422,
+        "invalid_input",
+        Some("to"),
+        None,
+    )
+    .await;
     refused(
         &app,
         c.get(app.url("/jobs?state=sleeping")),
