@@ -23,6 +23,12 @@ pub struct ServeArgs {
     /// batches.
     #[arg(long, env = "DRAWCAL_MAX_UPLOAD_BYTES", default_value_t = 16 * 1024 * 1024)]
     pub max_upload_bytes: usize,
+    /// Seconds a client may take to send a request's headers or leave its
+    /// body idle before the connection is closed (408 for a body); the
+    /// whole body must arrive within ten times this. Idle keep-alive
+    /// connections are closed after it too.
+    #[arg(long, env = "DRAWCAL_CLIENT_TIMEOUT_SECS", default_value_t = 30)]
+    pub client_timeout_secs: u64,
     /// Job lease (seconds): a job whose process died runs again this long
     /// after its last heartbeat.
     #[arg(long, env = "DRAWCAL_JOB_LEASE_SECS", default_value_t = 15)]
@@ -93,6 +99,9 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
     if args.runtime_threads == 0 {
         return Err("--runtime-threads must be at least 1".into());
     }
+    if args.client_timeout_secs == 0 {
+        return Err("--client-timeout-secs must be at least 1".into());
+    }
     if args.job_lease_secs == 0 {
         return Err("--job-lease-secs must be at least 1".into());
     }
@@ -101,6 +110,7 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
         listen: args.listen,
         database_url: args.database.clone(),
         max_upload_bytes: args.max_upload_bytes,
+        client_timeout: Duration::from_secs(args.client_timeout_secs),
         jobs: JobConfig {
             workers: args.workers,
             lease: Duration::from_secs(args.job_lease_secs),
@@ -116,12 +126,13 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
     // Through the log (not eprintln) so that JSON logs are JSON throughout;
     // the runtime's own count of its worker threads.
     tracing::info!(
-        "drawcal serve: listen={} database={} workers={} runtime_threads={} max_upload_bytes={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
+        "drawcal serve: listen={} database={} workers={} runtime_threads={} max_upload_bytes={} client_timeout_secs={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
         args.listen,
         redact(&args.database),
         args.workers,
         rt.metrics().num_workers(),
         args.max_upload_bytes,
+        args.client_timeout_secs,
         args.job_lease_secs,
         args.shutdown_grace_secs,
         args.log_format

@@ -19,7 +19,7 @@ use crate::store::StoreError;
 pub struct ErrorBody {
     /// Machine-readable code: `bad_request`, `malformed_json`,
     /// `invalid_input`, `not_found`, `conflict`, `payload_too_large`,
-    /// `unsupported_media_type`, `method_not_allowed`, `unavailable`,
+    /// `request_timeout`, `unsupported_media_type`, `method_not_allowed`, `unavailable`,
     /// `internal`.
     pub error: String,
     /// What went wrong, for a human.
@@ -62,6 +62,9 @@ pub enum ApiError {
     /// Body over the limit.
     #[error("{0}")]
     PayloadTooLarge(String),
+    /// The client stopped sending its body, or took too long over it.
+    #[error("{0}")]
+    RequestTimeout(String),
     /// Wrong or missing `Content-Type`.
     #[error("{0}")]
     UnsupportedMediaType(String),
@@ -95,6 +98,7 @@ impl ApiError {
             ApiError::NotFound(_) => (StatusCode::NOT_FOUND, "not_found"),
             ApiError::Conflict(_) => (StatusCode::CONFLICT, "conflict"),
             ApiError::PayloadTooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "payload_too_large"),
+            ApiError::RequestTimeout(_) => (StatusCode::REQUEST_TIMEOUT, "request_timeout"),
             ApiError::UnsupportedMediaType(_) => {
                 (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type")
             }

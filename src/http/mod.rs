@@ -29,7 +29,6 @@ use std::sync::{Arc, RwLock};
 use std::time::Duration;
 
 use axum::Router;
-use axum::extract::DefaultBodyLimit;
 use axum::http::{HeaderValue, Request};
 use serde::{Deserialize, Serialize};
 use tower_http::request_id::{
@@ -58,7 +57,17 @@ pub struct ServiceConfig {
     pub max_upload_bytes: usize,
     /// Job pool settings.
     pub jobs: JobConfig,
+    /// How long a client may take to send a request's headers, or leave its
+    /// body idle (`--client-timeout-secs`). The whole body must arrive
+    /// within [`BODY_DEADLINE_FACTOR`] times this. A client past either is
+    /// cut off, so that slow or stalled clients cannot hold connections and
+    /// buffers for ever.
+    pub client_timeout: Duration,
 }
+
+/// The whole request body must arrive within this many client timeouts
+/// (30 s by default: 5 minutes, 16 MiB at about 0.5 Mbit/s).
+pub const BODY_DEADLINE_FACTOR: u32 = 10;
 
 /// Largest batch `/compensate` accepts.
 pub const MAX_COMPENSATE_TARGETS: usize = 10_000;
@@ -222,7 +231,7 @@ impl MakeRequestId for CounterId {
 }
 
 /// The application, ready to serve.
-pub fn router(state: AppState, max_upload_bytes: usize) -> Router {
+pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration) -> Router {
     let (router, _) = api().split_for_parts();
     let ids = CounterId {
         prefix: format!("{:x}", crate::store::now_ms() & 0xff_ffff).into(),
@@ -232,8 +241,11 @@ pub fn router(state: AppState, max_upload_bytes: usize) -> Router {
         .merge(ui::routes())
         .fallback(|| async { ApiError::NotFound("no such route".into()) })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
-        .layer(DefaultBodyLimit::max(max_upload_bytes))
-        .layer(axum::Extension(extract::BodyLimit { max_upload_bytes }))
+        .layer(axum::Extension(extract::BodyPolicy {
+            max_upload_bytes,
+            idle_timeout: client_timeout,
+            deadline: client_timeout * BODY_DEADLINE_FACTOR,
+        }))
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(
             TraceLayer::new_for_http()
@@ -259,6 +271,7 @@ pub struct Service {
     listener: tokio::net::TcpListener,
     state: AppState,
     max_upload_bytes: usize,
+    client_timeout: Duration,
 }
 
 impl Service {
@@ -285,6 +298,7 @@ impl Service {
             listener,
             state,
             max_upload_bytes: cfg.max_upload_bytes,
+            client_timeout: cfg.client_timeout,
         })
     }
 
@@ -300,23 +314,74 @@ impl Service {
         self,
         shutdown: impl std::future::Future<Output = ()> + Send + 'static,
     ) -> std::io::Result<()> {
-        let app = router(self.state.clone(), self.max_upload_bytes);
+        let app = router(
+            self.state.clone(),
+            self.max_upload_bytes,
+            self.client_timeout,
+        );
         tracing::info!(addr = %self.addr, "listening");
-        // An answer that leaves in more than one segment (a large batch, or
-        // headers and body flushed apart) must not wait on Nagle for the
-        // client's delayed ACK (up to 40 ms).
-        let listener = axum::serve::ListenerExt::tap_io(self.listener, |tcp| {
-            let _ = tcp.set_nodelay(true);
-        });
-        let served = axum::serve(listener, app)
-            .with_graceful_shutdown(shutdown)
-            .await;
+        let served = serve_connections(self.listener, app, self.client_timeout, shutdown).await;
         tracing::info!("HTTP server stopped; stopping job workers");
         self.state.jobs.shutdown().await;
         self.state.store.close().await;
         tracing::info!("shutdown complete");
         served
     }
+}
+
+/// Accept connections and serve `app` on each (HTTP/1.1) until `shutdown`
+/// resolves; then stop accepting and wait for the open connections to
+/// finish their requests.
+///
+/// Our own loop rather than `axum::serve`, which gives hyper no timer, so a
+/// client could hold a connection open for ever by sending its headers a
+/// byte at a time (or nothing at all); here hyper closes a connection whose
+/// request headers have not all arrived within `client_timeout`, idle
+/// keep-alive connections included.
+async fn serve_connections(
+    listener: tokio::net::TcpListener,
+    app: Router,
+    client_timeout: Duration,
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    use hyper_util::rt::{TokioIo, TokioTimer};
+    use hyper_util::server::graceful::GracefulShutdown;
+    use hyper_util::service::TowerToHyperService;
+
+    let graceful = GracefulShutdown::new();
+    let mut shutdown = std::pin::pin!(shutdown);
+    loop {
+        let (tcp, peer) = tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok(conn) => conn,
+                Err(e) => {
+                    // Out of file descriptors and the like: transient, so
+                    // back off instead of spinning or stopping the service.
+                    tracing::warn!(error = %e, "accept failed");
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                    continue;
+                }
+            },
+            () = &mut shutdown => break,
+        };
+        // An answer that leaves in more than one segment (a large batch, or
+        // headers and body flushed apart) must not wait on Nagle for the
+        // client's delayed ACK (up to 40 ms).
+        let _ = tcp.set_nodelay(true);
+        let conn = hyper::server::conn::http1::Builder::new()
+            .timer(TokioTimer::new())
+            .header_read_timeout(client_timeout)
+            .serve_connection(TokioIo::new(tcp), TowerToHyperService::new(app.clone()));
+        let conn = graceful.watch(conn);
+        tokio::spawn(async move {
+            if let Err(e) = conn.await {
+                tracing::debug!(%peer, error = %e, "connection ended with an error");
+            }
+        });
+    }
+    drop(listener);
+    graceful.shutdown().await;
+    Ok(())
 }
 
 /// Resolves on Ctrl-C or SIGTERM.

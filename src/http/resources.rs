@@ -77,6 +77,7 @@ fn rig_out(r: RigRec) -> ApiResult<RigOut> {
     responses(
         (status = 201, description = "Stored", body = ModelOut),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
+        (status = 408, description = "The body stopped arriving for longer than the client timeout, or did not all arrive within ten times it (`drawcal serve --client-timeout-secs`, environment `DRAWCAL_CLIENT_TIMEOUT_SECS`; default 30 s): error `request_timeout`; nothing is stored", body = ErrorBody),
         (status = 413, description = "Body larger than the service accepts (`drawcal serve --max-upload-bytes`, environment `DRAWCAL_MAX_UPLOAD_BYTES`; default 16 MiB): error `payload_too_large`, whose message gives the limit in bytes and says how to raise it", body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Invalid robot.json (field named)", body = ErrorBody)))]
@@ -237,6 +238,7 @@ pub async fn get_robot(State(app): State<AppState>, Id(id): Id) -> ApiResult<Jso
     responses(
         (status = 201, description = "Stored", body = RigOut),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
+        (status = 408, description = "The body stopped arriving for longer than the client timeout, or did not all arrive within ten times it (`drawcal serve --client-timeout-secs`, environment `DRAWCAL_CLIENT_TIMEOUT_SECS`; default 30 s): error `request_timeout`; nothing is stored", body = ErrorBody),
         (status = 413, description = "Body larger than the service accepts (`drawcal serve --max-upload-bytes`, environment `DRAWCAL_MAX_UPLOAD_BYTES`; default 16 MiB): error `payload_too_large`, whose message gives the limit in bytes and says how to raise it", body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Invalid rig.json (field named)", body = ErrorBody)))]

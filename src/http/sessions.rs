@@ -252,6 +252,7 @@ async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot
         (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
         (status = 404, description = "No such session", body = ErrorBody),
         (status = 409, description = "Another upload was stored meanwhile", body = ErrorBody),
+        (status = 408, description = "The body stopped arriving for longer than the client timeout, or did not all arrive within ten times it (`drawcal serve --client-timeout-secs`, environment `DRAWCAL_CLIENT_TIMEOUT_SECS`; default 30 s): error `request_timeout`; nothing is stored", body = ErrorBody),
         (status = 413, description = "Body over the service's --max-upload-bytes (the message gives the limit)", body = ErrorBody),
         (status = 415, description = "Neither text/csv nor application/json", body = ErrorBody),
         (status = 422, description = "A bad row or column (named)", body = ErrorBody)))]

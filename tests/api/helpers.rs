@@ -49,6 +49,7 @@ pub struct Options {
     pub max_upload_bytes: usize,
     pub lease: Duration,
     pub grace: Duration,
+    pub client_timeout: Duration,
 }
 
 impl Default for Options {
@@ -59,6 +60,7 @@ impl Default for Options {
             max_upload_bytes: 2 * 1024 * 1024,
             lease: Duration::from_secs(15),
             grace: Duration::from_secs(10),
+            client_timeout: Duration::from_secs(30),
         }
     }
 }
@@ -79,6 +81,7 @@ impl TestApp {
             listen: "127.0.0.1:0".parse().unwrap(),
             database_url: db_url.to_string(),
             max_upload_bytes: o.max_upload_bytes,
+            client_timeout: o.client_timeout,
             jobs: JobConfig {
                 workers: o.workers,
                 lease: o.lease,

@@ -13,4 +13,5 @@ mod helpers;
 mod jobs;
 mod logs;
 mod openapi;
+mod slow_clients;
 mod store;

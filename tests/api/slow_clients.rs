@@ -1,0 +1,163 @@
+//! Slow and stalled clients are cut off after the client timeout, so they
+//! cannot hold connections and buffers for ever; ordinary clients are not
+//! affected.
+
+use std::time::{Duration, Instant};
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+
+use crate::helpers::{Options, TestApp};
+
+const TIMEOUT: Duration = Duration::from_secs(1);
+
+async fn app() -> TestApp {
+    TestApp::spawn_with(
+        "slow",
+        Options {
+            client_timeout: TIMEOUT,
+            ..Options::default()
+        },
+    )
+    .await
+}
+
+async fn connect(app: &TestApp) -> TcpStream {
+    TcpStream::connect(app.base.trim_start_matches("http://"))
+        .await
+        .expect("connect")
+}
+
+/// Everything the server sends until it closes the connection; panics if
+/// it keeps it open past `within`.
+async fn read_until_closed(tcp: &mut TcpStream, within: Duration) -> String {
+    let mut got = Vec::new();
+    tokio::time::timeout(within, tcp.read_to_end(&mut got))
+        .await
+        .expect("the server must close the connection")
+        .ok();
+    String::from_utf8_lossy(&got).into_owned()
+}
+
+#[tokio::test]
+async fn headers_sent_a_byte_at_a_time_are_cut_off() {
+    let app = app().await;
+    let mut tcp = connect(&app).await;
+    let started = Instant::now();
+    // Half a request line, then a trickle that never completes the headers.
+    tcp.write_all(b"GET /health HTTP/1.1\r\nHost: x\r\n")
+        .await
+        .unwrap();
+    let trickle = async {
+        for _ in 0..20 {
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            if tcp.write_all(b"X").await.is_err() {
+                break;
+            }
+        }
+    };
+    trickle.await;
+    let answer = read_until_closed(&mut tcp, Duration::from_secs(5)).await;
+    assert!(
+        !answer.contains("200 OK"),
+        "an incomplete request must not be answered: {answer}"
+    );
+    assert!(started.elapsed() < Duration::from_secs(10));
+
+    // A silent connection (never a byte) is closed too.
+    let mut idle = connect(&app).await;
+    read_until_closed(&mut idle, Duration::from_secs(5)).await;
+
+    // Ordinary requests go on being served.
+    assert_eq!(app.get("/health").await.status(), 200);
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn a_stalled_body_is_answered_408_and_stores_nothing() {
+    let app = app().await;
+    let body = r#"{"name": "stalled", "anchors_mm": [[0,0,0],[1000,0,0],[0,1000,0]], "r_mm": 10}"#;
+    let mut tcp = connect(&app).await;
+    let head = format!(
+        "POST /rigs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n",
+        body.len()
+    );
+    tcp.write_all(head.as_bytes()).await.unwrap();
+    // Half the body, then nothing.
+    tcp.write_all(&body.as_bytes()[..body.len() / 2])
+        .await
+        .unwrap();
+    let answer = read_until_closed(&mut tcp, Duration::from_secs(5)).await;
+    assert!(
+        answer.starts_with("HTTP/1.1 408"),
+        "a stalled body is a 408: {answer}"
+    );
+    assert!(answer.contains("\"error\":\"request_timeout\""), "{answer}");
+    assert!(answer.contains("--client-timeout-secs"), "{answer}");
+
+    let rigs: serde_json::Value = app.get("/rigs").await.json().await.unwrap();
+    assert_eq!(rigs["items"].as_array().unwrap().len(), 0, "{rigs}");
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn a_body_declared_too_large_is_refused_before_it_is_sent() {
+    let app = TestApp::spawn_with(
+        "slow",
+        Options {
+            max_upload_bytes: 1000,
+            ..Options::default()
+        },
+    )
+    .await;
+    let mut tcp = connect(&app).await;
+    // The client asks before sending: the answer is 413 at once, never
+    // "100 Continue", and the body is never needed.
+    tcp.write_all(
+        b"POST /rigs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 5000\r\nExpect: 100-continue\r\n\r\n",
+    )
+    .await
+    .unwrap();
+    let mut got = vec![0u8; 4096];
+    let n = tokio::time::timeout(Duration::from_secs(5), tcp.read(&mut got))
+        .await
+        .expect("an answer without the body")
+        .unwrap();
+    let answer = String::from_utf8_lossy(&got[..n]);
+    assert!(answer.starts_with("HTTP/1.1 413"), "{answer}");
+    app.stop().await;
+}
+
+#[tokio::test]
+async fn a_trickled_body_is_cut_off_at_the_deadline() {
+    let app = app().await;
+    let mut tcp = connect(&app).await;
+    let started = Instant::now();
+    tcp.write_all(
+        b"POST /rigs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 100000\r\n\r\n",
+    )
+    .await
+    .unwrap();
+    // A byte every 300 ms never trips the 1 s idle timeout, but the whole
+    // body is due within ten of them.
+    let (mut rd, mut wr) = tcp.into_split();
+    let trickle = tokio::spawn(async move {
+        while wr.write_all(b" ").await.is_ok() {
+            tokio::time::sleep(Duration::from_millis(300)).await;
+        }
+    });
+    let mut got = Vec::new();
+    tokio::time::timeout(Duration::from_secs(20), rd.read_to_end(&mut got))
+        .await
+        .expect("cut off within the deadline")
+        .ok();
+    trickle.abort();
+    let answer = String::from_utf8_lossy(&got);
+    let took = started.elapsed();
+    assert!(answer.starts_with("HTTP/1.1 408"), "{answer}");
+    assert!(
+        took >= TIMEOUT * drawcal::http::BODY_DEADLINE_FACTOR - Duration::from_millis(100),
+        "not before the deadline: {took:?}"
+    );
+    app.stop().await;
+}
