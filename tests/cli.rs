@@ -356,3 +356,43 @@ fn radians_in_degree_columns_are_warned_about() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// With nothing held out there are no test figures: the summary shows "-"
+/// in the test columns and the report `null`, never a perfect 0.
+#[test]
+fn nothing_held_out_shows_no_test_figures() {
+    let dir = std::env::temp_dir().join(format!("drawcal-cli-noholdout-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = std::fs::read_to_string(data("poses.csv")).unwrap();
+    let all_train = csv.replace(",test\n", ",train\n");
+    assert!(!all_train.contains(",test"));
+    std::fs::write(dir.join("poses.csv"), all_train).unwrap();
+    let report = dir.join("report.json");
+    let out = bin()
+        .args(["identify", "--physics", "off", "--holdout", "0", "--robot"])
+        .arg(data("robot.json"))
+        .arg("--rig")
+        .arg(data("rig.json"))
+        .arg("--poses")
+        .arg(dir.join("poses.csv"))
+        .arg("--out")
+        .arg(&report)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    let rms = stdout
+        .lines()
+        .find(|l| l.starts_with("RMS 3-D"))
+        .expect("RMS row");
+    let cells: Vec<&str> = rms.split_whitespace().skip(2).collect();
+    // train before, train after, then test before, test after, paper test.
+    assert!(cells[0].parse::<f64>().unwrap() > 1.0, "{rms}");
+    assert_eq!(&cells[2..], ["-", "-", "-"], "{rms}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(r["stats"]["test"]["n"], 0);
+    assert!(r["stats"]["test"]["after"]["rms_mm"].is_null());
+    assert!(r["noise_floor_mm"].is_null());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -104,7 +104,12 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
     for (label, f) in rows {
         let _ = write!(s, "{label:<16}");
         for (_, e) in &cols {
-            let _ = write!(s, "{:>13.4}", f(e));
+            // No poses in that column (nothing held out): no figure, not 0.
+            match f(e) {
+                v if v.is_finite() => write!(s, "{v:>13.4}"),
+                _ => write!(s, "{:>13}", "-"),
+            }
+            .ok();
         }
         let _ = writeln!(s);
     }

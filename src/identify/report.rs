@@ -17,6 +17,7 @@ pub const REPORT_FORMAT: &str = "drawcal report v1";
 
 /// Error figures of one model on one set of poses (the paper's Tables 3 and
 /// 4 plus RMS). Errors are model T minus measured T, in the robot base frame.
+/// Every figure is NaN (`null` in JSON) when the set has no poses.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 pub struct ErrorStats {
     /// 3-D RMS (mm).

@@ -9,7 +9,20 @@ use super::report::{AxisStats, ErrorStats};
 pub fn error_stats(errors: &[Vector3<f64>]) -> ErrorStats {
     let n = errors.len();
     if n == 0 {
-        return ErrorStats::default();
+        // No poses, no figures: NaN, written as null, never a perfect 0.
+        let none = AxisStats {
+            max_abs_mm: f64::NAN,
+            mean_abs_mm: f64::NAN,
+            rms_mm: f64::NAN,
+        };
+        return ErrorStats {
+            rms_mm: f64::NAN,
+            mean_mm: f64::NAN,
+            max_mm: f64::NAN,
+            x: none,
+            y: none,
+            z: none,
+        };
     }
     let nf = n as f64;
     let axis = |c: usize| {

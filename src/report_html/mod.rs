@@ -411,13 +411,17 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
     row(
         &mut o,
         "held-out 3-D RMS before → after",
-        format!(
-            r#"<span data-value="{}">{:.4}</span> → <span data-value="{}">{:.4}</span> mm"#,
-            r.stats.test.before.rms_mm,
-            r.stats.test.before.rms_mm,
-            r.stats.test.after.rms_mm,
-            r.stats.test.after.rms_mm
-        ),
+        if r.stats.test.n == 0 {
+            "- (no held-out poses)".to_string()
+        } else {
+            format!(
+                r#"<span data-value="{}">{:.4}</span> → <span data-value="{}">{:.4}</span> mm"#,
+                r.stats.test.before.rms_mm,
+                r.stats.test.before.rms_mm,
+                r.stats.test.after.rms_mm,
+                r.stats.test.after.rms_mm
+            )
+        },
     );
     row(&mut o, "noise floor (held-out)", fmt_opt(r.noise_floor_mm));
     row(&mut o, "string noise (1σ)", fmt_opt(r.string_sigma_mm));

@@ -224,7 +224,14 @@ pub fn bars(
             n = esc(name)
         );
         for (b, (label, color)) in bars.iter().enumerate() {
-            let v = values.get(g).and_then(|r| r.get(b)).copied().unwrap_or(0.0);
+            let v = values
+                .get(g)
+                .and_then(|r| r.get(b))
+                .copied()
+                .unwrap_or(f64::NAN);
+            if !v.is_finite() {
+                continue; // no figure (no held-out poses): no bar
+            }
             let top = T + ph * (1.0 - (v.max(y.0) - y.0) / (y.1 - y.0));
             let base = T + ph * (1.0 - (0.0 - y.0) / (y.1 - y.0));
             let _ = write!(

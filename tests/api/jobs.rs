@@ -367,6 +367,13 @@ async fn no_held_out_poses_no_held_out_accuracy() {
     assert_eq!(c["n_test"], 0, "{c}");
     assert!(c["test_rms_after_mm"].is_null(), "{c}");
     assert!(c["test_rms_before_mm"].is_null(), "{c}");
+    // The report itself has no held-out figures either, rather than zeros.
+    let test = &cal["report"]["stats"]["test"];
+    assert_eq!(test["n"], 0, "{test}");
+    for model in ["before", "after"] {
+        assert!(test[model]["rms_mm"].is_null(), "{test}");
+        assert!(test[model]["x"]["max_abs_mm"].is_null(), "{test}");
+    }
     let best = ok_json(app.get("/calibrations?max_test_rms_mm=0.001").await, 200).await;
     assert_eq!(best["total"], 0, "{best}");
     app.stop().await;
