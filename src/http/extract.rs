@@ -117,7 +117,9 @@ async fn read_body(body: Body, policy: &BodyPolicy, path: &str) -> Result<Bytes,
                 .into(),
         )
     };
-    if body.size_hint().lower() > policy.max_upload_bytes as u64 {
+    // The declared length (Content-Length), if any; within the limit here.
+    let declared = body.size_hint().lower();
+    if declared > policy.max_upload_bytes as u64 {
         return Err(too_large());
     }
     let deadline = tokio::time::Instant::now() + policy.deadline;
@@ -150,6 +152,7 @@ async fn read_body(body: Body, policy: &BodyPolicy, path: &str) -> Result<Bytes,
             None if rest.is_empty() => first = Some(data),
             _ => {
                 if let Some(f) = first.take() {
+                    rest.reserve(declared as usize);
                     rest.extend_from_slice(&f);
                 }
                 rest.extend_from_slice(&data);
