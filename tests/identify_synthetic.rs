@@ -204,4 +204,11 @@ fn three_strings_and_robust_outliers() {
         robust.stats.test.after.rms_mm,
         naive.stats.test.after.rms_mm
     );
+    // The iteration count covers every reweighting pass, not the last one.
+    assert!(
+        robust.convergence.iterations > naive.convergence.iterations,
+        "robust {} naive {}",
+        robust.convergence.iterations,
+        naive.convergence.iterations
+    );
 }

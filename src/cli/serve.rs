@@ -141,7 +141,6 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
         let service = Service::start(&cfg, engine_job_fn())
             .await
             .map_err(|e| e.to_string())?;
-        tracing::info!("drawcal serve: listening on http://{}", service.addr);
         service
             .run(shutdown_signal())
             .await

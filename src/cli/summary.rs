@@ -148,8 +148,11 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
             };
             let _ = writeln!(
                 s,
-                "- {}{}: {:.4} ± {:.4} {}",
-                f.effect, place, f.magnitude, f.sigma, f.unit
+                "- {}{}: {} {}",
+                f.effect,
+                place,
+                value_and_sigma(f.magnitude, f.sigma),
+                f.unit
             );
             let _ = writeln!(s, "  {}", f.explanation);
             let _ = writeln!(s, "  evidence: {}", f.evidence);
@@ -161,4 +164,28 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
         }
     }
     s
+}
+
+/// `value ± sigma` to two significant digits of the sigma, whatever the
+/// unit's scale (0.002502 ± 0.000051 deg/(N*m), -18686 ± 510 ppm); four
+/// decimals when the sigma is unknown.
+fn value_and_sigma(value: f64, sigma: f64) -> String {
+    if !(sigma.is_finite() && sigma > 0.0) {
+        return format!("{value:.4} ± -");
+    }
+    let decimals = (1.0 - sigma.log10().floor()).clamp(0.0, 12.0) as usize;
+    format!("{value:.decimals$} ± {sigma:.decimals$}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::value_and_sigma;
+
+    #[test]
+    fn values_are_shown_to_their_sigma() {
+        assert_eq!(value_and_sigma(0.0025017, 5.11e-5), "0.002502 ± 0.000051");
+        assert_eq!(value_and_sigma(0.0369, 0.0025), "0.0369 ± 0.0025");
+        assert_eq!(value_and_sigma(-18686.3, 512.0), "-18686 ± 512");
+        assert_eq!(value_and_sigma(1.5, f64::NAN), "1.5000 ± -");
+    }
 }

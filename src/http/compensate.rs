@@ -367,13 +367,18 @@ pub struct CompensateQuery {
 }
 
 impl CompensateQuery {
-    fn is_empty(&self) -> bool {
-        self.robot_id.is_none()
-            && self.calibration_id.is_none()
-            && self.orientation.is_none()
-            && self.temp_c.is_none()
-            && self.payload_kg.is_none()
-            && self.approach.is_none()
+    /// The first option given, by name (to name it in an error).
+    fn first_given(&self) -> Option<&'static str> {
+        [
+            ("robot_id", self.robot_id.is_some()),
+            ("calibration_id", self.calibration_id.is_some()),
+            ("orientation", self.orientation.is_some()),
+            ("temp_c", self.temp_c.is_some()),
+            ("payload_kg", self.payload_kg.is_some()),
+            ("approach", self.approach.is_some()),
+        ]
+        .into_iter()
+        .find_map(|(name, given)| given.then_some(name))
     }
 }
 
@@ -519,10 +524,12 @@ pub async fn compensate(
         .as_deref()
     {
         ct if is_json(ct) => {
-            if !query.is_empty() {
+            if let Some(name) = query.first_given() {
                 return Err(ApiError::invalid(
-                    "robot_id",
-                    "with a JSON body, robot_id, calibration_id, orientation, temp_c, payload_kg and approach go in the body, not the query string",
+                    name,
+                    format!(
+                        "with a JSON body, {name} (like robot_id, calibration_id, orientation, temp_c, payload_kg and approach) goes in the body, not the query string"
+                    ),
                 ));
             }
             let req: CompensateRequest = parse_json(&body.bytes)?;

@@ -319,7 +319,7 @@ impl Service {
             self.max_upload_bytes,
             self.client_timeout,
         );
-        tracing::info!(addr = %self.addr, "listening");
+        tracing::info!(addr = %self.addr, url = %format!("http://{}/", self.addr), "listening");
         let served = serve_connections(self.listener, app, self.client_timeout, shutdown).await;
         tracing::info!("HTTP server stopped; stopping job workers");
         self.state.jobs.shutdown().await;

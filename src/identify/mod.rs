@@ -444,6 +444,9 @@ pub fn geometric(
     let mut problem = session.problem(before.values.clone(), selection.free.clone());
     let mut result = run_lm(&problem, progress, "identifying")?;
     if opts.robust {
+        // Each reweighting pass starts from the last solution; the report
+        // counts the iterations of all of them.
+        let mut iterations = result.iterations;
         for _ in 0..8 {
             problem.full = problem.expand(&result.x);
             let res = pose_rms(&problem, &problem.full);
@@ -460,10 +463,12 @@ pub fn geometric(
                 .fold(0.0, f64::max);
             problem.weights = w;
             result = run_lm(&problem, progress, "identifying (robust)")?;
+            iterations += result.iterations;
             if change < 1e-3 {
                 break;
             }
         }
+        result.iterations = iterations;
     }
     let mut after = before.clone();
     after.values = problem.expand(&result.x);

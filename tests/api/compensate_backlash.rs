@@ -88,5 +88,16 @@ async fn approach_follows_a_backlash_calibration() {
         .unwrap();
     let e = err_json(r, 400, "bad_request").await;
     assert!(e.to_string().contains("approach"), "{e}");
+    // With a JSON body the options go in the body; one in the query string
+    // is refused naming it (not robot_id, which the body gives).
+    let r = app
+        .client
+        .post(app.url("/compensate?approach=in_order"))
+        .json(&json!({"robot_id": robot, "targets": targets}))
+        .send()
+        .await
+        .unwrap();
+    let e = err_json(r, 422, "invalid_input").await;
+    assert_eq!(e["field"], "approach", "{e}");
     app.stop().await;
 }
