@@ -396,3 +396,26 @@ fn nothing_held_out_shows_no_test_figures() {
     assert!(r["noise_floor_mm"].is_null());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Timeouts past a day are refused at start with the flag named, not
+/// overflowed into a panic later.
+#[test]
+fn serve_refuses_timeouts_it_cannot_keep() {
+    for flag in ["--client-timeout-secs", "--idle-timeout-secs"] {
+        for value in ["0", "18446744073709551615"] {
+            let out = bin()
+                .args(["serve", "--listen", "127.0.0.1:0", "--database"])
+                .arg(format!(
+                    "sqlite://{}/never-created.db",
+                    std::env::temp_dir().display()
+                ))
+                .args([flag, value])
+                .output()
+                .unwrap();
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert!(!out.status.success(), "{flag} {value}: {stderr}");
+            assert!(stderr.contains(flag), "{flag} {value}: {stderr}");
+            assert!(!stderr.contains("panicked"), "{stderr}");
+        }
+    }
+}

@@ -23,18 +23,23 @@ pub struct ServeArgs {
     /// batches.
     #[arg(long, env = "DRAWCAL_MAX_UPLOAD_BYTES", default_value_t = 16 * 1024 * 1024)]
     pub max_upload_bytes: usize,
-    /// Seconds a client may take to send a request's headers or leave its
-    /// body idle before the connection is closed (408 for a body); the
-    /// whole body must arrive within ten times this. Idle keep-alive
-    /// connections are closed after it too.
+    /// Seconds a request body may stall before the request is answered 408
+    /// (the whole body must arrive within ten times this). At most 86400.
     #[arg(long, env = "DRAWCAL_CLIENT_TIMEOUT_SECS", default_value_t = 30)]
     pub client_timeout_secs: u64,
+    /// Seconds a connection may go without a complete request header
+    /// before it is closed: idle keep-alive connections, and clients that
+    /// send their headers too slowly. Longer than the 90 s idle time of
+    /// common client connection pools, so that they drop a connection
+    /// before the service does. At most 86400.
+    #[arg(long, env = "DRAWCAL_IDLE_TIMEOUT_SECS", default_value_t = 120)]
+    pub idle_timeout_secs: u64,
     /// Job lease (seconds): a job whose process died runs again this long
     /// after its last heartbeat.
     #[arg(long, env = "DRAWCAL_JOB_LEASE_SECS", default_value_t = 15)]
     pub job_lease_secs: u64,
-    /// How long a running job may continue after a shutdown signal before
-    /// it is handed back to the queue (seconds).
+    /// Seconds open requests get to finish after a shutdown signal, and
+    /// then a running job before it is handed back to the queue.
     #[arg(long, env = "DRAWCAL_SHUTDOWN_GRACE_SECS", default_value_t = 10)]
     pub shutdown_grace_secs: u64,
     /// Threads of the async runtime (HTTP I/O, the store, small inline
@@ -99,8 +104,12 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
     if args.runtime_threads == 0 {
         return Err("--runtime-threads must be at least 1".into());
     }
-    if args.client_timeout_secs == 0 {
-        return Err("--client-timeout-secs must be at least 1".into());
+    let max = crate::http::MAX_TIMEOUT.as_secs();
+    if !(1..=max).contains(&args.client_timeout_secs) {
+        return Err(format!("--client-timeout-secs must be from 1 to {max}").into());
+    }
+    if !(1..=max).contains(&args.idle_timeout_secs) {
+        return Err(format!("--idle-timeout-secs must be from 1 to {max}").into());
     }
     if args.job_lease_secs == 0 {
         return Err("--job-lease-secs must be at least 1".into());
@@ -111,6 +120,7 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
         database_url: args.database.clone(),
         max_upload_bytes: args.max_upload_bytes,
         client_timeout: Duration::from_secs(args.client_timeout_secs),
+        idle_timeout: Duration::from_secs(args.idle_timeout_secs),
         jobs: JobConfig {
             workers: args.workers,
             lease: Duration::from_secs(args.job_lease_secs),
@@ -126,13 +136,14 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
     // Through the log (not eprintln) so that JSON logs are JSON throughout;
     // the runtime's own count of its worker threads.
     tracing::info!(
-        "drawcal serve: listen={} database={} workers={} runtime_threads={} max_upload_bytes={} client_timeout_secs={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
+        "drawcal serve: listen={} database={} workers={} runtime_threads={} max_upload_bytes={} client_timeout_secs={} idle_timeout_secs={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
         args.listen,
         redact(&args.database),
         args.workers,
         rt.metrics().num_workers(),
         args.max_upload_bytes,
         args.client_timeout_secs,
+        args.idle_timeout_secs,
         args.job_lease_secs,
         args.shutdown_grace_secs,
         args.log_format

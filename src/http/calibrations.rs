@@ -7,6 +7,7 @@ use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
+use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, ApiQuery, Id};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
 use crate::store::time::normalize_bound;
@@ -365,6 +366,8 @@ fn check_actor(by: &str, reason: &str) -> ApiResult<()> {
         (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody),
         (status = 409, description = "Already active", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Unknown calibration, another robot's, or missing who/why", body = ErrorBody)))]
 pub async fn activate(
@@ -417,6 +420,8 @@ pub async fn activate(
         (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody),
         (status = 409, description = "Nothing to roll back", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Missing who/why", body = ErrorBody)))]
 pub async fn rollback(

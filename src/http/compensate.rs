@@ -28,6 +28,7 @@ use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
+use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiQuery, RawBody, is_json, parse_json};
 use super::{ApiError, ApiResult, AppState, ErrorBody, MAX_COMPENSATE_TARGETS};
 use crate::compensate::{Compensated, CompensationStatus, Compensator};
@@ -508,8 +509,8 @@ fn wants_csv(headers: &HeaderMap) -> bool {
         (status = 400, description = "Malformed JSON or query string", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody),
         (status = 409, description = "The robot has no active calibration", body = ErrorBody),
-        (status = 408, description = "The body stopped arriving for longer than the client timeout, or did not all arrive within ten times it (`drawcal serve --client-timeout-secs`, environment `DRAWCAL_CLIENT_TIMEOUT_SECS`; default 30 s): error `request_timeout`; nothing is stored", body = ErrorBody),
-        (status = 413, description = "Body larger than the service accepts (`drawcal serve --max-upload-bytes`, environment `DRAWCAL_MAX_UPLOAD_BYTES`; default 16 MiB): error `payload_too_large`, whose message gives the limit in bytes and says how to raise it", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Neither application/json nor text/csv", body = ErrorBody),
         (status = 422, description = "Invalid target (row = 1-based position or CSV row), too many targets, temp_c not a temperature from -50 to 150 C, payload_kg not from 0 to 5000 kg, a calibration of another robot, or robot_id missing with a CSV body", body = ErrorBody)))]
 pub async fn compensate(

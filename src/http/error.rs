@@ -14,6 +14,12 @@ use utoipa::ToSchema;
 
 use crate::store::StoreError;
 
+/// OpenAPI description of the 408 of every route that reads a body.
+pub const BODY_TIMEOUT_408: &str = "The body stopped arriving for longer than the client timeout, or did not all arrive within ten times it (`drawcal serve --client-timeout-secs`, environment `DRAWCAL_CLIENT_TIMEOUT_SECS`; default 30 s): error `request_timeout`; nothing is stored";
+
+/// OpenAPI description of the 413 of every route that reads a body.
+pub const BODY_TOO_LARGE_413: &str = "Body larger than the service accepts (`drawcal serve --max-upload-bytes`, environment `DRAWCAL_MAX_UPLOAD_BYTES`; default 16 MiB): error `payload_too_large`, whose message gives the limit in bytes and says how to raise it";
+
 /// The error body of every 4xx and 5xx answer.
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ErrorBody {
@@ -173,6 +179,18 @@ impl IntoResponse for ApiError {
             field,
             row,
         };
-        (status, axum::Json(body)).into_response()
+        let mut response = (status, axum::Json(body)).into_response();
+        if matches!(
+            self,
+            ApiError::RequestTimeout(_) | ApiError::PayloadTooLarge(_)
+        ) {
+            // The rest of the body is not read, so the connection cannot
+            // carry another request: say it closes (RFC 9110, 408).
+            response.headers_mut().insert(
+                axum::http::header::CONNECTION,
+                axum::http::HeaderValue::from_static("close"),
+            );
+        }
+        response
     }
 }

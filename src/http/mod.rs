@@ -57,17 +57,24 @@ pub struct ServiceConfig {
     pub max_upload_bytes: usize,
     /// Job pool settings.
     pub jobs: JobConfig,
-    /// How long a client may take to send a request's headers, or leave its
-    /// body idle (`--client-timeout-secs`). The whole body must arrive
-    /// within [`BODY_DEADLINE_FACTOR`] times this. A client past either is
-    /// cut off, so that slow or stalled clients cannot hold connections and
-    /// buffers for ever.
+    /// How long a request body may stall (`--client-timeout-secs`); the
+    /// whole body must arrive within [`BODY_DEADLINE_FACTOR`] times this.
+    /// A client past either is answered 408, so that slow or stalled
+    /// clients cannot hold connections and buffers for ever.
     pub client_timeout: Duration,
+    /// How long a connection may go without a complete request header
+    /// (`--idle-timeout-secs`): a client sending its headers a byte at a
+    /// time, or an idle keep-alive connection, is closed after it.
+    pub idle_timeout: Duration,
 }
 
 /// The whole request body must arrive within this many client timeouts
 /// (30 s by default: 5 minutes, 16 MiB at about 0.5 Mbit/s).
 pub const BODY_DEADLINE_FACTOR: u32 = 10;
+
+/// Longest client or idle timeout the service takes (a day): beyond it a
+/// deadline would overflow the clock, and no client needs it.
+pub const MAX_TIMEOUT: Duration = Duration::from_secs(86_400);
 
 /// Largest batch `/compensate` accepts.
 pub const MAX_COMPENSATE_TARGETS: usize = 10_000;
@@ -232,6 +239,7 @@ impl MakeRequestId for CounterId {
 
 /// The application, ready to serve.
 pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration) -> Router {
+    let client_timeout = client_timeout.min(MAX_TIMEOUT);
     let (router, _) = api().split_for_parts();
     let ids = CounterId {
         prefix: format!("{:x}", crate::store::now_ms() & 0xff_ffff).into(),
@@ -272,6 +280,8 @@ pub struct Service {
     state: AppState,
     max_upload_bytes: usize,
     client_timeout: Duration,
+    idle_timeout: Duration,
+    drain_timeout: Duration,
 }
 
 impl Service {
@@ -299,6 +309,8 @@ impl Service {
             state,
             max_upload_bytes: cfg.max_upload_bytes,
             client_timeout: cfg.client_timeout,
+            idle_timeout: cfg.idle_timeout.min(MAX_TIMEOUT),
+            drain_timeout: cfg.jobs.shutdown_grace,
         })
     }
 
@@ -307,9 +319,11 @@ impl Service {
         self.state.clone()
     }
 
-    /// Serve until `shutdown` resolves; then finish in-flight requests, let
-    /// running jobs finish within their grace period (or hand them back to
-    /// the queue), and close the database.
+    /// Serve until `shutdown` resolves; then finish in-flight requests
+    /// (for at most the jobs' shutdown grace: a client that stopped reading
+    /// its answer must not hold the shutdown up), let running jobs finish
+    /// within their grace period (or hand them back to the queue), and
+    /// close the database.
     pub async fn run(
         self,
         shutdown: impl std::future::Future<Output = ()> + Send + 'static,
@@ -320,7 +334,14 @@ impl Service {
             self.client_timeout,
         );
         tracing::info!(addr = %self.addr, url = %format!("http://{}/", self.addr), "listening");
-        let served = serve_connections(self.listener, app, self.client_timeout, shutdown).await;
+        let served = serve_connections(
+            self.listener,
+            app,
+            self.idle_timeout,
+            self.drain_timeout,
+            shutdown,
+        )
+        .await;
         tracing::info!("HTTP server stopped; stopping job workers");
         self.state.jobs.shutdown().await;
         self.state.store.close().await;
@@ -330,18 +351,22 @@ impl Service {
 }
 
 /// Accept connections and serve `app` on each (HTTP/1.1) until `shutdown`
-/// resolves; then stop accepting and wait for the open connections to
-/// finish their requests.
+/// resolves; then stop accepting and give the open connections up to
+/// `drain_timeout` to finish their requests.
 ///
 /// Our own loop rather than `axum::serve`, which gives hyper no timer, so a
 /// client could hold a connection open for ever by sending its headers a
 /// byte at a time (or nothing at all); here hyper closes a connection whose
-/// request headers have not all arrived within `client_timeout`, idle
-/// keep-alive connections included.
+/// next request header has not all arrived within `idle_timeout`. That is
+/// also hyper's keep-alive idle timeout, which is why it defaults longer
+/// than the 90 s idle time of common client pools (reqwest, Go): a pool
+/// must drop a connection before the server closes it under a request.
+/// No HTTP upgrades (websockets): the service has none.
 async fn serve_connections(
     listener: tokio::net::TcpListener,
     app: Router,
-    client_timeout: Duration,
+    idle_timeout: Duration,
+    drain_timeout: Duration,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
     use hyper_util::rt::{TokioIo, TokioTimer};
@@ -351,18 +376,23 @@ async fn serve_connections(
     let graceful = GracefulShutdown::new();
     let mut shutdown = std::pin::pin!(shutdown);
     loop {
-        let (tcp, peer) = tokio::select! {
-            accepted = listener.accept() => match accepted {
-                Ok(conn) => conn,
-                Err(e) => {
-                    // Out of file descriptors and the like: transient, so
-                    // back off instead of spinning or stopping the service.
-                    tracing::warn!(error = %e, "accept failed");
-                    tokio::time::sleep(Duration::from_millis(50)).await;
-                    continue;
-                }
-            },
+        let accepted = tokio::select! {
+            accepted = listener.accept() => accepted,
             () = &mut shutdown => break,
+        };
+        let (tcp, peer) = match accepted {
+            Ok(conn) => conn,
+            // The peer gave up before we took the connection: nothing to do.
+            Err(e) if is_connection_error(&e) => continue,
+            Err(e) => {
+                // Out of file descriptors and the like: back off (and stay
+                // stoppable) instead of spinning or stopping the service.
+                tracing::error!(error = %e, "accept failed; retrying in 1 s");
+                tokio::select! {
+                    () = tokio::time::sleep(Duration::from_secs(1)) => continue,
+                    () = &mut shutdown => break,
+                }
+            }
         };
         // An answer that leaves in more than one segment (a large batch, or
         // headers and body flushed apart) must not wait on Nagle for the
@@ -370,18 +400,41 @@ async fn serve_connections(
         let _ = tcp.set_nodelay(true);
         let conn = hyper::server::conn::http1::Builder::new()
             .timer(TokioTimer::new())
-            .header_read_timeout(client_timeout)
+            .header_read_timeout(idle_timeout)
             .serve_connection(TokioIo::new(tcp), TowerToHyperService::new(app.clone()));
         let conn = graceful.watch(conn);
         tokio::spawn(async move {
-            if let Err(e) = conn.await {
-                tracing::debug!(%peer, error = %e, "connection ended with an error");
+            match conn.await {
+                Ok(()) => {}
+                Err(e) if e.is_timeout() => {
+                    tracing::debug!(%peer, "connection closed: idle, or its request header too slow");
+                }
+                Err(e) => tracing::debug!(%peer, error = %e, "connection ended with an error"),
             }
         });
     }
     drop(listener);
-    graceful.shutdown().await;
+    if tokio::time::timeout(drain_timeout, graceful.shutdown())
+        .await
+        .is_err()
+    {
+        // Their tasks end with the runtime.
+        tracing::warn!(
+            "connections still open {} s after the shutdown signal are dropped",
+            drain_timeout.as_secs()
+        );
+    }
     Ok(())
+}
+
+/// Accept errors that concern one connection only.
+fn is_connection_error(e: &std::io::Error) -> bool {
+    matches!(
+        e.kind(),
+        std::io::ErrorKind::ConnectionRefused
+            | std::io::ErrorKind::ConnectionAborted
+            | std::io::ErrorKind::ConnectionReset
+    )
 }
 
 /// Resolves on Ctrl-C or SIGTERM.

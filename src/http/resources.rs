@@ -6,6 +6,7 @@ use axum::http::StatusCode;
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
+use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
 use crate::model::{Rig, Robot};
@@ -77,8 +78,8 @@ fn rig_out(r: RigRec) -> ApiResult<RigOut> {
     responses(
         (status = 201, description = "Stored", body = ModelOut),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
-        (status = 408, description = "The body stopped arriving for longer than the client timeout, or did not all arrive within ten times it (`drawcal serve --client-timeout-secs`, environment `DRAWCAL_CLIENT_TIMEOUT_SECS`; default 30 s): error `request_timeout`; nothing is stored", body = ErrorBody),
-        (status = 413, description = "Body larger than the service accepts (`drawcal serve --max-upload-bytes`, environment `DRAWCAL_MAX_UPLOAD_BYTES`; default 16 MiB): error `payload_too_large`, whose message gives the limit in bytes and says how to raise it", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Invalid robot.json (field named)", body = ErrorBody)))]
 pub async fn create_model(
@@ -150,6 +151,8 @@ pub struct CreateRobot {
         (status = 201, description = "Stored", body = RobotRec),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
         (status = 409, description = "Serial number taken", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Invalid field or unknown model", body = ErrorBody)))]
 pub async fn create_robot(
@@ -238,8 +241,8 @@ pub async fn get_robot(State(app): State<AppState>, Id(id): Id) -> ApiResult<Jso
     responses(
         (status = 201, description = "Stored", body = RigOut),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
-        (status = 408, description = "The body stopped arriving for longer than the client timeout, or did not all arrive within ten times it (`drawcal serve --client-timeout-secs`, environment `DRAWCAL_CLIENT_TIMEOUT_SECS`; default 30 s): error `request_timeout`; nothing is stored", body = ErrorBody),
-        (status = 413, description = "Body larger than the service accepts (`drawcal serve --max-upload-bytes`, environment `DRAWCAL_MAX_UPLOAD_BYTES`; default 16 MiB): error `payload_too_large`, whose message gives the limit in bytes and says how to raise it", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Invalid rig.json (field named)", body = ErrorBody)))]
 pub async fn create_rig(

@@ -16,6 +16,7 @@ use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
+use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
 use crate::jobs::{JobOptions, session_csv};
@@ -40,6 +41,8 @@ pub struct CreateSession {
     responses(
         (status = 201, description = "Opened", body = SessionRec),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
         (status = 422, description = "Invalid field, unknown robot or rig", body = ErrorBody)))]
 pub async fn create_session(
@@ -252,8 +255,8 @@ async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot
         (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
         (status = 404, description = "No such session", body = ErrorBody),
         (status = 409, description = "Another upload was stored meanwhile", body = ErrorBody),
-        (status = 408, description = "The body stopped arriving for longer than the client timeout, or did not all arrive within ten times it (`drawcal serve --client-timeout-secs`, environment `DRAWCAL_CLIENT_TIMEOUT_SECS`; default 30 s): error `request_timeout`; nothing is stored", body = ErrorBody),
-        (status = 413, description = "Body over the service's --max-upload-bytes (the message gives the limit)", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Neither text/csv nor application/json", body = ErrorBody),
         (status = 422, description = "A bad row or column (named)", body = ErrorBody)))]
 pub async fn upload_poses(
@@ -412,6 +415,8 @@ pub async fn get_poses(State(app): State<AppState>, Id(id): Id) -> ApiResult<Res
         (status = 202, description = "Queued", body = JobRec, headers(("Location" = String, description = "The job's URL"))),
         (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
         (status = 404, description = "No such session", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Body not JSON", body = ErrorBody),
         (status = 422, description = "Bad options, or the session has no poses", body = ErrorBody)))]
 pub async fn enqueue_job(

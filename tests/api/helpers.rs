@@ -50,6 +50,7 @@ pub struct Options {
     pub lease: Duration,
     pub grace: Duration,
     pub client_timeout: Duration,
+    pub idle_timeout: Duration,
 }
 
 impl Default for Options {
@@ -61,6 +62,7 @@ impl Default for Options {
             lease: Duration::from_secs(15),
             grace: Duration::from_secs(10),
             client_timeout: Duration::from_secs(30),
+            idle_timeout: Duration::from_secs(120),
         }
     }
 }
@@ -82,6 +84,7 @@ impl TestApp {
             database_url: db_url.to_string(),
             max_upload_bytes: o.max_upload_bytes,
             client_timeout: o.client_timeout,
+            idle_timeout: o.idle_timeout,
             jobs: JobConfig {
                 workers: o.workers,
                 lease: o.lease,

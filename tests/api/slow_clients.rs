@@ -16,6 +16,7 @@ async fn app() -> TestApp {
         "slow",
         Options {
             client_timeout: TIMEOUT,
+            idle_timeout: TIMEOUT,
             ..Options::default()
         },
     )
@@ -94,6 +95,10 @@ async fn a_stalled_body_is_answered_408_and_stores_nothing() {
     );
     assert!(answer.contains("\"error\":\"request_timeout\""), "{answer}");
     assert!(answer.contains("--client-timeout-secs"), "{answer}");
+    assert!(
+        answer.to_ascii_lowercase().contains("connection: close"),
+        "{answer}"
+    );
 
     let rigs: serde_json::Value = app.get("/rigs").await.json().await.unwrap();
     assert_eq!(rigs["items"].as_array().unwrap().len(), 0, "{rigs}");
@@ -125,6 +130,10 @@ async fn a_body_declared_too_large_is_refused_before_it_is_sent() {
         .unwrap();
     let answer = String::from_utf8_lossy(&got[..n]);
     assert!(answer.starts_with("HTTP/1.1 413"), "{answer}");
+    assert!(
+        answer.to_ascii_lowercase().contains("connection: close"),
+        "{answer}"
+    );
     app.stop().await;
 }
 
@@ -160,4 +169,31 @@ async fn a_trickled_body_is_cut_off_at_the_deadline() {
         "not before the deadline: {took:?}"
     );
     app.stop().await;
+}
+
+#[tokio::test]
+async fn a_client_that_stops_reading_does_not_hold_up_the_shutdown() {
+    let app = TestApp::spawn_with(
+        "slow",
+        Options {
+            grace: Duration::from_secs(1),
+            ..Options::default()
+        },
+    )
+    .await;
+    // Pipeline requests for the (large) page and never read the answers:
+    // the server's writes block once the socket buffers are full.
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.set_recv_buffer_size(4096).unwrap();
+    let addr = app.base.trim_start_matches("http://").parse().unwrap();
+    let mut tcp = socket.connect(addr).await.unwrap();
+    let request = b"GET / HTTP/1.1\r\nHost: x\r\n\r\n".repeat(2000);
+    tcp.write_all(&request).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let started = Instant::now();
+    tokio::time::timeout(Duration::from_secs(10), app.stop())
+        .await
+        .expect("shutdown must not wait on a client that does not read");
+    assert!(started.elapsed() < Duration::from_secs(5));
+    drop(tcp);
 }
