@@ -25,8 +25,8 @@ pub const BODY_TOO_LARGE_413: &str = "Body larger than the service accepts (`dra
 pub struct ErrorBody {
     /// Machine-readable code: `bad_request`, `malformed_json`,
     /// `invalid_input`, `not_found`, `conflict`, `payload_too_large`,
-    /// `request_timeout`, `unsupported_media_type`, `method_not_allowed`, `unavailable`,
-    /// `internal`.
+    /// `request_timeout`, `unsupported_media_type`, `method_not_allowed`,
+    /// `unavailable`, `internal`.
     pub error: String,
     /// What went wrong, for a human.
     pub message: String,
