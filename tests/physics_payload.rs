@@ -58,8 +58,26 @@ fn check(robot: &str, seed: u64) {
         .unwrap();
     // The median of 0, 12 and 4 kg in equal blocks.
     assert_eq!(f.parameters["reference_payload_kg"].as_f64(), Some(4.0));
+    // A client must send the payload for this compliance.
+    assert_eq!(f.parameters["payload_matters"], true, "{robot}");
     // Ignoring the recorded payload leaves the swaps unexplained.
-    let (_, rms_blind) = analyse(&sim, &without_payload(&sim));
+    let (blind, rms_blind) = analyse(&sim, &without_payload(&sim));
+    // Fitted without any payload, a compliance takes one only through link
+    // masses: without them there is no lever to apply it to.
+    let compliance: Vec<_> = blind
+        .findings
+        .iter()
+        .filter(|f| f.effect == "joint_compliance")
+        .collect();
+    assert!(!compliance.is_empty(), "{robot}: {:#?}", blind.findings);
+    for f in compliance {
+        assert_eq!(
+            f.parameters["payload_matters"],
+            sim.robot.links.is_some(),
+            "{robot}: {:?}",
+            f.parameters
+        );
+    }
     assert!(
         rms_blind > 1.1 * rms,
         "{robot}: without the payload column {rms_blind} vs with {rms}"

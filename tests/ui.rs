@@ -67,7 +67,7 @@ async fn the_page_is_served_from_the_binary() {
         "if (!warnings || !warnings.length) return \"\";",
         "warnings.map(w => `<li>${esc(w)}</li>`)",
         "id=\"cal-warnings\"",
-        "${warningsHtml(out.report && out.report.warnings)}\n    <fieldset><legend>Activate",
+        "${warningsHtml(out.report && out.report.warnings)}\n    <fieldset><legend>${c.active ? \"Active for the robot\" : \"Activate for the robot\"}",
         "$(\"#report-warnings\", frag)",
     ] {
         assert!(js.contains(needle), "app.js lacks {needle}");

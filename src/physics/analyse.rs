@@ -1304,6 +1304,14 @@ pub fn analyse(
                     if let (Kind::JointCompliance { .. }, Some(p)) = (&e.kind, ctx.payload_ref_kg) {
                         o.insert("reference_payload_kg".into(), p.into());
                     }
+                    // Whether compensation takes a payload for it (what a
+                    // client should send), as compensation decides it.
+                    if let Kind::JointCompliance { .. } = e.kind {
+                        o.insert(
+                            "payload_matters".into(),
+                            e.payload_matters(ctx.n_joints).into(),
+                        );
+                    }
                     if let Kind::ThermalExpansion { driver, .. } = e.kind {
                         o.insert(
                             "reference".into(),

@@ -307,6 +307,24 @@ pub struct EffectModel {
 }
 
 impl EffectModel {
+    /// True when a payload at T changes this effect's offsets on a robot of
+    /// `n_joints` joints: a compliance with link masses (the payload adds
+    /// its torque), or without masses one whose session varied the payload
+    /// (so that its lever was fitted).
+    pub fn payload_matters(&self, n_joints: usize) -> bool {
+        let payload_regressor = n_joints + 1;
+        match &self.kind {
+            Kind::JointCompliance { regressors, .. } => {
+                regressors.is_empty()
+                    || regressors
+                        .iter()
+                        .zip(&self.coef)
+                        .any(|(&r, &c)| r == payload_regressor && c != 0.0)
+            }
+            _ => false,
+        }
+    }
+
     /// Check an effect read from a report against the robot it belongs to
     /// (`n_joints` joints, link masses or not): its joint among them, a
     /// compliance in the form the robot's masses give (one coefficient with

@@ -81,17 +81,8 @@ impl JointEffects {
     /// link masses (the payload adds its torque), or without masses one
     /// whose session varied the payload (so that its lever was fitted).
     pub fn payload_matters(&self) -> bool {
-        let payload_regressor = self.robot.dof() + 1;
-        self.effects.iter().any(|e| match &e.kind {
-            Kind::JointCompliance { regressors, .. } => {
-                regressors.is_empty()
-                    || regressors
-                        .iter()
-                        .zip(&e.coef)
-                        .any(|(&r, &c)| r == payload_regressor && c != 0.0)
-            }
-            _ => false,
-        })
+        let n = self.robot.dof();
+        self.effects.iter().any(|e| e.payload_matters(n))
     }
 
     /// The payload (kg) the offsets are evaluated with: the one set by

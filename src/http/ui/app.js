@@ -42,16 +42,25 @@ async function api(method, path, body, contentType) {
 }
 
 // An API error as the API gives it: code, message, field, row.
-function errorHtml(e) {
+// `csv`: the request was a CSV file, whose rows the API counts from the
+// first line after the header.
+function errorHtml(e, csv) {
   if (!(e instanceof ApiErr)) return `<div class="error">${esc(e.message || e)}</div>`;
   const b = e.body;
   let where = "";
-  if (b.row != null) where += ` row <b class="err-row">${esc(b.row)}</b>`;
-  if (b.field != null) where += ` column/field <b class="err-field">${esc(b.field)}</b>`;
+  if (b.row != null) {
+    where += ` row <b class="err-row">${esc(b.row)}</b>`;
+    if (csv) where += ` (line ${esc(b.row + 1)} of the file, counting the header)`;
+  }
+  if (b.field != null) where += ` ${csv ? "column" : "field"} <b class="err-field">${esc(b.field)}</b>`;
   return `<div class="error" data-error="${esc(b.error)}">HTTP ${e.status} <b>${esc(b.error || "")}</b>${where ? ":" + where : ""}\n${esc(b.message)}</div>`;
 }
 
 function showError(el, e) { el.innerHTML = errorHtml(e); }
+
+// A one-line success message for the next view drawn (after an action
+// that redraws the page).
+let flash = null;
 
 let timers = [];
 function clearTimers() { timers.forEach(clearInterval); timers = []; }
@@ -230,7 +239,7 @@ async function robotView(id) {
 async function sessionView(id) {
   const [s, jobs] = await Promise.all([api("GET", `/sessions/${id}`), all(`/jobs?session_id=${id}`)]);
   view().innerHTML = `<h2>Session #${s.id} ${esc(s.name || "")}</h2>
-    <p>robot <a href="#/robot/${s.robot_id}">#${s.robot_id}</a>, rig ${s.rig_id}; <b id="n-poses">${s.n_poses}</b> poses in ${s.n_batches} upload(s)</p>
+    <p>robot <a href="#/robot/${s.robot_id}">#${s.robot_id}</a>, rig ${s.rig_id}; <b id="n-poses">${s.n_poses}</b> poses in <span id="n-batches">${s.n_batches}</span> upload(s)</p>
     <fieldset><legend>Upload poses (poses.csv)</legend>
       <div class="drop" id="drop">Drop a poses.csv here, or <input type="file" id="poses-file" accept=".csv,text/csv"></div>
       <button id="upload">Upload</button> <div id="upload-msg"></div></fieldset>
@@ -239,9 +248,7 @@ async function sessionView(id) {
       <label><input type="checkbox" id="opt-physics" checked> physics analysis</label>
       <button id="start">Start identification</button> <div id="job-msg"></div>
       <div id="job"></div></fieldset>
-    <h3>Jobs</h3><table id="jobs"><tr><th>job</th><th>state</th><th>stage</th><th>progress</th><th>calibration</th><th>error</th></tr>
-    ${jobs.map(j => `<tr><td>#${j.id}</td><td>${esc(j.state)}</td><td>${esc(j.stage || "")}</td><td>${num(j.progress * 100, 0)} %</td>
-      <td>${j.calibration_id != null ? `<a href="#/calibration/${j.calibration_id}">#${j.calibration_id}</a>` : ""}</td><td>${esc(j.error || "")}</td></tr>`).join("")}</table>`;
+    <h3>Jobs</h3><table id="jobs">${jobsRows(jobs)}</table>`;
   let dropped = null;
   const drop = $("#drop");
   drop.ondragover = e => { e.preventDefault(); drop.classList.add("over"); };
@@ -251,29 +258,58 @@ async function sessionView(id) {
     dropped = e.dataTransfer.files[0];
     if (dropped) drop.firstChild.textContent = `${dropped.name} ready; `;
   };
+  // The last file chosen wins, dropped or picked.
+  $("#poses-file").onchange = () => {
+    dropped = null;
+    drop.firstChild.textContent = "Drop a poses.csv here, or ";
+  };
   $("#upload").onclick = async () => {
     const msg = $("#upload-msg");
     try {
+      const file = dropped || $("#poses-file").files[0];
       const text = dropped ? await dropped.text() : await fileText($("#poses-file"));
       msg.innerHTML = '<span class="muted">uploading…</span>';
       const r = await api("POST", `/sessions/${id}/poses`, text, "text/csv");
-      msg.innerHTML = `<div class="ok" id="upload-ok">${r.added} poses added; the session holds ${r.session.n_poses}.</div>`;
+      msg.innerHTML = `<div class="ok" id="upload-ok">${esc(file ? file.name : "the file")}: ${r.added} poses added; the session holds ${r.session.n_poses}.</div>`;
       $("#n-poses").textContent = r.session.n_poses;
-    } catch (e) { showError(msg, e); }
+      $("#n-batches").textContent = r.session.n_batches;
+      $("#job-msg").innerHTML = "";
+    } catch (e) {
+      const file = dropped || $("#poses-file").files[0];
+      // CSV rows count from the first line after the header.
+      msg.innerHTML = (file ? `<p>${esc(file.name)}:</p>` : "") + errorHtml(e, "csv");
+    }
   };
   $("#start").onclick = async () => {
+    const start = $("#start");
+    start.disabled = true; // one click, one job
     try {
       const job = await api("POST", `/sessions/${id}/jobs`, {robust: $("#opt-robust").checked, physics: $("#opt-physics").checked});
-      watchJob(job.id);
-    } catch (e) { showError($("#job-msg"), e); }
+      watchJob(job.id, id);
+    } catch (e) { start.disabled = false; showError($("#job-msg"), e); }
   };
   const live = jobs.find(j => j.state === "queued" || j.state === "running");
-  if (live) watchJob(live.id);
+  if (live) watchJob(live.id, id);
 }
 
-function watchJob(jobId) {
+// The rows of a session's jobs table, as the API lists the jobs.
+function jobsRows(jobs) {
+  return `<tr><th>job</th><th>state</th><th>stage</th><th>progress</th><th>calibration</th><th>error</th></tr>` +
+    jobs.map(j => `<tr><td>#${j.id}</td><td>${esc(j.state)}</td><td>${esc(j.stage || "")}</td><td>${num(j.progress * 100, 0)} %</td>
+      <td>${j.calibration_id != null ? `<a href="#/calibration/${j.calibration_id}">#${j.calibration_id}</a>` : ""}</td><td>${esc(j.error || "")}</td></tr>`).join("");
+}
+
+// Redraw the jobs table of the session on screen.
+async function drawJobs(sessionId) {
+  const jobs = await all(`/jobs?session_id=${sessionId}`);
+  const table = $("#jobs");
+  if (table) table.innerHTML = jobsRows(jobs);
+}
+
+function watchJob(jobId, sessionId) {
   const box = $("#job");
   $("#job-msg").innerHTML = "";
+  $("#start").disabled = true;
   const draw = j => {
     const done = ["succeeded", "failed", "cancelled"].includes(j.state);
     box.innerHTML = `<p id="job-state" data-state="${esc(j.state)}">job #${j.id}: <b>${esc(j.state)}</b> ${esc(j.stage || "")}
@@ -287,10 +323,15 @@ function watchJob(jobId) {
     };
     return done;
   };
+  const finished = () => {
+    clearTimers();
+    if ($("#start")) $("#start").disabled = false;
+    drawJobs(sessionId).catch(e => showError($("#job-msg"), e));
+  };
   const poll = async () => {
     try {
-      if (draw(await api("GET", `/jobs/${jobId}`))) clearTimers();
-    } catch (e) { showError($("#job-msg"), e); clearTimers(); }
+      if (draw(await api("GET", `/jobs/${jobId}`))) finished();
+    } catch (e) { showError($("#job-msg"), e); finished(); }
   };
   clearTimers();
   poll();
@@ -316,23 +357,31 @@ async function calibrationView(id) {
     <a href="/calibrations/${c.id}" download="calibration-${c.id}.json">report JSON</a> ·
     <a href="/calibrations/${c.id}/report.html" download="calibration-${c.id}.html">report HTML</a></p>
     ${warningsHtml(out.report && out.report.warnings)}
-    <fieldset><legend>Activate for the robot</legend>
+    <fieldset><legend>${c.active ? "Active for the robot" : "Activate for the robot"}</legend>
       <label>by <input type="text" id="act-by"></label><label>reason <input type="text" id="act-reason" size="40"></label>
-      <button id="activate" ${c.active ? "disabled" : ""}>Activate</button>
-      <label>rollback reason <input type="text" id="rb-reason" size="20"></label><button id="rollback">Roll back</button>
-      <div id="act-msg"></div></fieldset>
+      ${c.active
+        ? `<button id="rollback" title="the robot goes back to the calibration that was active before this one (or to nominal)">Roll back from this calibration</button>`
+        : `<button id="activate">Activate</button>`}
+      <div id="act-msg">${flash ? `<div class="ok" id="act-ok">${esc(flash)}</div>` : ""}</div></fieldset>
     <div id="report"><p class="muted">Loading the report…</p></div>`;
-  $("#activate").onclick = async () => {
+  flash = null;
+  const act = $("#activate"), rb = $("#rollback");
+  if (act) act.onclick = async () => {
+    act.disabled = true;
     try {
       await api("POST", `/robots/${c.robot_id}/activate`, {calibration_id: c.id, by: $("#act-by").value, reason: $("#act-reason").value});
+      flash = `Calibration #${c.id} is now active for ${c.serial_number}.`;
       route();
-    } catch (e) { showError($("#act-msg"), e); }
+    } catch (e) { act.disabled = false; showError($("#act-msg"), e); }
   };
-  $("#rollback").onclick = async () => {
+  if (rb) rb.onclick = async () => {
+    rb.disabled = true;
     try {
-      await api("POST", `/robots/${c.robot_id}/rollback`, {by: $("#act-by").value, reason: $("#rb-reason").value});
+      await api("POST", `/robots/${c.robot_id}/rollback`, {by: $("#act-by").value, reason: $("#act-reason").value});
+      const robot = await api("GET", `/robots/${c.robot_id}`);
+      flash = `Rolled back: ${c.serial_number} now runs ${robot.active_calibration_id != null ? `calibration #${robot.active_calibration_id}` : "the nominal model (no calibration)"}.`;
       route();
-    } catch (e) { showError($("#act-msg"), e); }
+    } catch (e) { rb.disabled = false; showError($("#act-msg"), e); }
   };
   const t0 = performance.now();
   const html = await api("GET", `/calibrations/${id}/report.html`);
@@ -401,7 +450,10 @@ function conditionHints(report) {
   const joints = list => { const j = list.map(x => x.joint).filter(j => j != null); return j.length ? ` of joint ${j.join(", ")}` : ""; };
   const thermal = of("thermal_expansion");
   const byTemp = thermal.filter(x => x.parameters && x.parameters.driver === "temperature");
-  const compliance = of("joint_compliance");
+  // A compliance takes a payload only when compensation says so (its
+  // `payload_matters`, from the engine; reports before it: assume it does).
+  const compliance = of("joint_compliance").filter(x => !x.parameters || x.parameters.payload_matters !== false);
+  const massFree = of("joint_compliance").length > compliance.length;
   const backlash = of("backlash");
   const refT = param(byTemp, "reference_temp_c"), refP = param(compliance, "reference_payload_kg");
   return {
@@ -412,7 +464,9 @@ function conditionHints(report) {
         : "no thermal expansion driven by the temperature among the findings"},
     payload: compliance.length
       ? {relevant: true, text: `matters: joint compliance${joints(compliance)}; default: ${refP != null ? `the session's ${esc(refP)} kg` : "0 kg (the session recorded no payload)"}`}
-      : {relevant: false, text: "no joint compliance among the findings"},
+      : {relevant: false, text: massFree
+        ? "not used: this calibration's joint compliance was fitted without link masses and without payload changes, so a payload cannot be applied to it"
+        : "no joint compliance among the findings"},
     approach: backlash.length
       ? {relevant: true, text: `matters: backlash${joints(backlash)}; default: every joint moving in +q`}
       : {relevant: false, text: "no backlash among the findings"},
