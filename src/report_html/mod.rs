@@ -439,7 +439,7 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
         &mut o,
         "identifiability",
         format!(
-            "{} of {} parameters identified, condition number {:.4e}",
+            "{} of {} parameters identified, condition number {:.0}",
             r.identifiability.n_identified,
             r.identifiability.n_candidates,
             r.identifiability.condition_number

@@ -197,6 +197,41 @@ pub fn scatter(title: &str, xlabel: &str, ylabel: &str, series: &[Series]) -> St
     out
 }
 
+/// A group's label under the axis, centred at `x`, within `width`: on two
+/// lines (split at its last space) and in a smaller font when one line at
+/// 11 px would run into its neighbours.
+fn group_label(out: &mut String, name: &str, x: f64, y: f64, width: f64) {
+    // About 0.6 em per character in the sans-serif fonts of the page.
+    let fits = |text: &str, px: f64| text.chars().count() as f64 * 0.6 * px <= 0.95 * width;
+    if fits(name, 11.0) {
+        let _ = write!(
+            out,
+            r#"<text x="{x:.1}" y="{y}" text-anchor="middle" font-size="11">{n}</text>"#,
+            n = esc(name)
+        );
+        return;
+    }
+    let lines: Vec<&str> = match name.rsplit_once(' ') {
+        Some((a, b)) => vec![a, b],
+        None => vec![name],
+    };
+    let longest = lines.iter().map(|l| l.chars().count()).max().unwrap_or(1) as f64;
+    let px = (0.95 * width / (0.6 * longest)).clamp(6.0, 11.0);
+    let _ = write!(
+        out,
+        r#"<text x="{x:.1}" y="{y}" text-anchor="middle" font-size="{px:.1}">"#
+    );
+    for (i, line) in lines.iter().enumerate() {
+        let _ = write!(
+            out,
+            r#"<tspan x="{x:.1}" dy="{dy:.1}">{t}</tspan>"#,
+            dy = if i == 0 { 0.0 } else { px * 1.1 },
+            t = esc(line)
+        );
+    }
+    out.push_str("</text>");
+}
+
 /// Grouped bars: `groups` along x, one bar per entry of `bars` (label,
 /// colour) in each group; `values[g][b]`.
 pub fn bars(
@@ -216,13 +251,7 @@ pub fn bars(
     let bw = gw * 0.8 / bars.len().max(1) as f64;
     for (g, name) in groups.iter().enumerate() {
         let gx = L + gw * g as f64 + gw * 0.1;
-        let _ = write!(
-            out,
-            r#"<text x="{x:.1}" y="{ty}" text-anchor="middle" font-size="11">{n}</text>"#,
-            x = L + gw * (g as f64 + 0.5),
-            ty = T + ph + 14.0,
-            n = esc(name)
-        );
+        group_label(&mut out, name, L + gw * (g as f64 + 0.5), T + ph + 14.0, gw);
         for (b, (label, color)) in bars.iter().enumerate() {
             let v = values
                 .get(g)
@@ -248,4 +277,32 @@ pub fn bars(
     legend(&mut out, bars);
     out.push_str("</svg>");
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::group_label;
+
+    #[test]
+    fn long_group_labels_wrap_and_shrink_to_their_width() {
+        let mut short = String::new();
+        group_label(&mut short, "rig_step", 100.0, 300.0, 120.0);
+        assert!(
+            short.contains(r#"font-size="11">rig_step</text>"#),
+            "{short}"
+        );
+
+        let mut long = String::new();
+        group_label(&mut long, "joint_compliance j2", 100.0, 300.0, 70.0);
+        assert_eq!(long.matches("<tspan").count(), 2, "{long}");
+        let px: f64 = long
+            .split(r#"font-size=""#)
+            .nth(1)
+            .and_then(|r| r.split('"').next())
+            .unwrap()
+            .parse()
+            .unwrap();
+        // "joint_compliance" (16 characters) within 95% of 70 px.
+        assert!(px < 11.0 && 16.0 * 0.6 * px <= 0.95 * 70.0 + 1e-9, "{px}");
+    }
 }

@@ -16,6 +16,9 @@ function num(v, d) {
   if (v === null || v === undefined) return "-";
   return Number(v).toFixed(d === undefined ? 4 : d);
 }
+// The API's comma-separated effect list, readable.
+function spaced(list) { return String(list || "").split(",").join(", "); }
+
 function td(v) {
   return `<td class="num" data-value="${v == null ? "" : v}">${num(v)}</td>`;
 }
@@ -101,7 +104,7 @@ async function fleetView() {
       <td>${esc(r.model_id)}</td><td>${esc(r.site || "")}</td><td>${esc(r.line || "")}</td><td>${esc(r.cell || "")}</td>
       <td>${c ? `<a href="#/calibration/${c.id}">#${c.id} v${c.version}</a>` : '<span class="muted">nominal</span>'}</td>
       ${c ? td(c.test_rms_before_mm) + td(c.test_rms_after_mm) : "<td>-</td><td>-</td>"}
-      <td>${c ? esc(c.effects) : ""}</td></tr>`;
+      <td>${c ? esc(spaced(c.effects)) : ""}</td></tr>`;
   }).join("");
   view().innerHTML = `<h2>Fleet</h2>
     <table id="fleet"><tr><th>robot</th><th>model</th><th>site</th><th>line</th><th>cell</th>
@@ -116,7 +119,7 @@ function calTable(cals) {
     <th>held-out RMS before (mm)</th><th>held-out RMS after (mm)</th><th>effects</th><th>active</th></tr>` +
     cals.map(c => `<tr><td><a href="#/calibration/${c.id}">#${c.id} v${c.version}</a></td>
       <td><a href="#/robot/${c.robot_id}">${esc(c.serial_number)}</a></td><td>${esc(c.created_at)}</td><td>${esc(c.method)}</td>
-      <td>${c.n_poses} (${c.n_test})</td>${td(c.test_rms_before_mm)}${td(c.test_rms_after_mm)}<td>${esc(c.effects)}</td>
+      <td>${c.n_poses} (${c.n_test})</td>${td(c.test_rms_before_mm)}${td(c.test_rms_after_mm)}<td>${esc(spaced(c.effects))}</td>
       <td>${c.active ? "✔" : ""}</td></tr>`).join("") + "</table>";
 }
 
