@@ -246,6 +246,10 @@ fn terms_of_one_joint_that_cancel_are_called_a_series() {
         "{:#?}",
         a.findings
     );
+    // `unexplained` fits no parameter: its sigma is unknown (null), not 0.
+    for f in a.findings.iter().filter(|f| f.effect == "unexplained") {
+        assert!(f.sigma.is_nan(), "{f:#?}");
+    }
     // Findings of other joints (and `unexplained`) carry no such doubt.
     assert!(
         a.findings

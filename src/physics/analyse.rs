@@ -2005,7 +2005,7 @@ fn unexplained(
         joint: None,
         sensor: None,
         magnitude: rms_res,
-        sigma: 0.0,
+        sigma: f64::NAN, // no fitted parameter: no uncertainty (null)
         unit: "mm (train residual RMS per reading)".into(),
         explanation: "structure remains that no effect of the catalogue explains; it is reported rather than forced onto a wrong name".into(),
         evidence: format!("{located}{region}"),

@@ -634,7 +634,10 @@ impl Context {
     /// A change point `t0_s` (seconds, or a row index without `time_s`)
     /// in words: "at about 1131 s" or "around row 46 (...)".
     pub fn when(&self, t0_s: f64) -> String {
-        if self.timed {
+        if self.timed && t0_s >= 3600.0 {
+            // Long sessions are plotted in hours: say both.
+            format!("at about {t0_s:.0} s ({:.1} h)", t0_s / 3600.0)
+        } else if self.timed {
             format!("at about {t0_s:.0} s")
         } else {
             format!(
