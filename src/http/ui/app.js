@@ -178,25 +178,28 @@ async function setupView() {
 function historySvg(hist) {
   if (!hist.length) return "";
   const W = 560, H = 240, L = 56, R = 12, T = 22, B = 34;
-  const vals = hist.flatMap(p => [p.test_rms_before_mm, p.test_rms_after_mm]).filter(v => v != null);
-  const ymax = Math.max(...vals, 1e-9) * 1.08;
+  // Log scale: before (millimetres) and after (hundredths) differ by
+  // orders of magnitude, and a linear axis flattens the after line.
+  const vals = hist.flatMap(p => [p.test_rms_before_mm, p.test_rms_after_mm]).filter(v => v != null && v > 0);
+  const lo = Math.floor(Math.log10(Math.min(...vals, 1)));
+  const hi = Math.max(Math.ceil(Math.log10(Math.max(...vals, 1e-9))), lo + 1);
   const x = i => L + (hist.length === 1 ? (W - L - R) / 2 : i * (W - L - R) / (hist.length - 1));
-  const y = v => T + (H - T - B) * (1 - v / ymax);
+  const y = v => T + (H - T - B) * (1 - (Math.log10(v) - lo) / (hi - lo));
   const line = (key, color) => {
-    const pts = hist.map((p, i) => p[key] == null ? null : [x(i), y(p[key])]).filter(Boolean);
+    const pts = hist.map((p, i) => p[key] == null || !(p[key] > 0) ? null : [x(i), y(p[key])]).filter(Boolean);
     return `<polyline fill="none" stroke="${color}" stroke-width="2" points="${pts.map(p => p.join(",")).join(" ")}"/>` +
       pts.map(p => `<circle cx="${p[0]}" cy="${p[1]}" r="3.5" fill="${color}"/>`).join("");
   };
   let grid = "";
-  for (let k = 0; k <= 4; k++) {
-    const v = ymax * k / 4;
-    grid += `<line x1="${L}" x2="${W - R}" y1="${y(v)}" y2="${y(v)}" stroke="#e4e4e4"/><text x="${L - 4}" y="${y(v) + 4}" text-anchor="end" font-size="11">${num(v, 3)}</text>`;
+  for (let k = lo; k <= hi; k++) {
+    const v = Math.pow(10, k);
+    grid += `<line x1="${L}" x2="${W - R}" y1="${y(v)}" y2="${y(v)}" stroke="#e4e4e4"/><text x="${L - 4}" y="${y(v) + 4}" text-anchor="end" font-size="11">${v >= 1 ? v.toFixed(0) : v.toFixed(-k)}</text>`;
   }
   const marks = hist.map((p, i) => `<text x="${x(i)}" y="${H - 18}" text-anchor="middle" font-size="11">v${p.version}${p.effects.length ? " ★" : ""}</text>` +
     (p.effects.length ? `<title>${esc(p.effects.join(", "))}</title>` : "")).join("");
   return `<svg id="history-plot" class="plot" viewBox="0 0 ${W} ${H}" width="${W}" height="${H}"><rect x="${L}" y="${T}" width="${W - L - R}" height="${H - T - B}" fill="#fff" stroke="#999"/>
     ${grid}${line("test_rms_before_mm", "#e8a33d")}${line("test_rms_after_mm", "#d62728")}${marks}
-    <text x="${L + 4}" y="14" font-size="12"><tspan fill="#e8a33d">■ held-out RMS before</tspan> <tspan fill="#d62728">■ after</tspan> (mm; ★ physics finding)</text>
+    <text x="${L + 4}" y="14" font-size="12"><tspan fill="#e8a33d">■ held-out RMS before</tspan> <tspan fill="#d62728">■ after</tspan> (mm, log scale; ★ physics finding)</text>
     <text x="${W / 2}" y="${H - 3}" text-anchor="middle" font-size="11">calibration version</text></svg>`;
 }
 
