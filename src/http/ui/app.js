@@ -577,12 +577,13 @@ t1,10,-20,30,0,40,0</textarea><br>
       if (payload !== undefined) req.payload_kg = payload;
       if ($("#comp-approach").value) req.approach = $("#comp-approach").value;
       const r = await api("POST", "/compensate", req);
-      const dof = Math.max(0, ...r.results.map(x => x.q_deg ? x.q_deg.length : 0));
-      const head = ["target", ...Array.from({length: dof}, (_, j) => `q${j + 1}_deg`), "residual_mm", "iterations", "status", "message"];
-      const q = (s) => /[",\n]/.test(s) ? '"' + s.replace(/"/g, '""') + '"' : s;
-      const csv = [head.join(",")].concat(r.results.map(x => [q(x.target),
-        ...Array.from({length: dof}, (_, j) => x.q_deg ? String(x.q_deg[j]) : ""),
-        x.residual_mm == null ? "" : String(x.residual_mm), String(x.iterations), x.status, q(x.message || "")].join(","))).join("\n") + "\n";
+      // compensated.csv as the API writes it (the same writer as the CLI),
+      // from the calibration that gave the summary above.
+      const csvReq = await fetch("/compensate", {method: "POST",
+        headers: {"content-type": "application/json", "accept": "text/csv"},
+        body: JSON.stringify({...req, calibration_id: r.calibration_id})});
+      const csv = await csvReq.text();
+      if (!csvReq.ok) throw new ApiErr(csvReq.status, JSON.parse(csv));
       const url = URL.createObjectURL(new Blob([csv], {type: "text/csv"}));
       $("#comp-out").innerHTML = `<p>calibration #${r.calibration_id} v${r.version}: ${r.n_ok} of ${r.results.length} ok.
         <a id="comp-download" href="${url}" download="compensated.csv">Download compensated.csv</a></p>
