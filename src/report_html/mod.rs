@@ -637,7 +637,7 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
     }
 
     // Parameters.
-    o.push_str(r#"<h2 id="parameters">Parameters (1σ)</h2><table id="parameters-table"><tr><th>name</th><th>value</th><th>deviation</th><th>1σ</th><th>unit</th><th>|deviation| / σ</th></tr>"#);
+    o.push_str(r#"<h2 id="parameters">Parameters (1σ)</h2><p class="muted">deviation: the calibrated value minus the nominal one for the joints; for the base pose and the tool point, minus the "before" fit (nominal joints, base and tool fitted), since their nominal values are only starting guesses.</p><table id="parameters-table"><tr><th>name</th><th>value</th><th>deviation</th><th>1σ</th><th>unit</th><th>|deviation| / σ</th></tr>"#);
     for p in &r.parameters {
         let ratio = if p.sigma > 0.0 {
             format!("{:.1}", p.deviation.abs() / p.sigma)

@@ -224,7 +224,7 @@ async function robotView(id) {
     <fieldset><legend>Roll back</legend>
       <label>by <input type="text" id="rb-by"></label><label>reason <input type="text" id="rb-reason" size="40"></label>
       <button id="rollback">Roll back to the previous calibration</button><div id="rb-msg"></div></fieldset>
-    <h3>Activations</h3><table id="activations"><tr><th>when</th><th>action</th><th>calibration</th><th>by</th><th>reason</th></tr>
+    <h3>Activations</h3><table id="activations"><tr><th>when</th><th>action</th><th>active after it</th><th>by</th><th>reason</th></tr>
     ${acts.items.map(a => `<tr><td>${esc(a.created_at)}</td><td>${esc(a.action)}</td><td>${a.calibration_id != null ? "#" + a.calibration_id : "nominal"}</td><td>${esc(a.actor)}</td><td>${esc(a.reason)}</td></tr>`).join("")}</table>`;
   $("#session-add").onclick = async () => {
     try {
