@@ -643,8 +643,10 @@ async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
         .client
         .post(app.url("/compensate"))
         .header("accept", "text/csv")
-        .json(&json!({"robot_id": 1, "calibration_id": 1, "orientation": false,
-            "targets": [{"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]}]}))
+        .json(
+            &json!({"robot_id": 1, "calibration_id": 1, "orientation": false,
+            "targets": [{"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]}]}),
+        )
         .send()
         .await
         .unwrap()
