@@ -283,7 +283,7 @@ async function sessionView(id) {
     } catch (e) {
       const file = dropped || $("#poses-file").files[0];
       // CSV rows count from the first line after the header.
-      msg.innerHTML = (file ? `<p>${esc(file.name)}:</p>` : "") + errorHtml(e, "csv");
+      msg.innerHTML = (file ? `<p>${esc(file.name)}:</p>` : "") + errorHtml(e, true);
     }
   };
   $("#start").onclick = async () => {
