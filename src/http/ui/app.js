@@ -207,6 +207,10 @@ async function robotView(id) {
   const [robot, acc, cals, sessions, acts, rigs] = await Promise.all([
     api("GET", `/robots/${id}`), api("GET", `/robots/${id}/accuracy`), all(`/calibrations?robot_id=${id}`),
     all(`/sessions?robot_id=${id}`), api("GET", `/robots/${id}/activations?limit=50`), all("/rigs")]);
+  // The rig of this robot's latest session, else the newest rig (most
+  // likely the one just added for it).
+  const latest = sessions.reduce((a, b) => (a && a.id > b.id ? a : b), null);
+  const defaultRig = latest ? latest.rig_id : rigs.reduce((m, r) => Math.max(m, r.id), -1);
   view().innerHTML = `<h2>Robot ${esc(robot.serial_number)}</h2>
     <p>model ${robot.model_id}, site ${esc(robot.site || "-")}, line ${esc(robot.line || "-")}, cell ${esc(robot.cell || "-")};
     active calibration: ${robot.active_calibration_id != null ? `<a href="#/calibration/${robot.active_calibration_id}">#${robot.active_calibration_id}</a>` : "nominal"}</p>
@@ -218,7 +222,7 @@ async function robotView(id) {
     <table><tr><th>session</th><th>name</th><th>rig</th><th>poses</th><th>created</th></tr>
     ${sessions.map(s => `<tr><td><a href="#/session/${s.id}">#${s.id}</a></td><td>${esc(s.name || "")}</td><td>${s.rig_id}</td><td>${s.n_poses}</td><td>${esc(s.created_at)}</td></tr>`).join("")}</table>
     <fieldset><legend>New session</legend>
-      <label>rig <select id="session-rig">${rigs.map(r => `<option value="${r.id}">${r.id}: ${esc(r.name)}</option>`).join("")}</select></label>
+      <label>rig <select id="session-rig">${rigs.map(r => `<option value="${r.id}" ${r.id === defaultRig ? "selected" : ""}>${r.id}: ${esc(r.name)} (${r.n_strings ? `${r.n_strings} strings` : "points: tracker, CMM or camera"})</option>`).join("")}</select></label>
       <label>name <input type="text" id="session-name" value="commissioning"></label>
       <button id="session-add">Create session</button><div id="session-msg"></div></fieldset>
     <fieldset><legend>Roll back</legend>
