@@ -167,11 +167,11 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
 }
 
 /// `value ± sigma` to two significant digits of the sigma, whatever the
-/// unit's scale (0.002502 ± 0.000051 deg/(N*m), -18686 ± 510 ppm); four
-/// decimals when the sigma is unknown.
+/// unit's scale (0.002502 ± 0.000051 deg/(N*m), -18686 ± 512 ppm); the
+/// value alone, to four decimals, when there is no sigma (`unexplained`).
 fn value_and_sigma(value: f64, sigma: f64) -> String {
     if !(sigma.is_finite() && sigma > 0.0) {
-        return format!("{value:.4} ± -");
+        return format!("{value:.4}");
     }
     let decimals = (1.0 - sigma.log10().floor()).clamp(0.0, 12.0) as usize;
     format!("{value:.decimals$} ± {sigma:.decimals$}")
@@ -186,6 +186,6 @@ mod tests {
         assert_eq!(value_and_sigma(0.0025017, 5.11e-5), "0.002502 ± 0.000051");
         assert_eq!(value_and_sigma(0.0369, 0.0025), "0.0369 ± 0.0025");
         assert_eq!(value_and_sigma(-18686.3, 512.0), "-18686 ± 512");
-        assert_eq!(value_and_sigma(1.5, f64::NAN), "1.5000 ± -");
+        assert_eq!(value_and_sigma(1.5, f64::NAN), "1.5000");
     }
 }
