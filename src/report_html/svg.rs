@@ -263,15 +263,25 @@ pub fn bars(
             }
             let top = T + ph * (1.0 - (v.max(y.0) - y.0) / (y.1 - y.0));
             let base = T + ph * (1.0 - (0.0 - y.0) / (y.1 - y.0));
+            let h = (base - top).abs().max(0.5);
             let _ = write!(
                 out,
                 r#"<rect class="bar" x="{x:.1}" y="{yy:.1}" width="{bw:.1}" height="{h:.1}" fill="{color}" data-value="{v}"><title>{n} {l}: {v:.4}</title></rect>"#,
                 x = gx + bw * b as f64,
                 yy = top.min(base),
-                h = (base - top).abs().max(0.5),
                 n = esc(name),
                 l = esc(label),
             );
+            // A bar too short to see beside bars a hundred times taller
+            // (after calibration beside before) says its value above it.
+            if h < 0.04 * ph {
+                let (cx, cy) = (gx + bw * (b as f64 + 0.5), top.min(base) - 3.0);
+                let _ = write!(
+                    out,
+                    r#"<text class="bar-value" x="{cx:.1}" y="{cy:.1}" font-size="9" transform="rotate(-90 {cx:.1} {cy:.1})" dominant-baseline="middle">{}</text>"#,
+                    fmt_tick(v)
+                );
+            }
         }
     }
     legend(&mut out, bars);
@@ -281,7 +291,20 @@ pub fn bars(
 
 #[cfg(test)]
 mod tests {
-    use super::group_label;
+    use super::{bars, group_label};
+
+    #[test]
+    fn a_bar_too_short_to_see_says_its_value() {
+        let svg = bars(
+            "t",
+            "mm",
+            &["x"],
+            &[("before", "#aaa"), ("after", "#f00")],
+            &[vec![7.2, 0.0339]],
+        );
+        assert_eq!(svg.matches(r#"class="bar-value""#).count(), 1, "{svg}");
+        assert!(svg.contains(">0.0339</text>"), "{svg}");
+    }
 
     #[test]
     fn long_group_labels_wrap_and_shrink_to_their_width() {
