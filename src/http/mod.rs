@@ -334,7 +334,7 @@ impl Service {
             self.client_timeout,
         );
         tracing::info!(addr = %self.addr, url = %format!("http://{}/", self.addr), "listening");
-        let served = serve_connections(
+        serve_connections(
             self.listener,
             app,
             self.idle_timeout,
@@ -346,7 +346,7 @@ impl Service {
         self.state.jobs.shutdown().await;
         self.state.store.close().await;
         tracing::info!("shutdown complete");
-        served
+        Ok(())
     }
 }
 
@@ -368,7 +368,7 @@ async fn serve_connections(
     idle_timeout: Duration,
     drain_timeout: Duration,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
-) -> std::io::Result<()> {
+) {
     use hyper_util::rt::{TokioIo, TokioTimer};
     use hyper_util::server::graceful::GracefulShutdown;
     use hyper_util::service::TowerToHyperService;
@@ -424,7 +424,6 @@ async fn serve_connections(
             drain_timeout.as_secs()
         );
     }
-    Ok(())
 }
 
 /// Accept errors that concern one connection only.

@@ -40,6 +40,23 @@ async fn read_until_closed(tcp: &mut TcpStream, within: Duration) -> String {
     String::from_utf8_lossy(&got).into_owned()
 }
 
+/// The head of a `POST /rigs` announcing a JSON body of `length` bytes,
+/// with `extra` header lines.
+async fn post_rig_head(tcp: &mut TcpStream, length: usize, extra: &str) {
+    let head = format!(
+        "POST /rigs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: {length}\r\n{extra}\r\n"
+    );
+    tcp.write_all(head.as_bytes()).await.unwrap();
+}
+
+/// An answer after which the server closes the connection says so.
+fn assert_says_close(answer: &str) {
+    assert!(
+        answer.to_ascii_lowercase().contains("connection: close"),
+        "{answer}"
+    );
+}
+
 #[tokio::test]
 async fn headers_sent_a_byte_at_a_time_are_cut_off() {
     let app = app().await;
@@ -79,11 +96,7 @@ async fn a_stalled_body_is_answered_408_and_stores_nothing() {
     let app = app().await;
     let body = r#"{"name": "stalled", "anchors_mm": [[0,0,0],[1000,0,0],[0,1000,0]], "r_mm": 10}"#;
     let mut tcp = connect(&app).await;
-    let head = format!(
-        "POST /rigs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n",
-        body.len()
-    );
-    tcp.write_all(head.as_bytes()).await.unwrap();
+    post_rig_head(&mut tcp, body.len(), "").await;
     // Half the body, then nothing.
     tcp.write_all(&body.as_bytes()[..body.len() / 2])
         .await
@@ -95,10 +108,7 @@ async fn a_stalled_body_is_answered_408_and_stores_nothing() {
     );
     assert!(answer.contains("\"error\":\"request_timeout\""), "{answer}");
     assert!(answer.contains("--client-timeout-secs"), "{answer}");
-    assert!(
-        answer.to_ascii_lowercase().contains("connection: close"),
-        "{answer}"
-    );
+    assert_says_close(&answer);
 
     let rigs: serde_json::Value = app.get("/rigs").await.json().await.unwrap();
     assert_eq!(rigs["items"].as_array().unwrap().len(), 0, "{rigs}");
@@ -118,11 +128,7 @@ async fn a_body_declared_too_large_is_refused_before_it_is_sent() {
     let mut tcp = connect(&app).await;
     // The client asks before sending: the answer is 413 at once, never
     // "100 Continue", and the body is never needed.
-    tcp.write_all(
-        b"POST /rigs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 5000\r\nExpect: 100-continue\r\n\r\n",
-    )
-    .await
-    .unwrap();
+    post_rig_head(&mut tcp, 5000, "Expect: 100-continue\r\n").await;
     let mut got = vec![0u8; 4096];
     let n = tokio::time::timeout(Duration::from_secs(5), tcp.read(&mut got))
         .await
@@ -130,10 +136,7 @@ async fn a_body_declared_too_large_is_refused_before_it_is_sent() {
         .unwrap();
     let answer = String::from_utf8_lossy(&got[..n]);
     assert!(answer.starts_with("HTTP/1.1 413"), "{answer}");
-    assert!(
-        answer.to_ascii_lowercase().contains("connection: close"),
-        "{answer}"
-    );
+    assert_says_close(&answer);
     app.stop().await;
 }
 
@@ -142,11 +145,7 @@ async fn a_trickled_body_is_cut_off_at_the_deadline() {
     let app = app().await;
     let mut tcp = connect(&app).await;
     let started = Instant::now();
-    tcp.write_all(
-        b"POST /rigs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 100000\r\n\r\n",
-    )
-    .await
-    .unwrap();
+    post_rig_head(&mut tcp, 100_000, "").await;
     // A byte every 300 ms never trips the 1 s idle timeout, but the whole
     // body is due within ten of them.
     let (mut rd, mut wr) = tcp.into_split();

@@ -275,8 +275,8 @@ async function sessionView(id) {
   };
   $("#upload").onclick = async () => {
     const msg = $("#upload-msg");
+    const file = dropped || $("#poses-file").files[0];
     try {
-      const file = dropped || $("#poses-file").files[0];
       const text = dropped ? await dropped.text() : await fileText($("#poses-file"));
       msg.innerHTML = '<span class="muted">uploading…</span>';
       const r = await api("POST", `/sessions/${id}/poses`, text, "text/csv");
@@ -285,7 +285,6 @@ async function sessionView(id) {
       $("#n-batches").textContent = r.session.n_batches;
       $("#job-msg").innerHTML = "";
     } catch (e) {
-      const file = dropped || $("#poses-file").files[0];
       // CSV rows count from the first line after the header.
       msg.innerHTML = (file ? `<p>${esc(file.name)}:</p>` : "") + errorHtml(e, true);
     }
