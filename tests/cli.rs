@@ -63,6 +63,7 @@ fn identify_then_compensate() {
         "fixed",
         "stats",
         "noise_floor_mm",
+        "expected_test_rms_mm",
         "held_out",
         "findings",
     ] {

@@ -265,6 +265,48 @@ impl<'a> Session<'a> {
             / self.test.len() as f64;
         Some(s * mean_trace.sqrt())
     }
+
+    /// Held-out 3-D RMS that an exact model, identified from these train
+    /// poses, shows on average: the noise floor plus the spread of the
+    /// identified parameters (`σ² (JᵀWJ)⁻¹` of the fit at `values` over the
+    /// `free` parameters) carried to each test pose's T. The two are
+    /// independent (test readings versus train readings), so their
+    /// variances add. More train poses shrink the second part, never the
+    /// first. `None` without a noise floor or a covariance.
+    pub fn expected_test_rms(
+        &self,
+        values: &[f64],
+        free: &[usize],
+        jtj: &DMatrix<f64>,
+        sigma: Option<f64>,
+    ) -> Option<f64> {
+        let floor = self.noise_floor(sigma)?;
+        let s = sigma?;
+        let cov = unit_covariance(jtj)?;
+        let trig = self.chain.trig(values);
+        let mut pj = self.chain.new_jacobian();
+        let mut spread = 0.0;
+        for &i in &self.test {
+            self.chain.point_jacobian_trig(
+                values,
+                &trig,
+                &self.q_trig[i],
+                OutputFrame::Rig,
+                &mut pj,
+            );
+            for c in 0..3 {
+                // String offsets (past the geometric block) do not move T.
+                let g = nalgebra::DVector::from_iterator(
+                    free.len(),
+                    free.iter()
+                        .map(|&k| pj.d_params.get(k).map_or(0.0, |v| v[c])),
+                );
+                spread += g.dot(&(&cov * &g));
+            }
+        }
+        let spread = s * s * spread / self.test.len() as f64;
+        spread.is_finite().then(|| (floor * floor + spread).sqrt())
+    }
 }
 
 fn choose_split(data: &Dataset, opts: &IdentifyOptions) -> (Vec<usize>, Vec<usize>) {
@@ -499,10 +541,12 @@ pub fn pose_rms(problem: &CalibrationProblem, p: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// 1-sigma of every free parameter from `σ² (JᵀWJ)⁻¹`, in internal units.
-pub fn sigmas(jtj: &DMatrix<f64>, sigma: f64) -> Vec<f64> {
+/// `(JᵀWJ)⁻¹`, inverted through the column-scaled matrix so that
+/// parameters in mm and in radians are conditioned alike; `None` when it is
+/// not positive definite.
+pub fn unit_covariance(jtj: &DMatrix<f64>) -> Option<DMatrix<f64>> {
     let n = jtj.nrows();
-    // Scale 1 for a zero column: its sigma comes out infinite, not NaN.
+    // Scale 1 for a zero column: its variance comes out infinite, not NaN.
     let d: Vec<f64> = (0..n)
         .map(|i| match jtj[(i, i)] {
             v if v > 0.0 && v.is_finite() => v.sqrt(),
@@ -510,14 +554,17 @@ pub fn sigmas(jtj: &DMatrix<f64>, sigma: f64) -> Vec<f64> {
         })
         .collect();
     let scaled = DMatrix::from_fn(n, n, |i, j| jtj[(i, j)] / (d[i] * d[j]));
-    match scaled.cholesky() {
-        Some(ch) => {
-            let inv = ch.inverse();
-            (0..n)
-                .map(|i| sigma * inv[(i, i)].max(0.0).sqrt() / d[i])
-                .collect()
-        }
-        None => vec![f64::NAN; n],
+    let inv = scaled.cholesky()?.inverse();
+    Some(DMatrix::from_fn(n, n, |i, j| inv[(i, j)] / (d[i] * d[j])))
+}
+
+/// 1-sigma of every free parameter from `σ² (JᵀWJ)⁻¹`, in internal units.
+pub fn sigmas(jtj: &DMatrix<f64>, sigma: f64) -> Vec<f64> {
+    match unit_covariance(jtj) {
+        Some(c) => (0..c.nrows())
+            .map(|i| sigma * c[(i, i)].max(0.0).sqrt())
+            .collect(),
+        None => vec![f64::NAN; jtj.nrows()],
     }
 }
 
@@ -546,6 +593,12 @@ pub fn identify(
         .string_sigma()
         .or_else(|| (l.n_strings > 0).then_some(geo.sigma));
     let noise_floor_mm = session.noise_floor(string_sigma);
+    let expected_test_rms_mm = session.expected_test_rms(
+        &geo.after.values,
+        &geo.selection.free,
+        &geo.result.jtj,
+        string_sigma,
+    );
 
     let paper = paper::one_step(&session, &geo.before);
     let (mut after_values, method, fixed_sel, mut sig) = match opts.method {
@@ -769,6 +822,7 @@ pub fn identify(
         stats,
         paper_stats,
         noise_floor_mm,
+        expected_test_rms_mm,
         string_sigma_mm: string_sigma,
         held_out: session
             .test

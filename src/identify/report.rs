@@ -334,6 +334,14 @@ pub struct Report {
     /// Expected held-out 3-D RMS of a perfect model: the point noise implied
     /// by the string noise and the rig geometry (mm). `None` for point data.
     pub noise_floor_mm: Option<f64>,
+    /// Expected held-out 3-D RMS of an exact model identified from these
+    /// train poses (mm): the noise floor plus the identified parameters'
+    /// spread carried to the test poses. `stats.test.after` well above it
+    /// means the model misses something; near it, that only more train
+    /// poses would help. `None` for point data (and in reports written
+    /// before it existed).
+    #[serde(default)]
+    pub expected_test_rms_mm: Option<f64>,
     /// String noise (1 sigma, mm) estimated from the strings' redundancy.
     pub string_sigma_mm: Option<f64>,
     /// Held-out pose ids.

@@ -424,6 +424,11 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
         },
     );
     row(&mut o, "noise floor (held-out)", fmt_opt(r.noise_floor_mm));
+    row(
+        &mut o,
+        "exact model from these train poses (held-out)",
+        fmt_opt(r.expected_test_rms_mm),
+    );
     row(&mut o, "string noise (1σ)", fmt_opt(r.string_sigma_mm));
     row(
         &mut o,
