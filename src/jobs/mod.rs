@@ -113,6 +113,11 @@ pub struct JobInput {
 pub type JobFn =
     Arc<dyn Fn(&JobInput, &dyn Progress) -> crate::Result<Report> + Send + Sync + 'static>;
 
+/// The `error` of a job whose cancel arrived while the engine was finishing:
+/// its progress reads 100 %, yet no calibration was stored.
+pub const CANCELLED_AS_IT_FINISHED: &str =
+    "cancel requested while the job finished: its result was not stored";
+
 /// The engine's identification as a [`JobFn`].
 pub fn engine_job_fn() -> JobFn {
     Arc::new(|input: &JobInput, progress: &dyn Progress| {
@@ -423,8 +428,9 @@ impl Worker {
                 Ok(Some(true))
             );
         if cancel_at_end {
-            tracing::info!("cancel requested while the job finished: its result is not stored");
-            self.finish(id, "cancelled", None).await;
+            tracing::info!("{CANCELLED_AS_IT_FINISHED}");
+            self.finish(id, "cancelled", Some(CANCELLED_AS_IT_FINISHED))
+                .await;
             return;
         }
         match result {

@@ -201,7 +201,8 @@ pub struct JobRec {
     pub locked_until_ms: Option<i64>,
     /// Cancellation was asked for.
     pub cancel_requested: bool,
-    /// Why it failed.
+    /// Why it failed; for a job cancelled as it finished (its progress at
+    /// 100 %), that its result was not stored.
     pub error: Option<String>,
     /// The calibration it produced.
     pub calibration_id: Option<i64>,

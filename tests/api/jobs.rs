@@ -324,6 +324,50 @@ async fn a_running_engine_job_cancels_within_the_lease() {
     app.stop().await;
 }
 
+/// A cancel that reaches the engine only as it finishes still wins, and the
+/// job says why its progress reads 100 % yet no calibration came of it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_cancel_as_the_job_finishes_stores_nothing_and_says_so() {
+    // An engine that sees the cancel flag, then returns its result anyway
+    // (as one does when the flag comes after its last look).
+    let job_fn: drawcal::jobs::JobFn = Arc::new(|input, progress| {
+        progress.update("finishing", 1.0);
+        while !progress.cancelled() {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        drawcal::identify::identify(
+            &input.robot,
+            &input.rig,
+            &input.data,
+            &input.options,
+            &drawcal::identify::NoProgress,
+        )
+    });
+    let app = TestApp::spawn_with(
+        "cancel-at-end",
+        Options {
+            job_fn,
+            lease: Duration::from_millis(600),
+            ..Options::default()
+        },
+    )
+    .await;
+    let sid = session_with_poses(&app, "JOB-END").await;
+    let job = enqueue(&app, sid).await;
+    wait_state(&app, job, "running").await;
+    ok_json(
+        app.post_raw(&format!("/jobs/{job}/cancel"), None, "").await,
+        202,
+    )
+    .await;
+    let j = wait_state(&app, job, "cancelled").await;
+    assert_eq!(j["calibration_id"], serde_json::Value::Null, "{j}");
+    assert_eq!(j["error"], drawcal::jobs::CANCELLED_AS_IT_FINISHED, "{j}");
+    let cals = ok_json(app.get("/calibrations").await, 200).await;
+    assert_eq!(cals["total"], 0, "{cals}");
+    app.stop().await;
+}
+
 /// A calibration with nothing held out (a `holdout_fraction` that rounds
 /// to no pose, on a file
 /// without a split column) has no held-out figures: null in the
