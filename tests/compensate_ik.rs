@@ -374,3 +374,42 @@ fn an_arm_without_a_closed_form_falls_back_to_the_numerical_seeds() {
     let ts = targets(&comp, &nom, 20, 3, true);
     assert!(run(&comp, &ts).ok >= 15);
 }
+
+/// Joint targets taught at singular poses (a stretched arm straight up, a
+/// wrist with joints 4 and 6 aligned) on a UR10 whose tracker target sits
+/// 16 mm from the nominal tool point, as on `real_ur10_ipa_grid`: each is
+/// compensated with joints that stay with the taught ones. Before the
+/// solver's step was bounded, the taught home pose went to joint 1 at
+/// -831 deg (refused as a joint-limit violation) and its neighbour, with
+/// the orientation, to joint 4 at -461 deg.
+#[test]
+fn singular_taught_poses_stay_near_the_taught_joints() {
+    let (nom, mut cal) = ur10();
+    cal.tool_point_mm[2] -= 16.0;
+    cal.tool_point_mm[1] += 0.3;
+    let comp = Compensator::new(&nom, &cal).unwrap();
+    for (q, orientation) in [
+        ([-90.0, -90.0, 0.0, -90.0, 0.0, 0.0], false),
+        ([-90.0, -90.0, 10.0, -90.0, 0.0, 0.0], false),
+        ([-90.0, -90.0, 30.0, -90.0, 0.0, 0.0], true),
+        ([0.0, -90.0, 0.0, 0.0, 0.0, 0.0], false),
+    ] {
+        let t = Target {
+            target: "taught".into(),
+            kind: TargetKind::Joints { q_deg: q.to_vec() },
+        };
+        let c = comp.compensate(&t, orientation);
+        assert_eq!(
+            c.status,
+            CompensationStatus::Ok,
+            "{q:?} {orientation}: {c:?}"
+        );
+        let qc = c.q_deg.unwrap();
+        let far = qc
+            .iter()
+            .zip(&q)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(far < 45.0, "{q:?} {orientation}: {qc:?}");
+    }
+}

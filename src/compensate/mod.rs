@@ -375,6 +375,10 @@ impl Reach {
 /// the converging solves never came below 7e-4.
 const GTOL: f64 = 1e-6;
 
+/// Longest joint step (rad, Euclidean over the joints) of one solver
+/// iteration from taught joints.
+const MAX_STEP_RAD: f64 = 0.2;
+
 impl Compensator {
     /// From the nominal and calibrated models (robot.json form).
     pub fn new(nominal: &Robot, calibrated: &Robot) -> Result<Self> {
@@ -717,7 +721,14 @@ impl Compensator {
             {
                 continue;
             }
-            let solved = self.solve(&pos, rot.as_ref(), &seed);
+            // Taught joints are where the answer should stay: their solve
+            // takes bounded steps.
+            let max_step = if cartesian {
+                f64::INFINITY
+            } else {
+                MAX_STEP_RAD
+            };
+            let solved = self.solve(&pos, rot.as_ref(), &seed, max_step);
             tried.push(seed);
             match solved {
                 Ok(sol) => {
@@ -830,7 +841,7 @@ impl Compensator {
         let mut any = false;
         std::iter::from_fn(move || {
             for s in starts.by_ref() {
-                if let Ok(mut sol) = self.solve_on(Model::Nominal, pos, rot, &s) {
+                if let Ok(mut sol) = self.solve_on(Model::Nominal, pos, rot, &s, f64::INFINITY) {
                     any = true;
                     // The solve may wander whole turns away: the same pose
                     // nearer home, inside the limits when it can be.
@@ -848,17 +859,20 @@ impl Compensator {
         })
     }
 
-    /// Damped least squares on the calibrated model from `q0`.
+    /// Damped least squares on the calibrated model from `q0`, each step at
+    /// most `max_step_rad` long.
     fn solve(
         &self,
         pos: &Vector3<f64>,
         rot: Option<&Matrix3<f64>>,
         q0: &[f64],
+        max_step_rad: f64,
     ) -> std::result::Result<Solution, NotConverged> {
-        self.solve_on(Model::Calibrated, pos, rot, q0)
+        self.solve_on(Model::Calibrated, pos, rot, q0, max_step_rad)
     }
 
-    /// Damped least squares on either model from `q0`.
+    /// Damped least squares on either model from `q0`, each step at most
+    /// `max_step_rad` long (a trust region; infinite for none).
     ///
     /// Besides converging or using up its iterations, a solve gives up as
     /// soon as it cannot converge from where it is (unreachable targets
@@ -891,6 +905,7 @@ impl Compensator {
         pos: &Vector3<f64>,
         rot: Option<&Matrix3<f64>>,
         q0: &[f64],
+        max_step_rad: f64,
     ) -> std::result::Result<Solution, NotConverged> {
         let n = self.dof();
         let (params, effective) = match model {
@@ -1006,8 +1021,21 @@ impl Compensator {
                     return give_up(it);
                 }
             }
+            // A trust region: near a singular configuration (a stretched
+            // arm, a wrist with aligned axes) the barely damped step can
+            // swing a joint by turns, and the solve then settled on joints
+            // far from the taught ones (a UR10's taught home pose came out
+            // at -831 deg of joint 1). Shorter steps follow the error down
+            // from the seed instead. The frozen test above used the full
+            // step, which bounds the shorter ones too.
+            let norm = step.norm();
+            let scale = if norm > max_step_rad {
+                max_step_rad / norm
+            } else {
+                1.0
+            };
             for c in 0..n {
-                q[c] += step[c];
+                q[c] += scale * step[c];
             }
             if !q.iter().all(|v| v.is_finite()) {
                 return give_up(it + 1);
@@ -1403,7 +1431,7 @@ mod tests {
             (Model::Nominal, None),
             (Model::Calibrated, Some(&back)),
         ] {
-            let Err(failed) = comp.solve_on(model, &far, rot, &home) else {
+            let Err(failed) = comp.solve_on(model, &far, rot, &home, f64::INFINITY) else {
                 panic!("converged on a target 5 m away");
             };
             assert!(failed.iterations < 20, "{}", failed.iterations);
@@ -1411,14 +1439,14 @@ mod tests {
         // The last step is never taken: the budget, not one more.
         let mut c = comp.clone();
         c.max_iterations = 3;
-        let Err(failed) = c.solve_on(Model::Calibrated, &far, None, &home) else {
+        let Err(failed) = c.solve_on(Model::Calibrated, &far, None, &home, f64::INFINITY) else {
             panic!()
         };
         assert!(failed.iterations <= 3);
         // A target within reach converges from home as before.
         let q = [0.3, 0.2, 0.4, 0.1, 0.5, 0.0];
         let (t, r) = comp.nominal_pose(&q);
-        let sol = comp.solve(&t, Some(&r), &q).ok().unwrap();
+        let sol = comp.solve(&t, Some(&r), &q, f64::INFINITY).ok().unwrap();
         assert!(sol.residual_mm < 1e-3);
     }
 }
