@@ -298,6 +298,88 @@ fn bad_poses_files_are_named_cleanly() {
             && !err.contains("missing column"),
         "{err}"
     );
+    // The same column twice: refused, not the first one silently used.
+    let dup = lines
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let extra = if i == 0 { "l1_mm" } else { "5.0" };
+            format!("{l},{extra}")
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let err = identify("twice.csv", dup);
+    assert!(err.contains("l1_mm: column appears twice"), "{err}");
+    // A payload no arm carries.
+    let pay = lines
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let extra = match i {
+                0 => "payload_kg",
+                3 => "-5",
+                _ => "2",
+            };
+            format!("{l},{extra}")
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let err = identify("payload.csv", pay);
+    assert!(
+        err.contains("row 3") && err.contains("payload_kg") && err.contains("-5 kg is outside"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Options and files that used to be taken without a word: a hold-out
+/// fraction out of range (was clamped), a robot.json with a byte-order mark
+/// (was refused as malformed JSON), a rig without `r_mm` (was taken as 0,
+/// and every pose then failed to locate).
+#[test]
+fn options_and_files_are_checked_as_given() {
+    let dir = std::env::temp_dir().join(format!("drawcal-cli-opts-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |robot: &PathBuf, rig: &PathBuf, extra: &[&str]| {
+        bin()
+            .args(["identify", "--physics", "off", "--robot"])
+            .arg(robot)
+            .arg("--rig")
+            .arg(rig)
+            .arg("--poses")
+            .arg(data("poses.csv"))
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    for h in ["1.5", "NaN", "-0.1", "inf"] {
+        let arg = format!("--holdout={h}");
+        let out = run(&data("robot.json"), &data("rig.json"), &[&arg]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "--holdout {h} accepted");
+        assert!(err.contains("a fraction from 0 to 0.9"), "{err}");
+    }
+    let bom = dir.join("robot.json");
+    let text = std::fs::read_to_string(data("robot.json")).unwrap();
+    std::fs::write(&bom, format!("\u{feff}{text}")).unwrap();
+    let out = run(&bom, &data("rig.json"), &[]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rig = dir.join("rig.json");
+    let mut r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data("rig.json")).unwrap()).unwrap();
+    r.as_object_mut().unwrap().remove("r_mm");
+    std::fs::write(&rig, r.to_string()).unwrap();
+    let out = run(&data("robot.json"), &rig, &[]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("rig.json") && err.contains("missing field `r_mm`"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -28,7 +28,10 @@ fn every_prefix_identifies_or_says_why() {
         let lines: Vec<&str> = csv.lines().collect();
         let mut reports = 0;
         // With the file's split, and with the tool choosing its own.
-        let prefixes = (1..=24.min(lines.len() - 1)).flat_map(|n| {
+        // Up to 24 poses one by one (a 6-axis arm errs on all of them:
+        // fewer poses than parameters), then a few that calibrate.
+        let sizes = (1..=24).chain([30, 36, 45]).filter(|&n| n < lines.len());
+        let prefixes = sizes.flat_map(|n| {
             let prefix = lines[..=n].join("\n");
             [(n, common::drop_columns(&prefix, &["split"])), (n, prefix)]
         });
@@ -78,4 +81,55 @@ fn a_split_without_test_poses_says_so() {
         rep.split_source
     );
     assert_eq!(rep.stats.test.n, 15);
+}
+
+/// Fewer distinct train poses than the parameters they identify is an
+/// error that says how many are needed, not a fit through the readings:
+/// 20 train poses of a 6-axis arm, and 50 recordings of one pose.
+#[test]
+fn fewer_poses_than_parameters_is_an_error() {
+    let (robot, rig, _) = common::load("er3a_paper_like");
+    let csv = std::fs::read_to_string(common::dir("er3a_paper_like").join("poses.csv")).unwrap();
+    let mut lines: Vec<String> = csv.lines().map(String::from).collect();
+    let split = lines[0].split(',').position(|h| h == "split").unwrap();
+    // Only the first 20 rows train.
+    for (i, line) in lines.iter_mut().enumerate().skip(1) {
+        let mut cells: Vec<&str> = line.split(',').collect();
+        cells[split] = if i <= 20 { "train" } else { "test" };
+        *line = cells.join(",");
+    }
+    let data = Dataset::from_csv(lines.join("\n").as_bytes(), &robot, &rig).unwrap();
+    let e = identify(
+        &robot,
+        &rig,
+        &data,
+        &IdentifyOptions::default(),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("20 usable train poses"), "{e}");
+    assert!(e.contains("parameters these poses identify"), "{e}");
+
+    // One pose recorded 50 times: readings, not information.
+    let first = lines[1].clone();
+    let same: Vec<String> = std::iter::once(lines[0].clone())
+        .chain((0..50).map(|k| {
+            let mut cells: Vec<String> = first.split(',').map(String::from).collect();
+            cells[0] = format!("p{k}");
+            cells[split] = String::new();
+            cells.join(",")
+        }))
+        .collect();
+    let data = Dataset::from_csv(same.join("\n").as_bytes(), &robot, &rig).unwrap();
+    let e = identify(
+        &robot,
+        &rig,
+        &data,
+        &IdentifyOptions::default(),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("1 usable train poses"), "{e}");
 }

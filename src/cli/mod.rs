@@ -43,11 +43,18 @@ pub enum CliError {
     Other(String),
 }
 
+/// A text file, without the byte-order mark some Windows editors put at
+/// the start (JSON parsers refuse it; the CSV reader skips it anyway).
 fn read(path: &Path) -> Result<String, CliError> {
-    std::fs::read_to_string(path).map_err(|source| CliError::Io {
-        path: path.into(),
-        source,
-    })
+    std::fs::read_to_string(path)
+        .map(|t| match t.strip_prefix('\u{feff}') {
+            Some(rest) => rest.to_string(),
+            None => t,
+        })
+        .map_err(|source| CliError::Io {
+            path: path.into(),
+            source,
+        })
 }
 
 fn core<T>(path: &Path, r: crate::Result<T>) -> Result<T, CliError> {
@@ -139,8 +146,9 @@ pub struct IdentifyArgs {
     /// The physics analysis after the geometric identification.
     #[arg(long, value_enum, default_value = "on")]
     pub physics: Switch,
-    /// Fraction of poses held out when the file has no split column.
-    #[arg(long, default_value_t = 0.3)]
+    /// Fraction of poses held out when the file has no split column, from 0
+    /// (none: no held-out figures) to 0.9.
+    #[arg(long, default_value_t = 0.3, value_parser = holdout_fraction)]
     pub holdout: f64,
     /// Seed of the hold-out choice.
     #[arg(long, default_value_t = 1)]
@@ -466,4 +474,15 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
         );
     }
     Ok(())
+}
+
+/// `--holdout`: a fraction from 0 to 0.9 (at least a tenth of the poses
+/// must train), refused rather than clamped.
+fn holdout_fraction(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && (0.0..=0.9).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{s}: a fraction from 0 to 0.9"))
+    }
 }

@@ -32,16 +32,26 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
         r.stats.train.n, r.stats.test.n, r.split_source
     );
     let id = &r.identifiability;
-    let _ = writeln!(
-        s,
-        "method {}: {} iterations ({}), {} of {} parameters identified, condition number {:.0}",
-        r.method,
-        r.convergence.iterations,
-        r.convergence.termination,
-        id.n_identified,
-        id.n_candidates,
-        id.condition_number
-    );
+    if r.method == "paper" {
+        // The solver figures in the report are those of the base-and-tool
+        // fit the paper's step starts from, not of the step.
+        let _ = writeln!(
+            s,
+            "method paper: one pseudo-inverse step of the linearised error model on the located points, {} joint parameters, from the nominal joints with base and tool fitted",
+            id.n_identified
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "method {}: {} iterations ({}), {} of {} parameters identified, condition number {:.0}",
+            r.method,
+            r.convergence.iterations,
+            r.convergence.termination,
+            id.n_identified,
+            id.n_candidates,
+            id.condition_number
+        );
+    }
     if !id.fixed.is_empty() {
         let _ = writeln!(s, "held at nominal (this data cannot separate them):");
         for f in &id.fixed {

@@ -156,9 +156,7 @@ pub fn check_temp_c(field: &str, temp_c: f64) -> Result<f64> {
     }
 }
 
-/// Heaviest payload (kg) a compensation is asked for: beyond any serial
-/// arm's rating (the largest carry about 2,300 kg).
-pub const MAX_PAYLOAD_KG: f64 = 5000.0;
+pub use crate::model::MAX_PAYLOAD_KG;
 
 /// A run-time payload (kg) checked: finite, from 0 to [`MAX_PAYLOAD_KG`];
 /// the error names `field`.

@@ -170,6 +170,9 @@ pub fn is_json(ct: Option<&str>) -> bool {
 /// Parse JSON bytes: syntax errors are 400 `malformed_json`, type and
 /// shape errors 422 `invalid_input` naming the field path.
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    // A byte-order mark (a file saved by a Windows editor and posted as
+    // is) is not part of the document.
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     // The common case in one pass; only a failed parse pays for the
     // classification below (it is on the /compensate hot path).
     if let Ok(v) = serde_json::from_slice::<T>(bytes) {

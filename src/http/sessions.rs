@@ -427,7 +427,16 @@ pub async fn enqueue_job(
     let options: JobOptions = if body.bytes.iter().all(u8::is_ascii_whitespace) {
         JobOptions::default()
     } else if is_json(body.content_type.as_deref()) {
-        parse_json(&body.bytes)?
+        // serde reads a struct from an array too (`[]` as all defaults):
+        // the options are an object (or null), as documented.
+        if body.bytes.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'[') {
+            return Err(ApiError::Invalid {
+                message: "job options are a JSON object (or null), not an array".into(),
+                field: None,
+                row: None,
+            });
+        }
+        parse_json::<Option<JobOptions>>(&body.bytes)?.unwrap_or_default()
     } else {
         return Err(ApiError::UnsupportedMediaType(
             "job options are JSON (application/json)".into(),

@@ -481,6 +481,16 @@ pub fn geometric(
     let mut g = nalgebra::DVector::zeros(cands.len());
     lm::LeastSquares::normal_equations(&pc, &pc.x0(), &mut jtj, &mut g);
     let selection = identifiability::select(&jtj, &cands, &l, opts.identifiability_tolerance);
+    // Fewer distinct poses than parameters: the fit would pass through the
+    // readings and its figures would mean nothing.
+    let usable = distinct_poses(session, &session.train);
+    if usable < selection.free.len() {
+        return Err(Error::InsufficientData(format!(
+            "{usable} usable train poses (distinct joint angles) for the {} parameters these poses identify: record at least {} poses, better two or three times as many (the paper identified 27 parameters from 30)",
+            selection.free.len(),
+            selection.free.len()
+        )));
+    }
 
     progress.update("identifying", 0.0);
     let mut problem = session.problem(before.values.clone(), selection.free.clone());
@@ -526,6 +536,25 @@ pub fn geometric(
         weights: problem.weights,
         sigma,
     })
+}
+
+/// How many of the poses `idx` differ in their joint angles (a pose
+/// recorded twice adds readings, not information about the geometry).
+fn distinct_poses(session: &Session, idx: &[usize]) -> usize {
+    let mut keys: Vec<Vec<i64>> = idx
+        .iter()
+        .map(|&i| {
+            session.data.poses[i]
+                .q_rad
+                .iter()
+                // Angles equal to a microradian are the same pose.
+                .map(|q| (q * 1e6).round() as i64)
+                .collect()
+        })
+        .collect();
+    keys.sort_unstable();
+    keys.dedup();
+    keys.len()
 }
 
 /// Per-pose RMS residual of a problem's poses at `p`.
@@ -629,6 +658,10 @@ pub fn identify(
     let broken = !(train_rms_mm <= PHYSICS_MAX_GEOMETRIC_RMS_MM);
     if !opts.physics {
         physics_notes.push(format!("{PHYSICS_NOT_RUN} (physics off)"));
+    } else if opts.method == Method::Paper {
+        physics_notes.push(format!(
+            "{PHYSICS_NOT_RUN} (method paper: the analysis builds on the Levenberg-Marquardt fit; run --method lm)"
+        ));
     }
     if opts.physics && opts.method == Method::Lm && broken {
         physics_notes.push(format!(

@@ -162,8 +162,10 @@ impl Dataset {
                         row,
                         &name,
                         format!(
-                            "{v} deg is outside the joint limits [{}, {}]",
-                            js.q_min_deg, js.q_max_deg
+                            "{} deg is outside the joint limits [{}, {}]",
+                            super::shown(v),
+                            js.q_min_deg,
+                            js.q_max_deg
                         ),
                     ));
                 }
@@ -178,7 +180,10 @@ impl Dataset {
                         return Err(Error::cell(
                             row,
                             &name,
-                            format!("{v} mm: a string reading cannot be negative"),
+                            format!(
+                                "{} mm: a string reading cannot be negative",
+                                super::shown(v)
+                            ),
                         ));
                     }
                     if let Some(rg) = range {
@@ -186,7 +191,10 @@ impl Dataset {
                             return Err(Error::cell(
                                 row,
                                 &name,
-                                format!("{v} mm is past the sensor's range of {rg} mm"),
+                                format!(
+                                    "{} mm is past the sensor's range of {rg} mm",
+                                    super::shown(v)
+                                ),
                             ));
                         }
                     }
@@ -201,7 +209,10 @@ impl Dataset {
                         return Err(Error::cell(
                             row,
                             *name,
-                            format!("{} mm: a measured point more than 10 km away", p[c]),
+                            format!(
+                                "{} mm: a measured point more than 10 km away",
+                                super::shown(p[c])
+                            ),
                         ));
                     }
                 }
@@ -226,7 +237,10 @@ impl Dataset {
                 return Err(Error::cell(
                     row,
                     "time_s",
-                    format!("{t} s is not a plausible time (more than 10^12 s)"),
+                    format!(
+                        "{} s is not a plausible time (more than 10^12 s)",
+                        super::shown(t)
+                    ),
                 ));
             }
             let temp_c = parse_opt(row, temp_col, &rec)?;
@@ -234,7 +248,19 @@ impl Dataset {
                 return Err(Error::cell(
                     row,
                     "temp_c",
-                    format!("{t} °C is outside -100..300 °C"),
+                    format!("{} °C is outside -100..300 °C", super::shown(t)),
+                ));
+            }
+            let payload_kg = parse_opt(row, payload_col, &rec)?;
+            if let Some(p) = payload_kg.filter(|p| !(0.0..=super::MAX_PAYLOAD_KG).contains(p)) {
+                return Err(Error::cell(
+                    row,
+                    "payload_kg",
+                    format!(
+                        "{} kg is outside 0..{} kg",
+                        super::shown(p),
+                        super::MAX_PAYLOAD_KG
+                    ),
                 ));
             }
             poses.push(PoseRecord {
@@ -243,7 +269,7 @@ impl Dataset {
                 measurement,
                 time_s,
                 temp_c,
-                payload_kg: parse_opt(row, payload_col, &rec)?,
+                payload_kg,
                 split,
             });
         }
@@ -438,7 +464,7 @@ pub fn string_readings_from_csv<R: Read>(input: R, rig: &Rig) -> Result<Vec<(Str
                 return Err(Error::cell(
                     row,
                     &name,
-                    format!("{v} mm is outside the sensor's range"),
+                    format!("{} mm is outside the sensor's range", super::shown(v)),
                 ));
             }
             ls.push(v);

@@ -26,6 +26,40 @@ pub(crate) fn finite(field: &str, v: f64) -> Result<f64> {
     }
 }
 
+/// Heaviest payload (kg) recorded or compensated for: beyond any serial
+/// arm's rating (the largest carry about 2,300 kg).
+pub const MAX_PAYLOAD_KG: f64 = 5000.0;
+
+/// A number as an error message shows it: plain, or in exponent form when
+/// very large or very small (1e300 is not 301 digits).
+pub(crate) fn shown(v: f64) -> String {
+    if v != 0.0 && !(1e-6..1e9).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// Largest |length| (mm) accepted in robot.json and rig.json: 100 m, far
+/// beyond any arm or rig; past it a value is a typo or a unit error, and
+/// the kinematics would lose all precision.
+pub const MAX_LENGTH_MM: f64 = 1e5;
+
+/// A finite length within ±[`MAX_LENGTH_MM`], with an error naming the field.
+pub(crate) fn length(field: &str, v: f64) -> Result<f64> {
+    finite(field, v)?;
+    if v.abs() > MAX_LENGTH_MM {
+        return Err(Error::field(
+            field,
+            format!(
+                "{} mm: more than 100 m, not a length of a robot or a rig",
+                shown(v)
+            ),
+        ));
+    }
+    Ok(v)
+}
+
 /// A CSV reader that trims cells and tolerates ragged rows (so a short row
 /// is reported by [`csv_record`] with its row number), with its header.
 ///
@@ -51,6 +85,12 @@ pub(crate) fn csv_with_header<R: std::io::Read>(
             return Err(Error::field("header", message));
         }
     };
+    // The same column twice: which one holds the data is anyone's guess.
+    for (i, h) in headers.iter().enumerate() {
+        if !h.is_empty() && headers.iter().take(i).any(|g| g == h) {
+            return Err(Error::field(h, "column appears twice"));
+        }
+    }
     if headers.len() == 1 {
         let only = &headers[0];
         let sep = [(';', "';'"), ('\t', "tab")]

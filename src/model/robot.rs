@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::finite;
+use super::{finite, length};
 use crate::error::{Error, Result};
 
 /// Which link-transform convention the joint table follows (DATA_FORMAT.md).
@@ -103,9 +103,9 @@ impl Robot {
         }
         for (i, j) in self.joints.iter().enumerate() {
             let p = |f: &str| format!("joints[{i}].{f}");
-            finite(&p("a_mm"), j.a_mm)?;
+            length(&p("a_mm"), j.a_mm)?;
             finite(&p("alpha_deg"), j.alpha_deg)?;
-            finite(&p("d_mm"), j.d_mm)?;
+            length(&p("d_mm"), j.d_mm)?;
             finite(&p("theta_offset_deg"), j.theta_offset_deg)?;
             finite(&p("beta_deg"), j.beta_deg)?;
             finite(&p("q_min_deg"), j.q_min_deg)?;
@@ -115,7 +115,7 @@ impl Robot {
             }
         }
         for (k, v) in self.tool_point_mm.iter().enumerate() {
-            finite(&format!("tool_point_mm[{k}]"), *v)?;
+            length(&format!("tool_point_mm[{k}]"), *v)?;
         }
         if let Some(links) = &self.links {
             if links.len() != self.joints.len() {
@@ -136,7 +136,7 @@ impl Robot {
                     ));
                 }
                 for (k, v) in l.com_mm.iter().enumerate() {
-                    finite(&format!("links[{i}].com_mm[{k}]"), *v)?;
+                    length(&format!("links[{i}].com_mm[{k}]"), *v)?;
                 }
             }
         }

@@ -172,6 +172,45 @@ async fn bad_requests_are_refused_and_change_nothing() {
         None,
     )
     .await;
+    // Two strings from one anchor; strings without r_mm; a negative r_mm.
+    refused(
+        &app,
+        c.post(app.url("/rigs")).json(
+            &json!({"anchors_mm": [[0, 0, 0], [0, 900, 0], [1200, 0, 0], [0, 0, 0]], "r_mm": 35}),
+        ),
+        422,
+        "invalid_input",
+        Some("anchors_mm[3]"),
+        None,
+    )
+    .await;
+    let e = refused(
+        &app,
+        c.post(app.url("/rigs"))
+            .json(&json!({"anchors_mm": [[0, 0, 0], [0, 900, 0], [1200, 0, 0]]})),
+        422,
+        "invalid_input",
+        None,
+        None,
+    )
+    .await;
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("missing field `r_mm`"),
+        "{e}"
+    );
+    refused(
+        &app,
+        c.post(app.url("/rigs"))
+            .json(&json!({"anchors_mm": [[0, 0, 0], [0, 900, 0], [1200, 0, 0]], "r_mm": -35})),
+        422,
+        "invalid_input",
+        Some("r_mm"),
+        None,
+    )
+    .await;
     refused(
         &app,
         c.post(app.url("/rigs"))
@@ -549,6 +588,21 @@ async fn bad_requests_are_refused_and_change_nothing() {
         None,
     )
     .await;
+    // An array is not the options object (serde alone took `[]`).
+    let e = refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/jobs")))
+            .json(&json!([])),
+        422,
+        "invalid_input",
+        None,
+        None,
+    )
+    .await;
+    assert!(
+        e["message"].as_str().unwrap().contains("not an array"),
+        "{e}"
+    );
 
     // Activation and compensation without a calibration.
     refused(
@@ -703,5 +757,27 @@ async fn poses_in_radians_are_calibrated_with_a_warning() {
             .starts_with("the joint angles look like radians"),
         "{warnings:?}"
     );
+    app.stop().await;
+}
+
+/// A JSON file saved with a byte-order mark (Windows editors add one) is
+/// read as the document it is, not refused as malformed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn json_with_a_byte_order_mark_is_read() {
+    let app = TestApp::spawn("bom").await;
+    let mut body = b"\xEF\xBB\xBF".to_vec();
+    body.extend_from_slice(read(DS, "rig.json").as_bytes());
+    let rig = ok_json(
+        reqwest::Client::new()
+            .post(app.url("/rigs"))
+            .header("content-type", "application/json")
+            .body(body)
+            .send()
+            .await
+            .unwrap(),
+        201,
+    )
+    .await;
+    assert_eq!(rig["n_strings"], 4, "{rig}");
     app.stop().await;
 }
