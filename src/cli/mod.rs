@@ -196,9 +196,16 @@ pub struct LocateArgs {
     /// Measuring rig (rig.json).
     #[arg(long)]
     pub rig: PathBuf,
-    /// Poses with string readings (poses.csv; joint columns are ignored).
+    /// Poses with string readings (poses.csv; joint columns are ignored
+    /// without --robot).
     #[arg(long)]
     pub poses: PathBuf,
+    /// Nominal robot (robot.json): with the rig's `base_in_rig` guess and the
+    /// joint columns it picks, for anchors in one plane, which side of the
+    /// plane each point is on (without it every point is put on the side
+    /// of the anchors' normal).
+    #[arg(long)]
+    pub robot: Option<PathBuf>,
     /// Where to write the located points CSV (stdout if absent).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -410,11 +417,48 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
         path: a.poses.clone(),
         source,
     })?;
-    let readings = core(
-        &a.poses,
-        crate::model::dataset::string_readings_from_csv(file, &rig),
-    )?;
     let anchors: Vec<_> = (0..rig.n_strings()).map(|k| rig.anchor(k)).collect();
+    let (readings, hints) = match &a.robot {
+        Some(path) => {
+            let robot = core(path, Robot::from_json(&read(path)?))?;
+            if rig.base_in_rig.is_none() {
+                return Err(CliError::Core {
+                    path: a.rig.clone(),
+                    source: crate::Error::field(
+                        "base_in_rig",
+                        "--robot needs the rig's guess of where the robot base is",
+                    ),
+                });
+            }
+            let data = core(&a.poses, Dataset::from_csv(file, &robot, &rig))?;
+            let hints = identify::nominal_points(&robot, &rig, &data);
+            let readings = data
+                .poses
+                .into_iter()
+                .map(|p| match p.measurement {
+                    crate::model::Measurement::Strings(l) => Ok((p.id, l)),
+                    crate::model::Measurement::Point(_) => Err(CliError::Core {
+                        path: a.poses.clone(),
+                        source: crate::Error::field("l1_mm", "no string readings to locate from"),
+                    }),
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            (readings, hints)
+        }
+        None => {
+            let readings = core(
+                &a.poses,
+                crate::model::dataset::string_readings_from_csv(file, &rig),
+            )?;
+            if measure::coplanar(&anchors) {
+                eprintln!(
+                    "note: the anchors lie in one plane, so each point has a mirror image across it; every point is put on the side of the anchors' normal (give --robot to choose each point's side from the nominal model)"
+                );
+            }
+            let n = readings.len();
+            (readings, vec![None; n])
+        }
+    };
     let mut located = Vec::with_capacity(readings.len());
     let mut w = csv::Writer::from_writer(Vec::new());
     let _ = w.write_record([
@@ -426,18 +470,24 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
         "closed_form_distance_mm",
     ]);
     let mut cf = Vec::new();
-    for (id, l) in &readings {
+    let mut mirrored = 0;
+    for ((id, l), hint) in readings.iter().zip(&hints) {
         let dist: Vec<f64> = l.iter().map(|v| v + rig.r_mm).collect();
-        let loc = core(&a.poses, measure::locate(&anchors, &dist, None))?;
-        let d_cf = if anchors.len() >= 4 {
-            measure::paper_closed_form(&anchors, l[0], l[2], l[3], rig.r_mm)
-                .ok()
-                .map(|p| (p - loc.point).norm())
+        let loc = core(&a.poses, measure::locate(&anchors, &dist, hint.as_ref()))?;
+        let cf_point = if anchors.len() >= 4 {
+            measure::paper_closed_form(&anchors, l[0], l[2], l[3], rig.r_mm).ok()
         } else {
             None
         };
-        if let Some(d) = d_cf {
+        let d_cf = cf_point.map(|p| (p - loc.point).norm());
+        if let (Some(d), Some(p)) = (d_cf, cf_point) {
             cf.push(d);
+            if d > 1.0
+                && measure::mirror_image(&anchors, &p)
+                    .is_some_and(|m| (m - loc.point).norm() < 0.1 * d)
+            {
+                mirrored += 1;
+            }
         }
         let _ = w.write_record([
             id.clone(),
@@ -470,7 +520,14 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
         let max = cf.iter().cloned().fold(0.0, f64::max);
         let bad = cf.iter().filter(|d| **d > 1.0).count();
         eprintln!(
-            "paper closed form vs least squares: RMS {rms:.4} mm, max {max:.4} mm, {bad} poses more than 1 mm apart"
+            "paper closed form vs least squares: RMS {rms:.4} mm, max {max:.4} mm, {bad} poses more than 1 mm apart{}",
+            crate::identify::report::ClosedFormComparison {
+                n: cf.len(),
+                rms_mm: rms,
+                max_mm: max,
+                mirrored
+            }
+            .mirrored_note()
         );
     }
     Ok(())

@@ -87,8 +87,11 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
     if let Some(c) = &r.closed_form_vs_lsq {
         let _ = writeln!(
             s,
-            "paper closed form vs least-squares points: RMS {:.4} mm, max {:.4} mm over {} poses",
-            c.rms_mm, c.max_mm, c.n
+            "paper closed form vs least-squares points: RMS {:.4} mm, max {:.4} mm over {} poses{}",
+            c.rms_mm,
+            c.max_mm,
+            c.n,
+            c.mirrored_note()
         );
     }
     let _ = writeln!(s);

@@ -166,18 +166,12 @@ impl<'a> Session<'a> {
                 train.len()
             )));
         }
-        // Side hint for mirror-ambiguous (coplanar) anchors: the nominal
-        // model's point with the base guess, when there is one.
-        let guess = rig.base_in_rig;
-        let nominal = guess.map(|b| Params::nominal(robot, &b, rig, m));
+        let hints = nominal_points(robot, rig, data);
         let mut measured = Vec::with_capacity(data.poses.len());
         let mut located = Vec::new();
-        for pose in &data.poses {
+        for (pose, hint) in data.poses.iter().zip(&hints) {
             match &pose.measurement {
                 Measurement::Strings(l) => {
-                    let hint = nominal
-                        .as_ref()
-                        .map(|p| chain.point(&p.values, &pose.q_rad, OutputFrame::Rig).1);
                     let dist: Vec<f64> = l.iter().map(|v| v + rig.r_mm).collect();
                     let loc = measure::locate(&anchors, &dist, hint.as_ref())
                         .map_err(|e| Error::field("poses", format!("pose {}: {e}", pose.id)))?;
@@ -356,6 +350,23 @@ fn split_source(data: &Dataset, session: &Session, opts: &IdentifyOptions) -> St
         data.poses.len(),
         opts.seed
     )
+}
+
+/// Where the nominal model, placed at the rig's `base_in_rig` guess, puts T
+/// at each pose (rig frame): the side hint that picks a located point's
+/// mirror image across a plane of anchors. All `None` without a guess.
+pub fn nominal_points(robot: &Robot, rig: &Rig, data: &Dataset) -> Vec<Option<Vector3<f64>>> {
+    let m = rig.n_strings();
+    let chain = Chain::new(robot.convention, robot.dof(), m);
+    let nominal = rig.base_in_rig.map(|b| Params::nominal(robot, &b, rig, m));
+    data.poses
+        .iter()
+        .map(|pose| {
+            nominal
+                .as_ref()
+                .map(|p| chain.point(&p.values, &pose.q_rad, OutputFrame::Rig).1)
+        })
+        .collect()
 }
 
 /// Rigid transform (R, t) minimising `Σ |R a + t - b|²` (Kabsch).
@@ -887,10 +898,18 @@ pub fn closed_form_comparison(session: &Session) -> Option<ClosedFormComparison>
     }
     let r = session.rig.r_mm;
     let mut d2 = Vec::new();
+    let mut mirrored = 0;
     for (pose, loc) in session.data.poses.iter().zip(&session.located) {
         if let Measurement::Strings(l) = &pose.measurement {
             if let Ok(p) = measure::paper_closed_form(&session.anchors, l[0], l[2], l[3], r) {
-                d2.push((p - loc.point).norm());
+                let d = (p - loc.point).norm();
+                if d > 1.0
+                    && measure::mirror_image(&session.anchors, &p)
+                        .is_some_and(|m| (m - loc.point).norm() < 0.1 * d)
+                {
+                    mirrored += 1;
+                }
+                d2.push(d);
             }
         }
     }
@@ -901,5 +920,6 @@ pub fn closed_form_comparison(session: &Session) -> Option<ClosedFormComparison>
         n: d2.len(),
         rms_mm: (d2.iter().map(|v| v * v).sum::<f64>() / d2.len() as f64).sqrt(),
         max_mm: d2.iter().cloned().fold(0.0, f64::max),
+        mirrored,
     })
 }

@@ -190,6 +190,24 @@ pub struct ClosedFormComparison {
     /// Max distance (mm).
     #[serde(deserialize_with = "nan_if_null")]
     pub max_mm: f64,
+    /// Poses where the closed form gave the mirror image of the
+    /// least-squares point across the anchors' plane (it assumes the
+    /// paper's side, z >= 0); they dominate the distances above.
+    #[serde(default)]
+    pub mirrored: usize,
+}
+
+impl ClosedFormComparison {
+    /// What a summary adds when the closed form gave mirror images (empty
+    /// when it gave none).
+    pub fn mirrored_note(&self) -> String {
+        match self.mirrored {
+            0 => String::new(),
+            n => format!(
+                " ({n} of them below the anchors' plane, where the closed form, which assumes the paper's z >= 0, gives the mirror image)"
+            ),
+        }
+    }
 }
 
 /// One physical effect found beyond the geometric model.

@@ -7,4 +7,4 @@ pub mod closed_form;
 pub mod multilateration;
 
 pub use closed_form::paper_closed_form;
-pub use multilateration::{Located, locate, string_sigma};
+pub use multilateration::{Located, coplanar, locate, mirror_image, string_sigma};

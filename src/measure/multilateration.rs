@@ -87,6 +87,47 @@ pub fn locate(
     })
 }
 
+/// True when the anchors lie in one plane (the paper's rig): every point
+/// then has a mirror image across that plane at the same distances.
+pub fn coplanar(anchors: &[Vector3<f64>]) -> bool {
+    spread_frame(anchors).2
+}
+
+/// `p` reflected across the plane of coplanar anchors (`None` when they are
+/// not coplanar): the other point at the same distances from every anchor.
+pub fn mirror_image(anchors: &[Vector3<f64>], p: &Vector3<f64>) -> Option<Vector3<f64>> {
+    let (eig, order, coplanar) = spread_frame(anchors);
+    if !coplanar || anchors.is_empty() {
+        return None;
+    }
+    let n = eig.eigenvectors.column(order[2]).into_owned();
+    Some(p - 2.0 * (p - anchors[0]).dot(&n) * n)
+}
+
+/// The eigen-decomposition of the anchors' spread about their centroid,
+/// with its axes ordered from the strongest spread down, and whether the
+/// weakest is nil (coplanar anchors).
+fn spread_frame(
+    anchors: &[Vector3<f64>],
+) -> (
+    nalgebra::SymmetricEigen<f64, nalgebra::U3>,
+    [usize; 3],
+    bool,
+) {
+    let mut cov = Matrix3::zeros();
+    let centroid = anchors.iter().sum::<Vector3<f64>>() / anchors.len().max(1) as f64;
+    for a in anchors {
+        let v = a - centroid;
+        cov += v * v.transpose();
+    }
+    let eig = cov.symmetric_eigen();
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&i, &j| eig.eigenvalues[j].total_cmp(&eig.eigenvalues[i]));
+    let spread = eig.eigenvalues[order[0]].max(1e-12);
+    let coplanar = eig.eigenvalues[order[2]] < 1e-6 * spread;
+    (eig, order, coplanar)
+}
+
 /// A start from the linearised equations `2(A_k - A_0)·p = |A_k|² - |A_0|²
 /// - d_k² + d_0²`. When the anchors are coplanar the normal component comes
 /// from the first sphere instead.
@@ -98,17 +139,7 @@ fn linear_start(
     let a0 = anchors[0];
     // Orthonormal frame of the anchors' spread: e1, e2 span the plane of
     // the strongest spread, e3 its normal.
-    let mut cov = Matrix3::zeros();
-    let centroid = anchors.iter().sum::<Vector3<f64>>() / anchors.len() as f64;
-    for a in anchors {
-        let v = a - centroid;
-        cov += v * v.transpose();
-    }
-    let eig = cov.symmetric_eigen();
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&i, &j| eig.eigenvalues[j].total_cmp(&eig.eigenvalues[i]));
-    let spread = eig.eigenvalues[order[0]].max(1e-12);
-    let coplanar = eig.eigenvalues[order[2]] < 1e-6 * spread;
+    let (eig, order, coplanar) = spread_frame(anchors);
     let mut rows: Vec<(Vector3<f64>, f64)> = Vec::new();
     for k in 1..anchors.len() {
         let ak = anchors[k];

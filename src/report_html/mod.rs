@@ -455,8 +455,11 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
             &mut o,
             "paper closed form vs least squares",
             format!(
-                "{} poses, RMS {:.4} mm, max {:.4} mm",
-                c.n, c.rms_mm, c.max_mm
+                "{} poses, RMS {:.4} mm, max {:.4} mm{}",
+                c.n,
+                c.rms_mm,
+                c.max_mm,
+                esc(&c.mirrored_note())
             ),
         );
     }
