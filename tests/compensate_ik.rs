@@ -413,3 +413,31 @@ fn singular_taught_poses_stay_near_the_taught_joints() {
         assert!(far < 45.0, "{q:?} {orientation}: {qc:?}");
     }
 }
+
+/// A two-joint positioner moves T on a surface: a target off it is
+/// unreachable, and the message says how near the calibrated model came
+/// (here a tool point 10 mm from the nominal one: at most 10 mm).
+#[test]
+fn a_two_joint_positioner_says_how_near_it_came() {
+    let nom = nominal("real_positioner2ax_rosi");
+    let mut cal = nom.clone();
+    cal.tool_point_mm[2] += 10.0;
+    let comp = Compensator::new(&nom, &cal).unwrap();
+    let t = Target {
+        target: "p".into(),
+        kind: TargetKind::Joints {
+            q_deg: vec![-30.0, 10.0],
+        },
+    };
+    let c = comp.compensate(&t, false);
+    assert_eq!(c.status, CompensationStatus::Unreachable, "{c:?}");
+    let message = c.message.unwrap();
+    let nearest: f64 = message
+        .split("the nearest the calibrated model came is ")
+        .nth(1)
+        .and_then(|r| r.strip_suffix(" mm"))
+        .unwrap_or_else(|| panic!("{message}"))
+        .parse()
+        .unwrap();
+    assert!(nearest > 0.1 && nearest <= 10.0 + 1e-6, "{message}");
+}

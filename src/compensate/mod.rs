@@ -252,6 +252,9 @@ struct Solution {
 /// A solve that did not converge: the iterations it ran before it gave up.
 struct NotConverged {
     iterations: usize,
+    /// Least distance (mm) from T to the target over the solve's iterates,
+    /// for a position-only target.
+    closest_mm: Option<f64>,
 }
 
 /// A ball that holds T for every joint angle (limits ignored): a true upper
@@ -704,6 +707,7 @@ impl Compensator {
         let cartesian = matches!(target.kind, TargetKind::Cartesian { .. });
         let mut last_iterations = 0;
         let mut limit_msg = None;
+        let mut closest_mm = f64::INFINITY;
         let mut tried: Vec<Vec<f64>> = Vec::new();
         // Closed-form (or taught) seeds first; the numerical ones only when
         // those fail, computed lazily.
@@ -744,11 +748,27 @@ impl Compensator {
                         message: None,
                     };
                 }
-                Err(failed) => last_iterations += failed.iterations,
+                Err(failed) => {
+                    last_iterations += failed.iterations;
+                    if let Some(c) = failed.closest_mm {
+                        closest_mm = closest_mm.min(c);
+                    }
+                }
             }
         }
         match limit_msg {
             Some(msg) => fail(CompensationStatus::JointLimit, last_iterations, msg),
+            // How near it came tells a target just out of reach (or an arm
+            // with too few joints to place T anywhere, like a two-axis
+            // positioner) from a wrong target.
+            None if closest_mm.is_finite() => fail(
+                CompensationStatus::Unreachable,
+                last_iterations,
+                format!(
+                    "{}; the nearest the calibrated model came is {closest_mm:.4} mm",
+                    unreachable_message()
+                ),
+            ),
             None => fail(
                 CompensationStatus::Unreachable,
                 last_iterations,
@@ -910,7 +930,13 @@ impl Compensator {
             Model::Calibrated => (&self.calibrated, true),
             Model::Nominal => (&self.nominal, false),
         };
-        let give_up = |iterations| Err(NotConverged { iterations });
+        let mut closest_mm = f64::INFINITY;
+        let give_up = |iterations, closest_mm: f64| {
+            Err(NotConverged {
+                iterations,
+                closest_mm: (rot.is_none() && closest_mm.is_finite()).then_some(closest_mm),
+            })
+        };
         let mut q = q0.to_vec();
         let mut jac = self.chain.new_jacobian();
         let m = if rot.is_some() { 6 } else { 3 };
@@ -933,6 +959,7 @@ impl Compensator {
             let e_rot = rot
                 .map(|r| rotation_error(r, &jac.flange.r))
                 .unwrap_or_else(Vector3::zeros);
+            closest_mm = closest_mm.min(e_pos.norm());
             let pos_ok = e_pos.norm() <= self.tolerance_mm;
             let rot_ok = e_rot.norm() <= self.tolerance_rad;
             if pos_ok && rot_ok {
@@ -944,7 +971,7 @@ impl Compensator {
             }
             if it == self.max_iterations {
                 // A step now would never be checked.
-                return give_up(it);
+                return give_up(it, closest_mm);
             }
             // Error in mm with rotation weighted by 1000 mm/rad so both
             // parts count alike in the damping.
@@ -981,7 +1008,7 @@ impl Compensator {
                 }
             }
             if err > 100.0 * converged_err && stationary(&j, &e) {
-                return give_up(it);
+                return give_up(it, closest_mm);
             }
             let step = if n >= m {
                 // Minimum-norm: Jᵀ (J Jᵀ + λ I)⁻¹ e.
@@ -991,7 +1018,7 @@ impl Compensator {
                     a[(i, i)] += lambda * scale;
                 }
                 let Some(a) = a.cholesky() else {
-                    return give_up(it);
+                    return give_up(it, closest_mm);
                 };
                 j.transpose() * a.solve(&e)
             } else {
@@ -1001,7 +1028,7 @@ impl Compensator {
                     a[(i, i)] += lambda * scale;
                 }
                 let Some(a) = a.cholesky() else {
-                    return give_up(it);
+                    return give_up(it, closest_mm);
                 };
                 a.solve(&(j.transpose() * &e))
             };
@@ -1016,7 +1043,7 @@ impl Compensator {
                 let per_rad = reach.radius + if rot.is_some() { 1000.0 } else { 0.0 };
                 let moved = 2.0 * (11.0 / 9.0) * (n as f64).sqrt() * per_rad * step.norm();
                 if err - moved > best {
-                    return give_up(it);
+                    return give_up(it, closest_mm);
                 }
             }
             // A trust region: near a singular configuration (a stretched
@@ -1036,7 +1063,7 @@ impl Compensator {
                 q[c] += scale * step[c];
             }
             if !q.iter().all(|v| v.is_finite()) {
-                return give_up(it + 1);
+                return give_up(it + 1, closest_mm);
             }
         }
         unreachable!("the last iteration returns")
