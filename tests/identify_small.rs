@@ -98,16 +98,19 @@ fn fewer_poses_than_parameters_is_an_error() {
         cells[split] = if i <= 20 { "train" } else { "test" };
         *line = cells.join(",");
     }
-    let data = Dataset::from_csv(lines.join("\n").as_bytes(), &robot, &rig).unwrap();
-    let e = identify(
-        &robot,
-        &rig,
-        &data,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap_err()
-    .to_string();
+    let refused = |csv: String| {
+        let data = Dataset::from_csv(csv.as_bytes(), &robot, &rig).unwrap();
+        identify(
+            &robot,
+            &rig,
+            &data,
+            &IdentifyOptions::default(),
+            &NoProgress,
+        )
+        .unwrap_err()
+        .to_string()
+    };
+    let e = refused(lines.join("\n"));
     assert!(e.contains("20 usable train poses"), "{e}");
     assert!(e.contains("parameters these poses identify"), "{e}");
 
@@ -121,15 +124,6 @@ fn fewer_poses_than_parameters_is_an_error() {
             cells.join(",")
         }))
         .collect();
-    let data = Dataset::from_csv(same.join("\n").as_bytes(), &robot, &rig).unwrap();
-    let e = identify(
-        &robot,
-        &rig,
-        &data,
-        &IdentifyOptions::default(),
-        &NoProgress,
-    )
-    .unwrap_err()
-    .to_string();
+    let e = refused(same.join("\n"));
     assert!(e.contains("1 usable train poses"), "{e}");
 }

@@ -212,9 +212,15 @@ fn the_compensate_view_sends_the_conditions_and_shows_the_used_ones() {
         approach_used: None,
         n_ok: 0,
         results: vec![],
+        warnings: vec![],
     })
     .unwrap();
-    for field in ["temp_c_used", "payload_kg_used", "approach_used"] {
+    for field in [
+        "temp_c_used",
+        "payload_kg_used",
+        "approach_used",
+        "warnings",
+    ] {
         assert!(answer.get(field).is_some(), "the API answers {field}");
         assert!(js.contains(&format!("r.{field}")), "app.js reads {field}");
     }

@@ -298,6 +298,9 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
         source,
     })?;
     let targets = core(&a.targets, targets_from_csv(file, comp.dof()))?;
+    if let Some(w) = crate::model::targets::radians_warning(&targets, comp.dof()) {
+        eprintln!("WARNING: {}: {w}", a.targets.display());
+    }
     if !comp.has_backlash() && a.approach != ApproachArg::Positive {
         eprintln!("note: --approach is not used: the calibration has no backlash");
     }

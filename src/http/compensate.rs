@@ -191,6 +191,10 @@ pub struct CompensateResponse {
     pub n_ok: usize,
     /// One per target, in order.
     pub results: Vec<CompensatedOut>,
+    /// What looks wrong in the targets but did not stop them, one sentence
+    /// each (joint angles that look like radians); empty when nothing does.
+    /// On text/csv answers: the `X-Warning` header.
+    pub warnings: Vec<String>,
 }
 
 fn check_target(i: usize, t: TargetIn, dof: usize, batch: bool) -> ApiResult<Target> {
@@ -505,7 +509,8 @@ fn wants_csv(headers: &HeaderMap) -> bool {
                 ("x-calibration-version" = i64, description = "Its version (on text/csv answers)"),
                 ("x-temp-c-used" = f64, description = "Temperature (°C) the geometry was taken at, on text/csv answers when the calibration has thermal expansion driven by the temperature (JSON: `temp_c_used`)"),
                 ("x-payload-kg-used" = f64, description = "Payload (kg at T) the joint compliance was evaluated with, on text/csv answers when the calibration has a compliance that depends on it (JSON: `payload_kg_used`)"),
-                ("x-approach-used" = String, description = "`positive`, `negative` or `in_order`: how the joints were taken to arrive, on text/csv answers when the calibration has a backlash (JSON: `approach_used`)"))),
+                ("x-approach-used" = String, description = "`positive`, `negative` or `in_order`: how the joints were taken to arrive, on text/csv answers when the calibration has a backlash (JSON: `approach_used`)"),
+                ("x-warning" = String, description = "What looks wrong in the targets but did not stop them (joint angles that look like radians), one header each, on text/csv answers (JSON: `warnings`)"))),
         (status = 400, description = "Malformed JSON or query string", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody),
         (status = 409, description = "The robot has no active calibration", body = ErrorBody),
@@ -645,6 +650,9 @@ pub async fn compensate(
             targets
         }
     };
+    let warnings: Vec<String> = crate::model::targets::radians_warning(&targets, dof)
+        .into_iter()
+        .collect();
     let adjusted = conditions.adjust(&cached.compensator);
     let used = adjusted.as_ref().unwrap_or(&cached.compensator);
     let (temp_c_used, payload_kg_used) = (used.temperature_c(), used.payload_kg());
@@ -688,6 +696,12 @@ pub async fn compensate(
                 resp.headers_mut().insert(HeaderName::from_static(name), v);
             }
         }
+        for w in &warnings {
+            if let Ok(v) = HeaderValue::from_str(w) {
+                resp.headers_mut()
+                    .append(HeaderName::from_static("x-warning"), v);
+            }
+        }
         if let Some(a) = approach_used {
             let v = match a {
                 ApproachIn::Positive => "positive",
@@ -712,6 +726,7 @@ pub async fn compensate(
         approach_used,
         n_ok,
         results,
+        warnings,
     })
     .into_response())
 }

@@ -117,6 +117,33 @@ pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
     Ok(out)
 }
 
+/// A warning when joint targets look like radians: a robot with three or
+/// more joints, at least three joint targets, not all at zero, and every
+/// angle within ±2π. The numbers alone cannot be sure (a program may
+/// really move only a few degrees), so they are compensated as degrees and
+/// the warning says so; these joints go to the robot.
+pub fn radians_warning(targets: &[Target], dof: usize) -> Option<String> {
+    let bound = crate::identify::warnings::RADIANS_BOUND;
+    let joints: Vec<&Vec<f64>> = targets
+        .iter()
+        .filter_map(|t| match &t.kind {
+            TargetKind::Joints { q_deg } => Some(q_deg),
+            TargetKind::Cartesian { .. } => None,
+        })
+        .collect();
+    let all = joints.iter().flat_map(|q| q.iter());
+    let suspect = dof >= 3
+        && joints.len() >= 3
+        && all.clone().all(|v| v.abs() <= bound)
+        && all.clone().any(|v| v.abs() > 1e-9);
+    suspect.then(|| {
+        format!(
+            "every joint angle of these {} joint targets lies between -6.28 and 6.28: if they are radians, convert them to degrees (the q*_deg columns hold degrees); they were compensated as degrees",
+            joints.len()
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -155,5 +182,30 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("must be comma-separated"), "{e}");
+    }
+
+    #[test]
+    fn joint_targets_in_radians_are_suspected() {
+        let t = |q: &[f64]| Target {
+            target: "t".into(),
+            kind: TargetKind::Joints { q_deg: q.to_vec() },
+        };
+        let rad = [
+            t(&[0.1, 0.5, 1.2]),
+            t(&[0.2, 0.6, -1.1]),
+            t(&[0.3, 0.4, 1.3]),
+        ];
+        assert!(radians_warning(&rad, 3).unwrap().contains("radians"));
+        // Two targets, a two-joint positioner, all at zero, one real angle: no.
+        assert!(radians_warning(&rad[..2], 3).is_none());
+        assert!(radians_warning(&rad, 2).is_none());
+        let zeros = [t(&[0.0; 3]), t(&[0.0; 3]), t(&[0.0; 3])];
+        assert!(radians_warning(&zeros, 3).is_none());
+        let deg = [
+            t(&[10.0, 0.5, 1.2]),
+            t(&[0.2, 0.6, -1.1]),
+            t(&[0.3, 0.4, 1.3]),
+        ];
+        assert!(radians_warning(&deg, 3).is_none());
     }
 }

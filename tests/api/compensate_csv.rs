@@ -313,3 +313,39 @@ async fn bad_csv_targets_are_refused_in_json_naming_row_and_column() {
     assert_eq!(app.snapshot().await, before, "nothing changed");
     app.stop().await;
 }
+
+/// Joint targets that look like radians are compensated as degrees (the
+/// contract) with a warning, in JSON `warnings` and as `X-Warning` on CSV;
+/// targets in degrees get none.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn joint_targets_that_look_like_radians_are_warned_about() {
+    let app = TestApp::spawn("comprad").await;
+    let (robot, _) = calibrated(&app).await;
+    let path = format!("/compensate?robot_id={robot}");
+    let radians = "target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\n\
+        a,0.1,0.5,1.2,-0.3,1.0,2.0\n\
+        b,0.2,0.6,1.1,-0.2,0.9,2.1\n\
+        c,0.3,0.4,1.3,-0.1,1.1,1.9\n";
+    let r = post(&app, &path, "text/csv", None, radians.into()).await;
+    assert_eq!(r.status(), 200);
+    let v = validate_response("post", "/compensate", r).await;
+    assert_eq!(v["n_ok"], 3, "{v}");
+    let w = v["warnings"].as_array().unwrap();
+    assert_eq!(w.len(), 1, "{v}");
+    assert!(w[0].as_str().unwrap().contains("radians"), "{v}");
+    let r = post(&app, &path, "text/csv", Some("text/csv"), radians.into()).await;
+    assert_eq!(r.status(), 200);
+    let h = r
+        .headers()
+        .get("x-warning")
+        .expect("X-Warning")
+        .to_str()
+        .unwrap();
+    assert!(h.contains("convert them to degrees"), "{h}");
+    // Degrees: nothing to say.
+    let r = post(&app, &path, "text/csv", None, JOINT_TARGETS.into()).await;
+    assert_eq!(r.status(), 200);
+    let v = validate_response("post", "/compensate", r).await;
+    assert_eq!(v["warnings"], json!([]), "{v}");
+    app.stop().await;
+}

@@ -591,6 +591,7 @@ t1,10,-20,30,0,40,0</textarea><br>
       $("#comp-out").innerHTML = `<p>calibration #${r.calibration_id} v${r.version}: ${r.n_ok} of ${r.results.length} ok.
         <a id="comp-download" href="${url}" download="compensated.csv">Download compensated.csv</a></p>
         ${usedHtml(r, req)}
+        ${(r.warnings || []).length ? `<div class="warnings" id="comp-warnings"><b>Warning</b><ul>${r.warnings.map(w => `<li>${esc(w)}</li>`).join("")}</ul></div>` : ""}
         <textarea id="comp-csv" rows="8" readonly>${esc(csv)}</textarea>`;
     } catch (e) { showError(msg, e); }
   };
