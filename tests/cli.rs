@@ -163,6 +163,84 @@ fn locate_compares_closed_form_and_least_squares() {
     assert!(err.contains("paper closed form vs least squares"), "{err}");
 }
 
+/// A report of another format version is refused by name; the service's
+/// calibration answer (the report wrapped under `report`) is read as the
+/// report it holds; a poses.csv with no rows locates nothing and says so.
+#[test]
+fn reports_are_read_by_their_format() {
+    let dir = std::env::temp_dir().join(format!("drawcal-cli-format-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let report = dir.join("report.json");
+    let out = bin()
+        .args(["identify", "--physics", "off", "--robot"])
+        .arg(data("robot.json"))
+        .arg("--rig")
+        .arg(data("rig.json"))
+        .arg("--poses")
+        .arg(data("poses.csv"))
+        .arg("--out")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = std::fs::read_to_string(&report).unwrap();
+    let targets = dir.join("targets.csv");
+    std::fs::write(
+        &targets,
+        "target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg\nt1,10,20,30,40,50,60\n",
+    )
+    .unwrap();
+    let compensate = |path: &PathBuf| {
+        bin()
+            .arg("compensate")
+            .arg("--calibration")
+            .arg(path)
+            .arg("--targets")
+            .arg(&targets)
+            .output()
+            .unwrap()
+    };
+    let future = dir.join("future.json");
+    std::fs::write(
+        &future,
+        text.replace("drawcal report v1", "drawcal report v9"),
+    )
+    .unwrap();
+    let out = compensate(&future);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("'drawcal report v9': this drawcal reads 'drawcal report v1'"),
+        "{err}"
+    );
+    let wrapped = dir.join("calibration.json");
+    std::fs::write(
+        &wrapped,
+        format!(r#"{{"id": 1, "version": 1, "report": {text}}}"#),
+    )
+    .unwrap();
+    let out = compensate(&wrapped);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("t1,"));
+    let empty = dir.join("empty.csv");
+    std::fs::write(&empty, "pose,l1_mm,l2_mm,l3_mm,l4_mm\n").unwrap();
+    let out = bin()
+        .arg("locate")
+        .arg("--rig")
+        .arg(data("rig.json"))
+        .arg("--poses")
+        .arg(&empty)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no poses"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Points below a plane of anchors (a simulated ER3A session reaching under
 /// the paper's rig): `locate` alone puts every point on the normal's side
 /// and says so; with `--robot` the nominal model picks each point's side

@@ -285,11 +285,7 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
 }
 
 fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
-    let report: Report =
-        serde_json::from_str(&read(&a.calibration)?).map_err(|e| CliError::Core {
-            path: a.calibration.clone(),
-            source: crate::Error::field("report", e.to_string()),
-        })?;
+    let report = core(&a.calibration, Report::from_json(&read(&a.calibration)?))?;
     let comp = core(&a.calibration, Compensator::from_report(&report))?;
     let comp = at_temperature(comp, &report, a.temp_c)?;
     let comp = with_payload(comp, a.payload_kg)?;

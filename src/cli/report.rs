@@ -26,22 +26,11 @@ pub struct ReportArgs {
     pub title: Option<String>,
 }
 
-/// Parse a report file: the report itself or the service's calibration
-/// answer wrapping it.
-pub fn parse_report(text: &str) -> Result<Report, String> {
-    let v: serde_json::Value = serde_json::from_str(text).map_err(|e| e.to_string())?;
-    let inner = match v.get("report") {
-        Some(r) if r.is_object() => r.clone(),
-        _ => v,
-    };
-    serde_json::from_value(inner).map_err(|e| format!("not a drawcal report: {e}"))
-}
-
 /// Write the HTML report.
 pub fn run(args: ReportArgs) -> Result<(), Box<dyn std::error::Error>> {
     let text = std::fs::read_to_string(&args.report)
         .map_err(|e| format!("{}: {e}", args.report.display()))?;
-    let report = parse_report(&text).map_err(|e| format!("{}: {e}", args.report.display()))?;
+    let report = Report::from_json(&text).map_err(|e| format!("{}: {e}", args.report.display()))?;
     let poses = match &args.poses {
         None => None,
         Some(p) => {

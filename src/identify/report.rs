@@ -390,3 +390,26 @@ pub struct Report {
     #[serde(default)]
     pub warnings: Vec<String>,
 }
+
+impl Report {
+    /// Read a report: `drawcal identify`'s JSON, or the service's
+    /// calibration answer wrapping it under `report`. A report of another
+    /// format version is refused by name rather than half read.
+    pub fn from_json(text: &str) -> crate::Result<Report> {
+        let field = |m: String| crate::Error::field("report", m);
+        let v: serde_json::Value = serde_json::from_str(text).map_err(|e| field(e.to_string()))?;
+        let inner = match v.get("report") {
+            Some(r) if r.is_object() => r.clone(),
+            _ => v,
+        };
+        if let Some(f) = inner.get("format").and_then(|f| f.as_str()) {
+            if f != REPORT_FORMAT {
+                return Err(crate::Error::field(
+                    "format",
+                    format!("'{f}': this drawcal reads '{REPORT_FORMAT}' reports"),
+                ));
+            }
+        }
+        serde_json::from_value(inner).map_err(|e| field(format!("not a drawcal report: {e}")))
+    }
+}

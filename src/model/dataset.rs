@@ -471,5 +471,8 @@ pub fn string_readings_from_csv<R: Read>(input: R, rig: &Rig) -> Result<Vec<(Str
         }
         out.push((id, ls));
     }
+    if out.is_empty() {
+        return Err(Error::InsufficientData("the file holds no poses".into()));
+    }
     Ok(out)
 }
