@@ -298,7 +298,9 @@ fn locate_with_the_robot_picks_each_points_side() {
     let (with_robot, err) = worst(&["--robot", robot.to_str().unwrap()]);
     assert!(with_robot < 1.0, "{with_robot}");
     assert!(
-        err.contains(&format!("{below} of them below the anchors' plane")),
+        err.contains(&format!(
+            "{below} of them below the plane of anchors A, C and D"
+        )),
         "{err}"
     );
     std::fs::remove_dir_all(&dir).ok();

@@ -28,8 +28,7 @@ fn every_prefix_identifies_or_says_why() {
         let lines: Vec<&str> = csv.lines().collect();
         let mut reports = 0;
         // With the file's split, and with the tool choosing its own.
-        // Up to 24 poses one by one (a 6-axis arm errs on all of them:
-        // fewer poses than parameters), then a few that calibrate.
+        // Up to 24 poses one by one, then a few more.
         let sizes = (1..=24).chain([30, 36, 45]).filter(|&n| n < lines.len());
         let prefixes = sizes.flat_map(|n| {
             let prefix = lines[..=n].join("\n");
@@ -83,22 +82,29 @@ fn a_split_without_test_poses_says_so() {
     assert_eq!(rep.stats.test.n, 15);
 }
 
-/// Fewer distinct train poses than the parameters they identify is an
-/// error that says how many are needed, not a fit through the readings:
-/// 20 train poses of a 6-axis arm, and 50 recordings of one pose.
+/// Too few distinct train poses for the parameters they identify: with no
+/// more equations (3 per pose) than parameters it is an error that says how
+/// many are needed, not a fit through the readings; with fewer poses than
+/// parameters but more equations, a warning. 20 and 8 train poses of a
+/// 6-axis arm (27 parameters), 50 recordings of one pose, and 30 poses with
+/// the hold-out chosen by the tool (21 train).
 #[test]
-fn fewer_poses_than_parameters_is_an_error() {
+fn too_few_poses_for_the_parameters() {
     let (robot, rig, _) = common::load("er3a_paper_like");
     let csv = std::fs::read_to_string(common::dir("er3a_paper_like").join("poses.csv")).unwrap();
-    let mut lines: Vec<String> = csv.lines().map(String::from).collect();
+    let lines: Vec<String> = csv.lines().map(String::from).collect();
     let split = lines[0].split(',').position(|h| h == "split").unwrap();
-    // Only the first 20 rows train.
-    for (i, line) in lines.iter_mut().enumerate().skip(1) {
-        let mut cells: Vec<&str> = line.split(',').collect();
-        cells[split] = if i <= 20 { "train" } else { "test" };
-        *line = cells.join(",");
-    }
-    let refused = |csv: String| {
+    // The first `n` rows train, the rest test.
+    let with_train = |n: usize| {
+        let mut out = vec![lines[0].clone()];
+        for (i, line) in lines.iter().enumerate().skip(1) {
+            let mut cells: Vec<&str> = line.split(',').collect();
+            cells[split] = if i <= n { "train" } else { "test" };
+            out.push(cells.join(","));
+        }
+        out.join("\n")
+    };
+    let run = |csv: String| {
         let data = Dataset::from_csv(csv.as_bytes(), &robot, &rig).unwrap();
         identify(
             &robot,
@@ -107,12 +113,21 @@ fn fewer_poses_than_parameters_is_an_error() {
             &IdentifyOptions::default(),
             &NoProgress,
         )
-        .unwrap_err()
-        .to_string()
     };
-    let e = refused(lines.join("\n"));
-    assert!(e.contains("20 usable train poses"), "{e}");
-    assert!(e.contains("parameters these poses identify"), "{e}");
+    let rep = run(with_train(20)).unwrap();
+    assert!(
+        rep.warnings
+            .iter()
+            .any(|w| w.contains("20 usable train poses") && w.contains("27 parameters")),
+        "{:?}",
+        rep.warnings
+    );
+    let e = run(with_train(8)).unwrap_err().to_string();
+    assert!(
+        e.contains("8 usable train poses") && e.contains("record at least"),
+        "{e}"
+    );
+    assert!(!e.contains("--holdout"), "the file's split: {e}");
 
     // One pose recorded 50 times: readings, not information.
     let first = lines[1].clone();
@@ -124,6 +139,15 @@ fn fewer_poses_than_parameters_is_an_error() {
             cells.join(",")
         }))
         .collect();
-    let e = refused(same.join("\n"));
+    let e = run(same.join("\n")).unwrap_err().to_string();
     assert!(e.contains("1 usable train poses"), "{e}");
+
+    // 30 poses, no split: 21 train, a warning that names the hold-out.
+    let no_split = common::drop_columns(&lines[..=30].join("\n"), &["split"]);
+    let rep = run(no_split).unwrap();
+    let w = rep.warnings.join(" ");
+    assert!(
+        w.contains("21 usable train poses") && w.contains("--holdout 0.3"),
+        "{w}"
+    );
 }

@@ -482,7 +482,7 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
         if let (Some(d), Some(p)) = (d_cf, cf_point) {
             cf.push(d);
             if d > 1.0
-                && measure::mirror_image(&anchors, &p)
+                && measure::paper_mirror_image(&anchors, &p)
                     .is_some_and(|m| (m - loc.point).norm() < 0.1 * d)
             {
                 mirrored += 1;

@@ -167,12 +167,16 @@ pub fn is_json(ct: Option<&str>) -> bool {
     matches!(ct, Some(c) if c == "application/json" || c.ends_with("+json"))
 }
 
+/// `bytes` without a leading UTF-8 byte-order mark (a file saved by a
+/// Windows editor and posted as is): it is not part of the document.
+pub fn without_bom(bytes: &[u8]) -> &[u8] {
+    bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes)
+}
+
 /// Parse JSON bytes: syntax errors are 400 `malformed_json`, type and
 /// shape errors 422 `invalid_input` naming the field path.
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
-    // A byte-order mark (a file saved by a Windows editor and posted as
-    // is) is not part of the document.
-    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let bytes = without_bom(bytes);
     // The common case in one pass; only a failed parse pays for the
     // classification below (it is on the /compensate hot path).
     if let Ok(v) = serde_json::from_slice::<T>(bytes) {
@@ -190,7 +194,15 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
             let path = e.path().to_string();
             let inner = e.into_inner();
             use serde_json::error::Category;
-            let field = (path != "." && !path.is_empty()).then_some(path);
+            // A field missing at the top level has the path "."; serde's
+            // message names it.
+            let field = (path != "." && !path.is_empty())
+                .then_some(path)
+                .or_else(|| {
+                    let m = inner.to_string();
+                    let rest = m.strip_prefix("missing field `")?;
+                    Some(rest[..rest.find('`')?].to_string())
+                });
             match inner.classify() {
                 Category::Io => Err(ApiError::MalformedJson(format!("malformed JSON: {inner}"))),
                 // The syntax pass above succeeded, so a "syntax" error here

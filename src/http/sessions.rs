@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
-use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json};
+use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json, without_bom};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
 use crate::jobs::{JobOptions, session_csv};
 use crate::model::{Dataset, Rig, Robot};
@@ -429,7 +429,10 @@ pub async fn enqueue_job(
     } else if is_json(body.content_type.as_deref()) {
         // serde reads a struct from an array too (`[]` as all defaults):
         // the options are an object (or null), as documented.
-        if body.bytes.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'[') {
+        let first = without_bom(&body.bytes)
+            .iter()
+            .find(|b| !b.is_ascii_whitespace());
+        if first == Some(&b'[') {
             return Err(ApiError::Invalid {
                 message: "job options are a JSON object (or null), not an array".into(),
                 field: None,

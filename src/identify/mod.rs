@@ -492,17 +492,18 @@ pub fn geometric(
     let mut g = nalgebra::DVector::zeros(cands.len());
     lm::LeastSquares::normal_equations(&pc, &pc.x0(), &mut jtj, &mut g);
     let selection = identifiability::select(&jtj, &cands, &l, opts.identifiability_tolerance);
-    // Fewer distinct poses than parameters: the fit would pass through the
-    // readings and its figures would mean nothing.
+    // As many equations (3 per distinct pose: T) as parameters or fewer:
+    // the fit passes through the readings and its figures mean nothing.
+    // (Fewer poses than parameters, but more equations, is a warning.)
     let usable = distinct_poses(session, &session.train);
-    if usable < selection.free.len() {
+    let k = selection.free.len();
+    if 3 * usable <= k {
         return Err(Error::InsufficientData(format!(
-            "{usable} usable train poses (distinct joint angles) for the {} parameters these poses identify: record at least {} poses, better two or three times as many (the paper identified 27 parameters from 30)",
-            selection.free.len(),
-            selection.free.len()
+            "{usable} usable train poses (distinct joint angles) for the {k} parameters these \
+             poses identify: {}",
+            more_poses_advice(session, opts, k)
         )));
     }
-
     progress.update("identifying", 0.0);
     let mut problem = session.problem(before.values.clone(), selection.free.clone());
     let mut result = run_lm(&problem, progress, "identifying")?;
@@ -547,6 +548,27 @@ pub fn geometric(
         weights: problem.weights,
         sigma,
     })
+}
+
+/// What to do about too few train poses for `k` parameters: record at
+/// least `k` train poses (more, if the tool chooses the hold-out itself).
+fn more_poses_advice(session: &Session, opts: &IdentifyOptions, k: usize) -> String {
+    // The file's split is used when it marks both kinds (`choose_split`).
+    let marked = |k: Split| session.data.poses.iter().any(|p| p.split == Some(k));
+    let from_file = marked(Split::Train) && marked(Split::Test);
+    let hold = opts.holdout_fraction.clamp(0.0, 0.9);
+    if from_file || hold == 0.0 {
+        format!(
+            "record at least {k} train poses, better two or three times as many (the paper identified 27 parameters from 30)"
+        )
+    } else {
+        format!(
+            "record at least {k} train poses, better two or three times as many (the paper identified 27 parameters from 30); {} of the {} poses are held out (--holdout {hold}), so record at least {} in all, lower --holdout, or mark the split in a split column",
+            session.test.len(),
+            session.data.poses.len(),
+            (k as f64 / (1.0 - hold)).ceil() as usize
+        )
+    }
 }
 
 /// How many of the poses `idx` differ in their joint angles (a pose
@@ -626,8 +648,18 @@ pub fn identify(
     progress: &dyn Progress,
 ) -> Result<Report> {
     let session = Session::new(robot, rig, data, opts)?;
-    let warnings = warnings::input_warnings(&session);
+    let mut warnings = warnings::input_warnings(&session);
     let geo = geometric(&session, opts, progress)?;
+    let (usable, k) = (
+        distinct_poses(&session, &session.train),
+        geo.selection.free.len(),
+    );
+    if usable < k {
+        warnings.push(format!(
+            "{usable} usable train poses (distinct joint angles) for the {k} parameters they identify: the parameters and the held-out figures are fragile; {}",
+            more_poses_advice(&session, opts, k)
+        ));
+    }
     let l = session.chain.layout;
     let string_sigma = session
         .string_sigma()
@@ -904,7 +936,7 @@ pub fn closed_form_comparison(session: &Session) -> Option<ClosedFormComparison>
             if let Ok(p) = measure::paper_closed_form(&session.anchors, l[0], l[2], l[3], r) {
                 let d = (p - loc.point).norm();
                 if d > 1.0
-                    && measure::mirror_image(&session.anchors, &p)
+                    && measure::paper_mirror_image(&session.anchors, &p)
                         .is_some_and(|m| (m - loc.point).norm() < 0.1 * d)
                 {
                     mirrored += 1;

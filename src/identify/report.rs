@@ -191,8 +191,8 @@ pub struct ClosedFormComparison {
     #[serde(deserialize_with = "nan_if_null")]
     pub max_mm: f64,
     /// Poses where the closed form gave the mirror image of the
-    /// least-squares point across the anchors' plane (it assumes the
-    /// paper's side, z >= 0); they dominate the distances above.
+    /// least-squares point across the plane of anchors A, C and D (it
+    /// assumes the paper's side, z >= 0); they dominate the distances above.
     #[serde(default)]
     pub mirrored: usize,
 }
@@ -204,7 +204,7 @@ impl ClosedFormComparison {
         match self.mirrored {
             0 => String::new(),
             n => format!(
-                " ({n} of them below the anchors' plane, where the closed form, which assumes the paper's z >= 0, gives the mirror image)"
+                " ({n} of them below the plane of anchors A, C and D, where the closed form, which assumes the paper's z >= 0, gives the mirror image)"
             ),
         }
     }
@@ -397,6 +397,7 @@ impl Report {
     /// format version is refused by name rather than half read.
     pub fn from_json(text: &str) -> crate::Result<Report> {
         let field = |m: String| crate::Error::field("report", m);
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let v: serde_json::Value = serde_json::from_str(text).map_err(|e| field(e.to_string()))?;
         let inner = match v.get("report") {
             Some(r) if r.is_object() => r.clone(),

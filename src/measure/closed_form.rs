@@ -10,6 +10,19 @@ use nalgebra::{Matrix3, Vector3};
 
 use crate::error::{Error, Result};
 
+/// `p` reflected across the plane of anchors A, C and D (the first, third
+/// and fourth), the plane the closed form measures its z >= 0 from: where
+/// the closed form puts a point below that plane. `None` with fewer than
+/// four anchors.
+pub fn paper_mirror_image(anchors: &[Vector3<f64>], p: &Vector3<f64>) -> Option<Vector3<f64>> {
+    if anchors.len() < 4 {
+        return None;
+    }
+    let (a, c, d) = (anchors[0], anchors[2], anchors[3]);
+    let n = (c - a).cross(&(d - a)).try_normalize(1e-12)?;
+    Some(p - 2.0 * (p - a).dot(&n) * n)
+}
+
 /// T in the rig frame from readings `l_a, l_c, l_d` (mm) and the string
 /// constant `r` (mm). `anchors` are A, B, C, D in rig.json order; B is not
 /// used by the paper's equations.

@@ -93,17 +93,6 @@ pub fn coplanar(anchors: &[Vector3<f64>]) -> bool {
     spread_frame(anchors).2
 }
 
-/// `p` reflected across the plane of coplanar anchors (`None` when they are
-/// not coplanar): the other point at the same distances from every anchor.
-pub fn mirror_image(anchors: &[Vector3<f64>], p: &Vector3<f64>) -> Option<Vector3<f64>> {
-    let (eig, order, coplanar) = spread_frame(anchors);
-    if !coplanar || anchors.is_empty() {
-        return None;
-    }
-    let n = eig.eigenvectors.column(order[2]).into_owned();
-    Some(p - 2.0 * (p - anchors[0]).dot(&n) * n)
-}
-
 /// The eigen-decomposition of the anchors' spread about their centroid,
 /// with its axes ordered from the strongest spread down, and whether the
 /// weakest is nil (coplanar anchors).

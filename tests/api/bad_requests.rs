@@ -190,7 +190,7 @@ async fn bad_requests_are_refused_and_change_nothing() {
             .json(&json!({"anchors_mm": [[0, 0, 0], [0, 900, 0], [1200, 0, 0]]})),
         422,
         "invalid_input",
-        None,
+        Some("r_mm"),
         None,
     )
     .await;
