@@ -3,8 +3,8 @@
 
 mod common;
 
-use std::path::PathBuf;
-use std::process::Command;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_drawcal"))
@@ -16,22 +16,31 @@ fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// `drawcal identify --physics off` on these files, with `extra` arguments.
+fn identify_files(robot: &Path, rig: &Path, poses: &Path, extra: &[&str]) -> Output {
+    bin()
+        .args(["identify", "--physics", "off", "--robot"])
+        .arg(robot)
+        .arg("--rig")
+        .arg(rig)
+        .arg("--poses")
+        .arg(poses)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn identify_then_compensate() {
     let dir = std::env::temp_dir().join(format!("drawcal-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let report = dir.join("report.json");
-    let out = bin()
-        .args(["identify", "--physics", "off", "--robot"])
-        .arg(data("robot.json"))
-        .arg("--rig")
-        .arg(data("rig.json"))
-        .arg("--poses")
-        .arg(data("poses.csv"))
-        .arg("--out")
-        .arg(&report)
-        .output()
-        .unwrap();
+    let out = identify_files(
+        &data("robot.json"),
+        &data("rig.json"),
+        &data("poses.csv"),
+        &["--out", report.to_str().unwrap()],
+    );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
@@ -171,17 +180,12 @@ fn reports_are_read_by_their_format() {
     let dir = std::env::temp_dir().join(format!("drawcal-cli-format-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let report = dir.join("report.json");
-    let out = bin()
-        .args(["identify", "--physics", "off", "--robot"])
-        .arg(data("robot.json"))
-        .arg("--rig")
-        .arg(data("rig.json"))
-        .arg("--poses")
-        .arg(data("poses.csv"))
-        .arg("--out")
-        .arg(&report)
-        .output()
-        .unwrap();
+    let out = identify_files(
+        &data("robot.json"),
+        &data("rig.json"),
+        &data("poses.csv"),
+        &["--out", report.to_str().unwrap()],
+    );
     assert!(out.status.success());
     let text = std::fs::read_to_string(&report).unwrap();
     let targets = dir.join("targets.csv");
@@ -399,15 +403,7 @@ fn bad_poses_files_are_named_cleanly() {
     let identify = |name: &str, text: String| {
         let path = dir.join(name);
         std::fs::write(&path, text).unwrap();
-        let out = bin()
-            .args(["identify", "--physics", "off", "--robot"])
-            .arg(data("robot.json"))
-            .arg("--rig")
-            .arg(data("rig.json"))
-            .arg("--poses")
-            .arg(&path)
-            .output()
-            .unwrap();
+        let out = identify_files(&data("robot.json"), &data("rig.json"), &path, &[]);
         assert!(!out.status.success(), "{name} accepted");
         String::from_utf8_lossy(&out.stderr).into_owned()
     };
@@ -484,16 +480,7 @@ fn options_and_files_are_checked_as_given() {
     let dir = std::env::temp_dir().join(format!("drawcal-cli-opts-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let run = |robot: &PathBuf, rig: &PathBuf, extra: &[&str]| {
-        bin()
-            .args(["identify", "--physics", "off", "--robot"])
-            .arg(robot)
-            .arg("--rig")
-            .arg(rig)
-            .arg("--poses")
-            .arg(data("poses.csv"))
-            .args(extra)
-            .output()
-            .unwrap()
+        identify_files(robot, rig, &data("poses.csv"), extra)
     };
     for h in ["1.5", "NaN", "-0.1", "inf"] {
         let arg = format!("--holdout={h}");
@@ -594,17 +581,12 @@ fn nothing_held_out_shows_no_test_figures() {
     assert!(!all_train.contains(",test"));
     std::fs::write(dir.join("poses.csv"), all_train).unwrap();
     let report = dir.join("report.json");
-    let out = bin()
-        .args(["identify", "--physics", "off", "--holdout", "0", "--robot"])
-        .arg(data("robot.json"))
-        .arg("--rig")
-        .arg(data("rig.json"))
-        .arg("--poses")
-        .arg(dir.join("poses.csv"))
-        .arg("--out")
-        .arg(&report)
-        .output()
-        .unwrap();
+    let out = identify_files(
+        &data("robot.json"),
+        &data("rig.json"),
+        &dir.join("poses.csv"),
+        &["--holdout", "0", "--out", report.to_str().unwrap()],
+    );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}");
     let rms = stdout
