@@ -227,11 +227,22 @@ fn csv_body(rows: &[Vec<String>]) -> ApiResult<String> {
 async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot, Rig)> {
     let robot_rec = app.store.get_robot(session.robot_id).await?;
     let model = app.store.get_model(robot_rec.model_id).await?;
-    let robot = Robot::from_json(&model.robot_json)
-        .map_err(|e| ApiError::Internal(format!("stored model: {e}")))?;
+    // A model or rig stored by an earlier version may fail checks added
+    // since: the session cannot take poses until it is replaced, which is
+    // the client's to do, not a server fault.
+    let robot = Robot::from_json(&model.robot_json).map_err(|e| {
+        ApiError::Conflict(format!(
+            "stored robot model {} no longer passes validation ({e}): register a corrected model, a robot and a new session",
+            model.id
+        ))
+    })?;
     let rig_rec = app.store.get_rig(session.rig_id).await?;
-    let rig = Rig::from_json(&rig_rec.rig_json)
-        .map_err(|e| ApiError::Internal(format!("stored rig: {e}")))?;
+    let rig = Rig::from_json(&rig_rec.rig_json).map_err(|e| {
+        ApiError::Conflict(format!(
+            "stored rig {} no longer passes validation ({e}): register a corrected rig and a new session",
+            rig_rec.id
+        ))
+    })?;
     Ok((robot, rig))
 }
 
@@ -254,7 +265,7 @@ async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot
         (status = 200, description = "Stored", body = UploadResult),
         (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
         (status = 404, description = "No such session", body = ErrorBody),
-        (status = 409, description = "Another upload was stored meanwhile", body = ErrorBody),
+        (status = 409, description = "Another upload was stored meanwhile, or the session's stored model or rig no longer passes validation (stored by an earlier version)", body = ErrorBody),
         (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
         (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Neither text/csv nor application/json", body = ErrorBody),

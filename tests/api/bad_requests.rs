@@ -781,3 +781,43 @@ async fn json_with_a_byte_order_mark_is_read() {
     assert_eq!(rig["n_strings"], 4, "{rig}");
     app.stop().await;
 }
+
+/// A rig stored by an earlier version that today's checks refuse (here a
+/// negative `r_mm`, written straight into the store): uploads to its
+/// session answer 409 naming the rig and what to do, not a 500.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stored_rig_that_no_longer_validates_is_a_conflict() {
+    let app = TestApp::spawn("stalerig").await;
+    let (_, robot_id, _, _) = app.setup(DS, "STALE-1").await;
+    let store = drawcal::store::Store::connect(&app.db_url).await.unwrap();
+    let bad = read(DS, "rig.json").replace("\"r_mm\": 35.0", "\"r_mm\": -35.0");
+    assert!(bad.contains("-35.0"));
+    let rig = store.create_rig("old rig", 4, &bad).await.unwrap();
+    let session = ok_json(
+        app.post_json(
+            "/sessions",
+            &json!({"robot_id": robot_id, "rig_id": rig.id}),
+        )
+        .await,
+        201,
+    )
+    .await;
+    let sid = session["id"].as_i64().unwrap();
+    let e = err_json(
+        app.post_raw(
+            &format!("/sessions/{sid}/poses"),
+            Some("text/csv"),
+            read(DS, "poses.csv"),
+        )
+        .await,
+        409,
+        "conflict",
+    )
+    .await;
+    let m = e["message"].as_str().unwrap();
+    assert!(
+        m.contains(&format!("stored rig {}", rig.id)) && m.contains("r_mm"),
+        "{e}"
+    );
+    app.stop().await;
+}
