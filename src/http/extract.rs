@@ -207,9 +207,14 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
                 Category::Io => Err(ApiError::MalformedJson(format!("malformed JSON: {inner}"))),
                 // The syntax pass above succeeded, so a "syntax" error here
                 // is the shape: a fixed-length array (a point, an angle
-                // triple) given more elements than it has.
+                // triple) given more elements than it has, or a number
+                // past f64 (1e999) where a number is read.
                 Category::Syntax | Category::Eof => Err(ApiError::Invalid {
-                    message: format!("more elements than expected ({inner})"),
+                    message: if inner.to_string().starts_with("number out of range") {
+                        format!("not a finite number ({inner})")
+                    } else {
+                        format!("more elements than expected ({inner})")
+                    },
                     field,
                     row: None,
                 }),

@@ -172,6 +172,25 @@ async fn bad_requests_are_refused_and_change_nothing() {
         None,
     )
     .await;
+    // A number past f64.
+    let e = refused(
+        &app,
+        c.post(app.url("/rigs"))
+            .header("content-type", "application/json")
+            .body(r#"{"anchors_mm": [[0, 0, 0], [0, 900, 0], [1e999, 0, 0]], "r_mm": 35}"#),
+        422,
+        "invalid_input",
+        None,
+        None,
+    )
+    .await;
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .starts_with("not a finite number"),
+        "{e}"
+    );
     // Two strings from one anchor; strings without r_mm; a negative r_mm.
     refused(
         &app,
