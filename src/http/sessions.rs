@@ -139,28 +139,92 @@ fn table_from_csv(bytes: &[u8]) -> ApiResult<Table> {
     Ok(Table { header, rows })
 }
 
+/// One element of an uploaded JSON array: an object's entries in order,
+/// a key given twice kept twice (`serde_json::Map` would keep the last one
+/// silently), or anything else (refused by its row).
+enum JsonPose {
+    Object(Vec<(String, serde_json::Value)>),
+    NotAnObject,
+}
+
+impl<'de> serde::Deserialize<'de> for JsonPose {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = JsonPose;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a pose object")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut m: A,
+            ) -> Result<JsonPose, A::Error> {
+                let mut entries = Vec::new();
+                while let Some(e) = m.next_entry::<String, serde_json::Value>()? {
+                    entries.push(e);
+                }
+                Ok(JsonPose::Object(entries))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut s: A,
+            ) -> Result<JsonPose, A::Error> {
+                while s.next_element::<serde::de::IgnoredAny>()?.is_some() {}
+                Ok(JsonPose::NotAnObject)
+            }
+            fn visit_bool<E>(self, _: bool) -> Result<JsonPose, E> {
+                Ok(JsonPose::NotAnObject)
+            }
+            fn visit_i64<E>(self, _: i64) -> Result<JsonPose, E> {
+                Ok(JsonPose::NotAnObject)
+            }
+            fn visit_u64<E>(self, _: u64) -> Result<JsonPose, E> {
+                Ok(JsonPose::NotAnObject)
+            }
+            fn visit_f64<E>(self, _: f64) -> Result<JsonPose, E> {
+                Ok(JsonPose::NotAnObject)
+            }
+            fn visit_str<E>(self, _: &str) -> Result<JsonPose, E> {
+                Ok(JsonPose::NotAnObject)
+            }
+            fn visit_unit<E>(self) -> Result<JsonPose, E> {
+                Ok(JsonPose::NotAnObject)
+            }
+        }
+        d.deserialize_any(Visit)
+    }
+}
+
 fn table_from_json(bytes: &[u8]) -> ApiResult<Table> {
-    let value: serde_json::Value = parse_json(bytes)?;
-    let serde_json::Value::Array(items) = value else {
-        return Err(ApiError::Invalid {
-            message: "expected a JSON array of pose objects".into(),
-            field: None,
-            row: None,
-        });
+    // One pass when the upload is an array; only a failed one pays for
+    // telling malformed JSON from a body that is not an array.
+    let items: Vec<JsonPose> = match serde_json::from_slice(without_bom(bytes)) {
+        Ok(items) => items,
+        Err(_) => {
+            let value: serde_json::Value = parse_json(bytes)?;
+            if !value.is_array() {
+                return Err(ApiError::Invalid {
+                    message: "expected a JSON array of pose objects".into(),
+                    field: None,
+                    row: None,
+                });
+            }
+            parse_json(bytes)?
+        }
     };
     let mut header: Vec<String> = Vec::new();
     let mut index: HashMap<String, usize> = HashMap::new();
     let mut cells: Vec<Vec<(usize, String)>> = Vec::with_capacity(items.len());
     for (i, item) in items.into_iter().enumerate() {
         let row = i + 1;
-        let serde_json::Value::Object(map) = item else {
+        let JsonPose::Object(map) = item else {
             return Err(ApiError::Invalid {
                 message: "expected an object keyed by column name".into(),
                 field: None,
                 row: Some(row),
             });
         };
-        let mut out = Vec::with_capacity(map.len());
+        let mut out: Vec<(usize, String)> = Vec::with_capacity(map.len());
         for (k, v) in map {
             let text = match v {
                 serde_json::Value::Number(n) => n.to_string(),
@@ -175,9 +239,16 @@ fn table_from_json(bytes: &[u8]) -> ApiResult<Table> {
                 }
             };
             let col = *index.entry(k.clone()).or_insert_with(|| {
-                header.push(k);
+                header.push(k.clone());
                 header.len() - 1
             });
+            if out.iter().any(|(c, _)| *c == col) {
+                return Err(ApiError::Invalid {
+                    message: "key appears twice in this pose".into(),
+                    field: Some(k),
+                    row: Some(row),
+                });
+            }
             out.push((col, text));
         }
         cells.push(out);

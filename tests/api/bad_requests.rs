@@ -172,6 +172,19 @@ async fn bad_requests_are_refused_and_change_nothing() {
         None,
     )
     .await;
+    // A key given twice in one pose object (JSON would keep the last).
+    let twice = r#"[{"pose":"d","q1_deg":0,"q1_deg":5,"q2_deg":0,"q3_deg":0,"q4_deg":0,"q5_deg":0,"q6_deg":0,"l1_mm":800,"l2_mm":800,"l3_mm":800,"l4_mm":800}]"#;
+    refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/poses")))
+            .header("content-type", "application/json")
+            .body(twice),
+        422,
+        "invalid_input",
+        Some("q1_deg"),
+        Some(1),
+    )
+    .await;
     // A number past f64.
     let e = refused(
         &app,
