@@ -16,6 +16,13 @@ fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// A fresh directory for one test's files (removed at its end).
+fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("drawcal-cli-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 /// `drawcal identify --physics off` on these files, with `extra` arguments.
 fn identify_files(robot: &Path, rig: &Path, poses: &Path, extra: &[&str]) -> Output {
     bin()
@@ -32,8 +39,7 @@ fn identify_files(robot: &Path, rig: &Path, poses: &Path, extra: &[&str]) -> Out
 
 #[test]
 fn identify_then_compensate() {
-    let dir = std::env::temp_dir().join(format!("drawcal-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("main");
     let report = dir.join("report.json");
     let out = identify_files(
         &data("robot.json"),
@@ -177,8 +183,7 @@ fn locate_compares_closed_form_and_least_squares() {
 /// report it holds; a poses.csv with no rows locates nothing and says so.
 #[test]
 fn reports_are_read_by_their_format() {
-    let dir = std::env::temp_dir().join(format!("drawcal-cli-format-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("format");
     let report = dir.join("report.json");
     let out = identify_files(
         &data("robot.json"),
@@ -252,8 +257,7 @@ fn reports_are_read_by_their_format() {
 /// as their mirror images, up to 736 mm off, without a word.
 #[test]
 fn locate_with_the_robot_picks_each_points_side() {
-    let dir = std::env::temp_dir().join(format!("drawcal-cli-mirror-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("mirror");
     let spec: drawcal::physics::simulate::Spec =
         serde_json::from_value(serde_json::json!({"robot": "er3a", "seed": 1})).unwrap();
     let sim = drawcal::physics::simulate::generate(&spec).unwrap();
@@ -316,8 +320,7 @@ fn locate_with_the_robot_picks_each_points_side() {
 /// effect.
 #[test]
 fn compensate_at_a_temperature() {
-    let dir = std::env::temp_dir().join(format!("drawcal-cli-temp-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("temp");
     let spec: drawcal::physics::simulate::Spec = serde_json::from_value(serde_json::json!({
         "robot": "er3a",
         "n_poses": 120,
@@ -396,8 +399,7 @@ fn compensate_at_a_temperature() {
 /// service's `row`), or says the file must be comma-separated.
 #[test]
 fn bad_poses_files_are_named_cleanly() {
-    let dir = std::env::temp_dir().join(format!("drawcal-cli-rows-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("rows");
     let poses = std::fs::read_to_string(data("poses.csv")).unwrap();
     let lines: Vec<&str> = poses.lines().collect();
     let identify = |name: &str, text: String| {
@@ -477,8 +479,7 @@ fn bad_poses_files_are_named_cleanly() {
 /// and every pose then failed to locate).
 #[test]
 fn options_and_files_are_checked_as_given() {
-    let dir = std::env::temp_dir().join(format!("drawcal-cli-opts-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("opts");
     let run = |robot: &PathBuf, rig: &PathBuf, extra: &[&str]| {
         identify_files(robot, rig, &data("poses.csv"), extra)
     };
@@ -519,8 +520,7 @@ fn options_and_files_are_checked_as_given() {
 /// rule it named a cable sag and a sensor offset that fitted the garbage).
 #[test]
 fn radians_in_degree_columns_are_warned_about() {
-    let dir = std::env::temp_dir().join(format!("drawcal-cli-rad-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("rad");
     let poses = std::fs::read_to_string(data("poses.csv")).unwrap();
     let rad = dir.join("radians.csv");
     std::fs::write(&rad, common::q_columns_in_radians(&poses, None)).unwrap();
@@ -574,8 +574,7 @@ fn radians_in_degree_columns_are_warned_about() {
 /// in the test columns and the report `null`, never a perfect 0.
 #[test]
 fn nothing_held_out_shows_no_test_figures() {
-    let dir = std::env::temp_dir().join(format!("drawcal-cli-noholdout-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("noholdout");
     let csv = std::fs::read_to_string(data("poses.csv")).unwrap();
     let all_train = csv.replace(",test\n", ",train\n");
     assert!(!all_train.contains(",test"));
