@@ -563,7 +563,7 @@ fn more_poses_advice(session: &Session, opts: &IdentifyOptions, k: usize) -> Str
         )
     } else {
         format!(
-            "record at least {k} train poses, better two or three times as many (the paper identified 27 parameters from 30); {} of the {} poses are held out (--holdout {hold}), so record at least {} in all, lower --holdout, or mark the split in a split column",
+            "record at least {k} train poses, better two or three times as many (the paper identified 27 parameters from 30); {} of the {} poses are held out (--holdout {hold}; a job's holdout_fraction), so record at least {} in all, hold out fewer, or mark the split in a split column",
             session.test.len(),
             session.data.poses.len(),
             (k as f64 / (1.0 - hold)).ceil() as usize
