@@ -37,9 +37,9 @@ fn identify_files(robot: &Path, rig: &Path, poses: &Path, extra: &[&str]) -> Out
         .unwrap()
 }
 
-#[test]
-fn identify_then_compensate() {
-    let dir = scratch("main");
+/// er3a_paper_like identified (physics off) with its report written to
+/// `dir/report.json`: the run and the report's path.
+fn identify_er3a(dir: &Path) -> (Output, PathBuf) {
     let report = dir.join("report.json");
     let out = identify_files(
         &data("robot.json"),
@@ -47,6 +47,13 @@ fn identify_then_compensate() {
         &data("poses.csv"),
         &["--out", report.to_str().unwrap()],
     );
+    (out, report)
+}
+
+#[test]
+fn identify_then_compensate() {
+    let dir = scratch("main");
+    let (out, report) = identify_er3a(&dir);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
@@ -184,13 +191,7 @@ fn locate_compares_closed_form_and_least_squares() {
 #[test]
 fn reports_are_read_by_their_format() {
     let dir = scratch("format");
-    let report = dir.join("report.json");
-    let out = identify_files(
-        &data("robot.json"),
-        &data("rig.json"),
-        &data("poses.csv"),
-        &["--out", report.to_str().unwrap()],
-    );
+    let (out, report) = identify_er3a(&dir);
     assert!(out.status.success());
     let text = std::fs::read_to_string(&report).unwrap();
     let targets = dir.join("targets.csv");

@@ -14,7 +14,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::compensate::{self, Compensator};
-use crate::identify::report::Report;
+use crate::identify::report::{ClosedFormComparison, Report};
 use crate::identify::{self, IdentifyOptions, Method, Progress};
 use crate::measure;
 use crate::model::{Dataset, Rig, Robot, targets::targets_from_csv};
@@ -481,10 +481,7 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
         let d_cf = cf_point.map(|p| (p - loc.point).norm());
         if let (Some(d), Some(p)) = (d_cf, cf_point) {
             cf.push(d);
-            if d > 1.0
-                && measure::paper_mirror_image(&anchors, &p)
-                    .is_some_and(|m| (m - loc.point).norm() < 0.1 * d)
-            {
+            if measure::is_paper_mirror(&anchors, &p, &loc.point) {
                 mirrored += 1;
             }
         }
@@ -514,19 +511,13 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
     if let Some(s) = measure::string_sigma(&located) {
         eprintln!("string noise from the redundancy: {s:.4} mm (1 sigma)");
     }
-    if !cf.is_empty() {
-        let rms = (cf.iter().map(|v| v * v).sum::<f64>() / cf.len() as f64).sqrt();
-        let max = cf.iter().cloned().fold(0.0, f64::max);
+    if let Some(c) = ClosedFormComparison::from_distances(&cf, mirrored) {
         let bad = cf.iter().filter(|d| **d > 1.0).count();
         eprintln!(
-            "paper closed form vs least squares: RMS {rms:.4} mm, max {max:.4} mm, {bad} poses more than 1 mm apart{}",
-            crate::identify::report::ClosedFormComparison {
-                n: cf.len(),
-                rms_mm: rms,
-                max_mm: max,
-                mirrored
-            }
-            .mirrored_note()
+            "paper closed form vs least squares: RMS {:.4} mm, max {:.4} mm, {bad} poses more than 1 mm apart{}",
+            c.rms_mm,
+            c.max_mm,
+            c.mirrored_note()
         );
     }
     Ok(())

@@ -934,24 +934,12 @@ pub fn closed_form_comparison(session: &Session) -> Option<ClosedFormComparison>
     for (pose, loc) in session.data.poses.iter().zip(&session.located) {
         if let Measurement::Strings(l) = &pose.measurement {
             if let Ok(p) = measure::paper_closed_form(&session.anchors, l[0], l[2], l[3], r) {
-                let d = (p - loc.point).norm();
-                if d > 1.0
-                    && measure::paper_mirror_image(&session.anchors, &p)
-                        .is_some_and(|m| (m - loc.point).norm() < 0.1 * d)
-                {
+                if measure::is_paper_mirror(&session.anchors, &p, &loc.point) {
                     mirrored += 1;
                 }
-                d2.push(d);
+                d2.push((p - loc.point).norm());
             }
         }
     }
-    if d2.is_empty() {
-        return None;
-    }
-    Some(ClosedFormComparison {
-        n: d2.len(),
-        rms_mm: (d2.iter().map(|v| v * v).sum::<f64>() / d2.len() as f64).sqrt(),
-        max_mm: d2.iter().cloned().fold(0.0, f64::max),
-        mirrored,
-    })
+    ClosedFormComparison::from_distances(&d2, mirrored)
 }

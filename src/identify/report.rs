@@ -198,6 +198,17 @@ pub struct ClosedFormComparison {
 }
 
 impl ClosedFormComparison {
+    /// The figures of per-pose distances (mm) between the closed form and
+    /// least squares, `mirrored` of them mirror images; `None` without any.
+    pub fn from_distances(d: &[f64], mirrored: usize) -> Option<Self> {
+        (!d.is_empty()).then(|| ClosedFormComparison {
+            n: d.len(),
+            rms_mm: (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt(),
+            max_mm: d.iter().cloned().fold(0.0, f64::max),
+            mirrored,
+        })
+    }
+
     /// What a summary adds when the closed form gave mirror images (empty
     /// when it gave none).
     pub fn mirrored_note(&self) -> String {

@@ -21,9 +21,7 @@ use crate::kinematics::Params;
 use crate::kinematics::chain::OutputFrame;
 use crate::model::BasePose;
 
-/// Largest |angle| (in the file's numbers) that radians take: 2π, with a
-/// little room for rounding.
-pub const RADIANS_BOUND: f64 = std::f64::consts::TAU + 1e-6;
+pub use crate::model::RADIANS_BOUND;
 
 /// How many times closer to the measured points the nominal model must
 /// come with the angles read as radians than read as degrees before they

@@ -10,17 +10,26 @@ use nalgebra::{Matrix3, Vector3};
 
 use crate::error::{Error, Result};
 
-/// `p` reflected across the plane of anchors A, C and D (the first, third
-/// and fourth), the plane the closed form measures its z >= 0 from: where
-/// the closed form puts a point below that plane. `None` with fewer than
-/// four anchors.
-pub fn paper_mirror_image(anchors: &[Vector3<f64>], p: &Vector3<f64>) -> Option<Vector3<f64>> {
-    if anchors.len() < 4 {
-        return None;
+/// True when the closed form's point `closed_form` is the mirror image of
+/// the least-squares point `lsq` across the plane of anchors A, C and D
+/// (the first, third and fourth), the plane the closed form measures its
+/// z >= 0 from: the point lies below it. False with fewer than four
+/// anchors, or when the two are within 1 mm.
+pub fn is_paper_mirror(
+    anchors: &[Vector3<f64>],
+    closed_form: &Vector3<f64>,
+    lsq: &Vector3<f64>,
+) -> bool {
+    let apart = (closed_form - lsq).norm();
+    if anchors.len() < 4 || apart <= 1.0 {
+        return false;
     }
     let (a, c, d) = (anchors[0], anchors[2], anchors[3]);
-    let n = (c - a).cross(&(d - a)).try_normalize(1e-12)?;
-    Some(p - 2.0 * (p - a).dot(&n) * n)
+    let Some(n) = (c - a).cross(&(d - a)).try_normalize(1e-12) else {
+        return false;
+    };
+    let mirror = closed_form - 2.0 * (closed_form - a).dot(&n) * n;
+    (mirror - lsq).norm() < 0.1 * apart
 }
 
 /// T in the rig frame from readings `l_a, l_c, l_d` (mm) and the string

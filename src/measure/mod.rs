@@ -6,5 +6,5 @@
 pub mod closed_form;
 pub mod multilateration;
 
-pub use closed_form::{paper_closed_form, paper_mirror_image};
+pub use closed_form::{is_paper_mirror, paper_closed_form};
 pub use multilateration::{Located, coplanar, locate, string_sigma};

@@ -26,6 +26,10 @@ pub(crate) fn finite(field: &str, v: f64) -> Result<f64> {
     }
 }
 
+/// Largest |angle| (in a file's `_deg` numbers) that radians take: 2π,
+/// with a little room for rounding.
+pub const RADIANS_BOUND: f64 = std::f64::consts::TAU + 1e-6;
+
 /// Heaviest payload (kg) recorded or compensated for: beyond any serial
 /// arm's rating (the largest carry about 2,300 kg).
 pub const MAX_PAYLOAD_KG: f64 = 5000.0;

@@ -123,7 +123,7 @@ pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
 /// really move only a few degrees), so they are compensated as degrees and
 /// the warning says so; these joints go to the robot.
 pub fn radians_warning(targets: &[Target], dof: usize) -> Option<String> {
-    let bound = crate::identify::warnings::RADIANS_BOUND;
+    let bound = super::RADIANS_BOUND;
     let joints: Vec<&Vec<f64>> = targets
         .iter()
         .filter_map(|t| match &t.kind {
