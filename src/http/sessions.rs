@@ -499,6 +499,7 @@ pub async fn get_poses(State(app): State<AppState>, Id(id): Id) -> ApiResult<Res
         (status = 404, description = "No such session", body = ErrorBody),
         (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
         (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
+        (status = 409, description = "The session's stored model or rig no longer passes validation (stored by an earlier version)", body = ErrorBody),
         (status = 415, description = "Body not JSON", body = ErrorBody),
         (status = 422, description = "Bad options, or the session has no poses", body = ErrorBody)))]
 pub async fn enqueue_job(
@@ -538,6 +539,10 @@ pub async fn enqueue_job(
             row: None,
         });
     }
+    // Refused now rather than failing in the worker: a model or rig stored
+    // by an earlier version that today's checks refuse is the client's to
+    // replace (409), as on upload.
+    robot_and_rig(&app, &session).await?;
     let opts = serde_json::to_string(&options).map_err(|e| ApiError::Internal(e.to_string()))?;
     let job = app.store.create_job(id, session.robot_id, &opts, 3).await?;
     app.jobs.wake();
