@@ -87,11 +87,62 @@ fn range(vals: impl Iterator<Item = f64>, zero: bool) -> (f64, f64) {
     (if zero && lo == 0.0 { 0.0 } else { lo - pad }, hi + pad)
 }
 
+/// How values map to a plot's height.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum YAxis {
+    /// From `.0` at the bottom to `.1` at the top.
+    Linear(f64, f64),
+    /// Powers of ten from `10^.0` at the bottom to `10^.1` at the top.
+    Log10(i32, i32),
+}
+
+impl YAxis {
+    /// Bars of positive values spanning more than two decades (before
+    /// calibration beside after, typically 100-300 times smaller) go on a
+    /// log axis, so every bar can be read; otherwise a linear one from 0.
+    fn for_bars(values: impl Iterator<Item = f64> + Clone) -> YAxis {
+        let finite = values.filter(|v| v.is_finite());
+        let max = finite.clone().fold(f64::NEG_INFINITY, f64::max);
+        let min_pos = finite
+            .clone()
+            .filter(|v| *v > 0.0)
+            .fold(f64::INFINITY, f64::min);
+        let any_negative = finite.clone().any(|v| v < 0.0);
+        if !any_negative && min_pos.is_finite() && max / min_pos > 100.0 {
+            // At least 0.3 decade of the smallest bar shows.
+            let lo = (min_pos.log10() - 0.3).floor() as i32;
+            let hi = (max.log10().ceil() as i32).max(lo + 1);
+            return YAxis::Log10(lo, hi);
+        }
+        let (lo, hi) = range(finite, true);
+        YAxis::Linear(0.0f64.min(lo), hi)
+    }
+
+    /// Height fraction (0 bottom, 1 top) of `v`, clamped to the axis.
+    fn frac(&self, v: f64) -> f64 {
+        let f = match *self {
+            YAxis::Linear(lo, hi) => (v - lo) / (hi - lo),
+            YAxis::Log10(lo, hi) if v > 0.0 => (v.log10() - lo as f64) / (hi - lo) as f64,
+            YAxis::Log10(..) => 0.0,
+        };
+        f.clamp(0.0, 1.0)
+    }
+
+    fn ticks(&self) -> Vec<f64> {
+        match *self {
+            YAxis::Linear(lo, hi) => ticks(lo, hi, 5),
+            YAxis::Log10(lo, hi) => (lo..=hi).map(|k| 10f64.powi(k)).collect(),
+        }
+    }
+}
+
 const W: f64 = 560.0;
 const H: f64 = 300.0;
 const L: f64 = 62.0;
 const R: f64 = 12.0;
-const T: f64 = 26.0;
+/// Top margin: the title, then the legend's row above the plot, where it
+/// never hides a bar or a point.
+const T: f64 = 40.0;
 const B: f64 = 42.0;
 
 fn frame(
@@ -100,7 +151,7 @@ fn frame(
     xlabel: &str,
     ylabel: &str,
     x: (f64, f64),
-    y: (f64, f64),
+    y: YAxis,
     xticks: bool,
 ) {
     let pw = W - L - R;
@@ -115,8 +166,8 @@ fn frame(
         xlab = esc(xlabel),
         ylab = esc(ylabel),
     );
-    for v in ticks(y.0, y.1, 5) {
-        let py = T + ph * (1.0 - (v - y.0) / (y.1 - y.0));
+    for v in y.ticks() {
+        let py = T + ph * (1.0 - y.frac(v));
         let _ = write!(
             out,
             r##"<line x1="{L}" x2="{x2}" y1="{py:.1}" y2="{py:.1}" stroke="#e4e4e4"/><text x="{tx}" y="{ty:.1}" text-anchor="end" font-size="11">{s}</text>"##,
@@ -146,9 +197,9 @@ fn legend(out: &mut String, items: &[(&str, &str)]) {
         let _ = write!(
             out,
             r#"<rect x="{x}" y="{y}" width="10" height="10" fill="{color}"/><text x="{tx}" y="{ty}" font-size="11">{l}</text>"#,
-            y = T + 5.0,
+            y = T - 15.0,
             tx = x + 13.0,
-            ty = T + 14.0,
+            ty = T - 6.0,
             l = esc(label)
         );
         x += 22.0 + 6.5 * label.len() as f64;
@@ -167,7 +218,15 @@ pub fn scatter(title: &str, xlabel: &str, ylabel: &str, series: &[Series]) -> St
         true,
     );
     let mut out = String::new();
-    frame(&mut out, title, xlabel, ylabel, x, y, true);
+    frame(
+        &mut out,
+        title,
+        xlabel,
+        ylabel,
+        x,
+        YAxis::Linear(y.0, y.1),
+        true,
+    );
     let pw = W - L - R;
     let ph = H - T - B;
     let n: usize = series.iter().map(|s| s.points.len()).sum();
@@ -241,10 +300,13 @@ pub fn bars(
     bars: &[(&str, &str)],
     values: &[Vec<f64>],
 ) -> String {
-    let y = range(values.iter().flatten().copied(), true);
-    let y = (0.0f64.min(y.0), y.1);
+    let y = YAxis::for_bars(values.iter().flatten().copied());
+    let ylabel = match y {
+        YAxis::Log10(..) => format!("{ylabel}, log scale"),
+        YAxis::Linear(..) => ylabel.to_string(),
+    };
     let mut out = String::new();
-    frame(&mut out, title, "", ylabel, (0.0, 1.0), y, false);
+    frame(&mut out, title, "", &ylabel, (0.0, 1.0), y, false);
     let pw = W - L - R;
     let ph = H - T - B;
     let gw = pw / groups.len().max(1) as f64;
@@ -261,8 +323,9 @@ pub fn bars(
             if !v.is_finite() {
                 continue; // no figure (no held-out poses): no bar
             }
-            let top = T + ph * (1.0 - (v.max(y.0) - y.0) / (y.1 - y.0));
-            let base = T + ph * (1.0 - (0.0 - y.0) / (y.1 - y.0));
+            let top = T + ph * (1.0 - y.frac(v));
+            // A log axis has no zero: its bars stand on the bottom.
+            let base = T + ph * (1.0 - y.frac(0.0));
             let h = (base - top).abs().max(0.5);
             let _ = write!(
                 out,
@@ -300,10 +363,66 @@ mod tests {
             "mm",
             &["x"],
             &[("before", "#aaa"), ("after", "#f00")],
-            &[vec![7.2, 0.0339]],
+            &[vec![3.0, 0.0339]],
         );
+        // 88 times smaller, within two decades: linear.
+        assert!(!svg.contains("log scale"), "{svg}");
         assert_eq!(svg.matches(r#"class="bar-value""#).count(), 1, "{svg}");
         assert!(svg.contains(">0.0339</text>"), "{svg}");
+    }
+
+    #[test]
+    fn bars_spanning_decades_go_on_a_log_axis() {
+        let svg = bars(
+            "t",
+            "RMS (mm)",
+            &["x", "3-D"],
+            &[("before", "#aaa"), ("after", "#f00")],
+            &[vec![7.2, 0.0339], vec![7.46, 0.0445]],
+        );
+        assert!(svg.contains("RMS (mm), log scale"), "{svg}");
+        // Decade ticks from 0.01 to 10, each one drawn.
+        for t in [">0.01</text>", ">0.1</text>", ">1</text>", ">10</text>"] {
+            assert!(svg.contains(t), "{t} in {svg}");
+        }
+        // Every bar tall enough to read: no value written beside one.
+        assert_eq!(svg.matches(r#"class="bar-value""#).count(), 0, "{svg}");
+        let heights: Vec<f64> = svg
+            .split(r#"class="bar""#)
+            .skip(1)
+            .map(|r| {
+                r.split("height=\"")
+                    .nth(1)
+                    .unwrap()
+                    .split('"')
+                    .next()
+                    .unwrap()
+                    .parse()
+                    .unwrap()
+            })
+            .collect();
+        assert_eq!(heights.len(), 4);
+        // log10(7.2 / 0.0339) = 2.33 decades between the two heights.
+        let per_decade = (heights[0] - heights[1]) / (7.2f64 / 0.0339).log10();
+        let (a, b) = (heights[2], heights[3]);
+        assert!(
+            ((a - b) / per_decade - (7.46f64 / 0.0445).log10()).abs() < 0.01,
+            "{heights:?}"
+        );
+        assert!(heights[1] > 0.05 * heights[0], "{heights:?}");
+    }
+
+    #[test]
+    fn bars_within_two_decades_stay_linear_from_zero() {
+        let svg = bars(
+            "t",
+            "RMS (mm)",
+            &["3-D"],
+            &[("before", "#aaa"), ("after", "#f00")],
+            &[vec![0.99, 0.48]],
+        );
+        assert!(!svg.contains("log scale"), "{svg}");
+        assert!(svg.contains(">0</text>"), "{svg}");
     }
 
     #[test]
