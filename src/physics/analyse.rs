@@ -19,7 +19,9 @@
 //!    if the held-out RMS drops.
 //! 4. Repeat until nothing significant remains. Finally, test whether the
 //!    residuals still vary smoothly along any joint angle, time or
-//!    temperature; if so report an `unexplained` finding saying where.
+//!    temperature, exceed the strings' own noise, or are confined to a
+//!    stretch of one joint's range (confirmed on the held-out poses); if so
+//!    report an `unexplained` finding saying where.
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
@@ -1826,8 +1828,10 @@ fn robot_side_share(session: &Session, p: &[f64]) -> (Option<f64>, Option<f64>) 
 /// strings, a robot-side residual larger than the strings' own noise
 /// explains, whatever it follows (an error that flips direction between
 /// neighbours, e.g. a joint error seen from both sides of its axis, defeats
-/// the neighbour test but not this one). `n_free` is the number of
-/// geometric parameters fitted.
+/// the neighbour test but not this one); or, failing the neighbour test, a
+/// mismatch confined to a few poses in one stretch of a joint's range
+/// ([`concentrated`]). `n_free` is the number of geometric parameters
+/// fitted.
 fn unexplained(
     session: &Session,
     ctx: &Context,
@@ -1950,6 +1954,27 @@ fn unexplained(
     }
     let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
     let excess = robot_side_excess(session, ctx, &res, rpp, n_params);
+    let confined = if best.is_none() {
+        let test_problem = EffectProblem {
+            chain: session.chain,
+            ctx,
+            data: session.data,
+            poses: session.test.clone(),
+            full: p.to_vec(),
+            free: vec![],
+            effects: effects.to_vec(),
+        };
+        let mut test_res = Vec::with_capacity(session.test.len() * rpp);
+        test_problem.rows(&x, |_, r, _| test_res.push(r));
+        let per_pose = |r: &[f64]| -> Vec<f64> {
+            r.chunks(rpp)
+                .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
+                .collect()
+        };
+        concentrated(session, ctx, &per_pose(&res), &per_pose(&test_res), 1e-3)
+    } else {
+        None
+    };
     let (winner, located) = match (&best, excess, winner_at) {
         (Some((z, name)), _, Some((pk, false))) => (
             pk,
@@ -1964,6 +1989,24 @@ fn unexplained(
                 j = pk + 1
             ),
         ),
+        (None, _, _) if confined.is_some() => {
+            let c = confined.as_ref().expect("checked");
+            (
+                c.joint,
+                format!(
+                    "the train poses far off the rest ({ids}: misfit over {FAR_OFF_MEDIANS} times the median) lie with joint {j} between {lo:.0} and {hi:.0} deg, and the {m} held-out poses there confirm it (misfit RMS {a:.3} mm per reading, against {b:.3} elsewhere; permutation p = {p:.1e}, threshold {t:.1e}): the mismatch is confined to that stretch of joint {j}'s range, in a form no catalogue effect has",
+                    ids = c.train_poses.join(", "),
+                    j = c.joint + 1,
+                    lo = c.lo_rad.to_degrees(),
+                    hi = c.hi_rad.to_degrees(),
+                    m = c.n_test_in,
+                    a = c.test_rms_in,
+                    b = c.test_rms_out,
+                    p = c.p,
+                    t = c.alpha,
+                ),
+            )
+        }
         (None, Some(x), _) if x.f > x.threshold => {
             // The ordering that comes nearest, for the plot.
             let (w, z) = zs
@@ -1982,7 +2025,12 @@ fn unexplained(
         }
         _ => return None,
     };
-    let region = worst_region(ctx, &session.train, &res, rpp);
+    // A confined mismatch already says where it lives.
+    let region = if confined.is_some() {
+        String::new()
+    } else {
+        worst_region(ctx, &session.train, &res, rpp)
+    };
     let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
     let test = rms(&errors_with_effects(
         session,
@@ -1996,6 +2044,13 @@ fn unexplained(
         "along_joint_motion": winner_at.is_some_and(|(_, projected)| projected),
         "z": zs[winner],
     });
+    if let Some(c) = &confined {
+        parameters["confined_joint"] = (c.joint + 1).into();
+        parameters["confined_deg"] =
+            serde_json::json!([c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]);
+        parameters["confined_train_poses"] = serde_json::json!(c.train_poses);
+        parameters["confined_p"] = c.p.into();
+    }
     if let Some(x) = excess {
         parameters["robot_side_variance_ratio"] = x.f.into();
         parameters["variance_ratio_threshold"] = x.threshold.into();
@@ -2014,6 +2069,157 @@ fn unexplained(
         parameters,
         evidence_plot: super::evidence::unexplained_plot(session, ctx, p, effects, winner, &zs),
     })
+}
+
+/// A mismatch confined to a few poses, found by [`concentrated`].
+#[derive(Debug, Clone)]
+struct Concentrated {
+    /// Joint (0-based) whose angle gathers them.
+    joint: usize,
+    /// The stretch of its range (rad) the held-out poses were tested in.
+    lo_rad: f64,
+    hi_rad: f64,
+    /// Train poses far off the rest that lie in the stretch, by pose id.
+    train_poses: Vec<String>,
+    /// Held-out poses in the stretch, and the held-out misfit (RMS per
+    /// reading, mm) inside and outside it.
+    n_test_in: usize,
+    test_rms_in: f64,
+    test_rms_out: f64,
+    /// Chance of held-out poses inside ranking this high without a
+    /// mismatch there (permutation test), and what it had to beat.
+    p: f64,
+    alpha: f64,
+}
+
+/// A train pose is "far off" when its misfit passes this multiple of the
+/// train poses' median misfit: about six standard deviations of noise for
+/// three Gaussian readings, so noise alone hardly ever gives one.
+const FAR_OFF_MEDIANS: f64 = 4.0;
+/// Random relabellings of the held-out poses for the permutation test.
+const PERMUTATIONS: usize = 20_000;
+
+/// An error confined to a stretch of one joint's range (a damaged or
+/// eccentric stretch of gear, a cable or dress pack pulling in one
+/// posture, a local collision with the rig) that only a few poses reach:
+/// too few for any smooth model or neighbour test, and with a tracker no
+/// string redundancy gives the noise to compare against. The few train
+/// poses far off the rest (`misfit_train` above [`FAR_OFF_MEDIANS`] times
+/// its median, at most a quarter of them) form, for each joint, a stretch
+/// of its angle: the narrowest holding two thirds of them, padded by half
+/// its width or a twentieth of the joint's range. That is a hypothesis made
+/// on the train poses alone; the held-out poses test it: their misfits
+/// inside the stretch must rank above those outside (rank sum, permutation
+/// p-value) at `alpha` shared among the joints. Misfits are per reading
+/// (string residuals, or point coordinates), whose noise is the same at
+/// every pose, not 3-D errors, whose noise grows where the rig's geometry
+/// is poor.
+fn concentrated(
+    session: &Session,
+    ctx: &Context,
+    misfit_train: &[f64],
+    misfit_test: &[f64],
+    alpha: f64,
+) -> Option<Concentrated> {
+    let (n_tr, n_te) = (misfit_train.len(), misfit_test.len());
+    if n_tr < 8 || n_te < 4 {
+        return None;
+    }
+    let mut sorted = misfit_train.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[n_tr / 2];
+    let far: Vec<usize> = (0..n_tr)
+        .filter(|&k| misfit_train[k] > FAR_OFF_MEDIANS * median)
+        .collect();
+    if far.is_empty() || 4 * far.len() > n_tr {
+        return None;
+    }
+    // Held-out ranks (1 = smallest misfit), ties in pose order.
+    let mut by_misfit: Vec<usize> = (0..n_te).collect();
+    by_misfit.sort_by(|a, b| misfit_test[*a].total_cmp(&misfit_test[*b]));
+    let mut rank = vec![0usize; n_te];
+    for (r, &k) in by_misfit.iter().enumerate() {
+        rank[k] = r + 1;
+    }
+    let alpha_joint = alpha / ctx.n_joints.max(1) as f64;
+    let mut rng = crate::rng::Rng::new(0x5eed);
+    let mut best: Option<Concentrated> = None;
+    for j in 0..ctx.n_joints {
+        let q = |i: usize| ctx.poses[i].q_rad[j];
+        let (lo_all, hi_all) = session
+            .train
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &i| {
+                (a.min(q(i)), b.max(q(i)))
+            });
+        let range = hi_all - lo_all;
+        if range.to_degrees() < 5.0 {
+            continue;
+        }
+        let mut qf: Vec<(f64, usize)> = far.iter().map(|&k| (q(session.train[k]), k)).collect();
+        qf.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let need = if qf.len() <= 2 {
+            qf.len()
+        } else {
+            (2 * qf.len()).div_ceil(3)
+        };
+        let (width, start) = (0..=qf.len() - need)
+            .map(|s| (qf[s + need - 1].0 - qf[s].0, s))
+            .min_by(|a, b| a.0.total_cmp(&b.0))?;
+        if width > range / 4.0 {
+            continue; // spread over the range: not confined to a stretch
+        }
+        let pad = (width / 2.0).max(range / 20.0);
+        let (lo, hi) = (qf[start].0 - pad, qf[start + need - 1].0 + pad);
+        let inside: Vec<usize> = (0..n_te)
+            .filter(|&k| (lo..=hi).contains(&q(session.test[k])))
+            .collect();
+        let m = inside.len();
+        if m == 0 || m == n_te {
+            continue;
+        }
+        let observed: usize = inside.iter().map(|&k| rank[k]).sum();
+        // Rank sums of m held-out poses drawn at random (partial shuffle).
+        let mut ranks: Vec<usize> = (1..=n_te).collect();
+        let mut as_high = 0usize;
+        for _ in 0..PERMUTATIONS {
+            let mut sum = 0;
+            for t in 0..m {
+                let u = t + (rng.next_u64() % (n_te - t) as u64) as usize;
+                ranks.swap(t, u);
+                sum += ranks[t];
+            }
+            if sum >= observed {
+                as_high += 1;
+            }
+        }
+        let p = (as_high + 1) as f64 / (PERMUTATIONS + 1) as f64;
+        if p < alpha_joint && best.as_ref().is_none_or(|b| p < b.p) {
+            let rms_of = |ks: &mut dyn Iterator<Item = usize>| {
+                let (mut ss, mut c) = (0.0, 0usize);
+                for k in ks {
+                    ss += misfit_test[k] * misfit_test[k];
+                    c += 1;
+                }
+                (ss / c.max(1) as f64).sqrt()
+            };
+            best = Some(Concentrated {
+                joint: j,
+                lo_rad: lo,
+                hi_rad: hi,
+                train_poses: qf[start..start + need]
+                    .iter()
+                    .map(|&(_, k)| session.data.poses[session.train[k]].id.clone())
+                    .collect(),
+                n_test_in: m,
+                test_rms_in: rms_of(&mut inside.iter().copied()),
+                test_rms_out: rms_of(&mut (0..n_te).filter(|k| !inside.contains(k))),
+                p,
+                alpha: alpha_joint,
+            });
+        }
+    }
+    best
 }
 
 /// Robot-side residual variance against the strings' noise (see
