@@ -1,7 +1,8 @@
 //! Physics beyond the geometric model: a catalogue of effects
 //! ([`effects`]), the calibration problem augmented with them
 //! ([`problem`]), the analysis that finds, names, models and proves them
-//! ([`analyse`]), and the simulator that puts them into recordings
+//! ([`analyse`]) and says where structure no effect explains remains
+//! (`unexplained`), and the simulator that puts them into recordings
 //! ([`simulate`]). One implementation of each effect serves both.
 //!
 //! Hooks for the engine: [`analyse()`] after `identify::geometric()`,
@@ -15,6 +16,7 @@ pub mod evidence;
 pub mod problem;
 pub mod simulate;
 pub mod stats;
+mod unexplained;
 
 pub use analyse::{Analysis, analyse, errors_with_effects, session_context};
 pub use effects::{Context, EffectModel, Kind};

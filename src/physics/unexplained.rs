@@ -1,0 +1,647 @@
+//! What the catalogue leaves: residual structure after the accepted
+//! effects, located and reported as an `unexplained` finding rather than
+//! forced onto a wrong name. Four tests, each saying where the mismatch
+//! lives: neighbouring poses (by a joint angle, also along the direction
+//! that joint moves T; by time, temperature, the joint configuration) that
+//! agree more than noise allows; with four or more strings, a robot-side
+//! residual above the strings' own noise; and a mismatch confined to a
+//! stretch of one joint's range that the held-out poses confirm.
+
+use nalgebra::Vector3;
+
+use super::analyse::{errors_with_effects, rms};
+use super::effects::{Context, EffectModel};
+use super::problem::EffectProblem;
+use super::stats::{f_quantile_upper, normal_quantile};
+use crate::identify::Session;
+use crate::identify::report::Finding;
+
+/// The part of one pose's string residuals `r` (one per anchor, mm) that a
+/// displacement of T explains: least squares through the anchors' unit
+/// vectors at `t` (rig frame). The displacement (mm) and the residual
+/// energy it takes (`rᵀG(GᵀG)⁻¹Gᵀr`, mm²); `None` when the anchors do not
+/// fix a point.
+fn common_displacement(
+    anchors: &[Vector3<f64>],
+    t: &Vector3<f64>,
+    r: &[f64],
+) -> Option<(Vector3<f64>, f64)> {
+    let mut gtg = nalgebra::Matrix3::zeros();
+    let mut gtr = Vector3::zeros();
+    for (a, &rk) in anchors.iter().zip(r) {
+        let u = (t - a).normalize();
+        gtg += u * u.transpose();
+        gtr += u * rk;
+    }
+    let d = gtg.try_inverse()? * gtr;
+    Some((d, gtr.dot(&d)))
+}
+
+/// Share of the train string residual energy that a displacement of T per
+/// pose explains, and the share noise alone would give (3/m).
+pub(super) fn robot_side_share(session: &Session, p: &[f64]) -> (Option<f64>, Option<f64>) {
+    let m = session.anchors.len();
+    if m <= 3 {
+        return (None, None);
+    }
+    let problem = session.problem(p.to_vec(), vec![]);
+    let mut r = Vec::new();
+    let (mut robot, mut total) = (0.0, 0.0);
+    for &i in &session.train {
+        let pose = &session.data.poses[i];
+        problem.pose_residuals(p, pose, &mut r);
+        let (_, t) =
+            session
+                .chain
+                .point(p, &pose.q_rad, crate::kinematics::chain::OutputFrame::Rig);
+        if let Some((_, energy)) = common_displacement(&session.anchors, &t, &r) {
+            robot += energy;
+        }
+        total += r.iter().map(|v| v * v).sum::<f64>();
+    }
+    if total <= 0.0 {
+        return (None, None);
+    }
+    (Some(robot / total), Some(3.0 / m as f64))
+}
+
+/// Residual structure left after the accepted effects: neighbouring poses
+/// (sorted by each joint angle, by time, by temperature) whose residuals
+/// agree more than independent noise allows; or, with more than three
+/// strings, a robot-side residual larger than the strings' own noise
+/// explains, whatever it follows (an error that flips direction between
+/// neighbours, e.g. a joint error seen from both sides of its axis, defeats
+/// the neighbour test but not this one); or, failing the neighbour test, a
+/// mismatch confined to a few poses in one stretch of a joint's range
+/// ([`concentrated`]). `n_free` is the number of geometric parameters
+/// fitted.
+pub(super) fn unexplained(
+    session: &Session,
+    ctx: &Context,
+    p: &[f64],
+    effects: &[EffectModel],
+    n_free: usize,
+) -> Option<Finding> {
+    let problem = EffectProblem {
+        chain: session.chain,
+        ctx,
+        data: session.data,
+        poses: session.train.clone(),
+        full: p.to_vec(),
+        free: vec![],
+        effects: effects.to_vec(),
+    };
+    let x = problem.x0();
+    let rpp = problem.rows_per_pose();
+    let mut res = vec![0.0; session.train.len() * rpp];
+    let mut at = 0;
+    problem.rows(&x, |_, r, _| {
+        res[at] = r;
+        at += 1;
+    });
+    let n = ctx.n_joints;
+    let mut keys: Vec<(String, Vec<f64>)> = (0..n)
+        .map(|j| {
+            (
+                format!("joint {} angle", j + 1),
+                session
+                    .train
+                    .iter()
+                    .map(|&i| ctx.poses[i].q_rad[j])
+                    .collect(),
+            )
+        })
+        .collect();
+    keys.push((
+        "time (visiting order)".into(),
+        session.train.iter().map(|&i| ctx.poses[i].time_s).collect(),
+    ));
+    if session.data.poses.iter().all(|p| p.temp_c.is_some()) {
+        keys.push((
+            "temperature".into(),
+            session
+                .train
+                .iter()
+                .map(|&i| session.data.poses[i].temp_c.unwrap_or(0.0))
+                .collect(),
+        ));
+    }
+    // Neighbour pairs per ordering: sorted by one key, and each pose with
+    // its nearest neighbour in joint space (the workspace). Poses close in
+    // time are usually close in the workspace too (a tour, a raster), so
+    // time only wins where it beats the configuration itself.
+    let mut pairings: Vec<(String, Vec<(usize, usize)>)> = keys
+        .iter()
+        .map(|(name, key)| {
+            let mut order: Vec<usize> = (0..key.len()).collect();
+            order.sort_by(|a, b| key[*a].total_cmp(&key[*b]));
+            (
+                name.clone(),
+                order.windows(2).map(|w| (w[0], w[1])).collect(),
+            )
+        })
+        .collect();
+    pairings.push((
+        "the joint configuration (nearest pose in joint space)".into(),
+        nearest_in_joint_space(ctx, &session.train),
+    ));
+    // The same joint orderings once more, on the part of each residual
+    // along the direction that joint moves T: an error of the joint's own
+    // angle, smooth in the angle (a harmonic the catalogue lacks, a gear
+    // ratio, a local bump), moves T in opposite directions on the two sides
+    // of the axis, so raw residuals of neighbours in that angle need not
+    // agree while these components do.
+    let along = joint_components(session, ctx, p, &res, rpp);
+    let n_plain = pairings.len();
+    let n_tests = n_plain + along.as_ref().map_or(0, |_| n);
+    let alpha = 1e-3 / n_tests as f64;
+    let zcrit = normal_quantile(1.0 - alpha);
+    let z_of = |pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64| {
+        let (mut s, mut v) = (0.0, 0.0);
+        for &(i, k) in pairs {
+            let x = d(i, k);
+            s += x;
+            v += x * x;
+        }
+        (v > 0.0).then(|| s / v.sqrt())
+    };
+    let mut best: Option<(f64, String)> = None;
+    // Per ordering of `pairings` (the plot's layout), the larger of the raw
+    // and the along-the-joint z for the joints.
+    let mut zs = vec![f64::NAN; n_plain];
+    // The winning ordering, and whether it was the along-the-joint one.
+    let mut winner_at: Option<(usize, bool)> = None;
+    for (pk, (name, pairs)) in pairings.iter().enumerate() {
+        let raw = |i: usize, k: usize| (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
+        let mut tries: Vec<(Option<f64>, bool)> = vec![(z_of(pairs, &raw), false)];
+        if let (Some(a), true) = (&along, pk < n) {
+            let proj = |i: usize, k: usize| a[pk][i] * a[pk][k];
+            tries.push((z_of(pairs, &proj), true));
+        }
+        for (z, projected) in tries {
+            let Some(z) = z else { continue };
+            // (NaN, not yet set, is replaced.)
+            if zs[pk].is_nan() || z > zs[pk] {
+                zs[pk] = z;
+            }
+            if z > zcrit && best.as_ref().is_none_or(|b| z > b.0) {
+                let label = if projected {
+                    format!("{name}, along the direction joint {} moves T", pk + 1)
+                } else {
+                    name.clone()
+                };
+                best = Some((z, label));
+                winner_at = Some((pk, projected));
+            }
+        }
+    }
+    let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
+    let excess = robot_side_excess(session, ctx, &res, rpp, n_params);
+    let confined = if best.is_none() {
+        let test_problem = EffectProblem {
+            chain: session.chain,
+            ctx,
+            data: session.data,
+            poses: session.test.clone(),
+            full: p.to_vec(),
+            free: vec![],
+            effects: effects.to_vec(),
+        };
+        let mut test_res = Vec::with_capacity(session.test.len() * rpp);
+        test_problem.rows(&x, |_, r, _| test_res.push(r));
+        let per_pose = |r: &[f64]| -> Vec<f64> {
+            r.chunks(rpp)
+                .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
+                .collect()
+        };
+        concentrated(session, ctx, &per_pose(&res), &per_pose(&test_res), 1e-3)
+    } else {
+        None
+    };
+    let (winner, located) = match (&best, excess, winner_at) {
+        (Some((z, name)), _, Some((pk, false))) => (
+            pk,
+            format!(
+                "residuals of neighbouring poses by {name} agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch varies smoothly with {name}"
+            ),
+        ),
+        (Some((z, _)), _, Some((pk, true))) => (
+            pk,
+            format!(
+                "along the direction joint {j} moves T, the residuals of poses neighbouring in joint {j}'s angle agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch behaves like an error of joint {j}'s own angle that varies smoothly with the angle, in a form no catalogue effect has",
+                j = pk + 1
+            ),
+        ),
+        (None, _, _) if confined.is_some() => {
+            let c = confined.as_ref().expect("checked");
+            (
+                c.joint,
+                format!(
+                    "the train poses far off the rest ({ids}: misfit over {FAR_OFF_MEDIANS} times the median) lie with joint {j} between {lo:.0} and {hi:.0} deg, and the {m} held-out poses there confirm it (misfit RMS {a:.3} mm per reading, against {b:.3} elsewhere; permutation p = {p:.1e}, threshold {t:.1e}): the mismatch is confined to that stretch of joint {j}'s range, in a form no catalogue effect has",
+                    ids = c.train_poses.join(", "),
+                    j = c.joint + 1,
+                    lo = c.lo_rad.to_degrees(),
+                    hi = c.hi_rad.to_degrees(),
+                    m = c.n_test_in,
+                    a = c.test_rms_in,
+                    b = c.test_rms_out,
+                    p = c.p,
+                    t = c.alpha,
+                ),
+            )
+        }
+        (None, Some(x), _) if x.f > x.threshold => {
+            // The ordering that comes nearest, for the plot.
+            let (w, z) = zs
+                .iter()
+                .enumerate()
+                .filter(|(_, z)| z.is_finite())
+                .max_by(|a, b| a.1.total_cmp(b.1))
+                .map_or((0, f64::NAN), |(w, z)| (w, *z));
+            (
+                w,
+                format!(
+                    "the robot-side part of the string residuals is {:.1} times the variance the strings' own disagreement (their noise) explains (F = {:.1} on {} and {} degrees of freedom, threshold {:.1}), though it follows no driver of the catalogue and varies too fast for neighbouring poses to agree (nearest: {}, z = {z:.1})",
+                    x.f, x.f, x.d1, x.d2, x.threshold, pairings[w].0
+                ),
+            )
+        }
+        _ => return None,
+    };
+    // A confined mismatch already says where it lives.
+    let region = if confined.is_some() {
+        String::new()
+    } else {
+        worst_region(ctx, &session.train, &res, rpp)
+    };
+    let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
+    let test = rms(&errors_with_effects(
+        session,
+        ctx,
+        p,
+        effects,
+        &session.test,
+    ));
+    let mut parameters = serde_json::json!({
+        "ordering": pairings[winner].0,
+        "along_joint_motion": winner_at.is_some_and(|(_, projected)| projected),
+        "z": zs[winner],
+    });
+    if let Some(c) = &confined {
+        parameters["confined_joint"] = (c.joint + 1).into();
+        parameters["confined_deg"] =
+            serde_json::json!([c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]);
+        parameters["confined_train_poses"] = serde_json::json!(c.train_poses);
+        parameters["confined_p"] = c.p.into();
+    }
+    if let Some(x) = excess {
+        parameters["robot_side_variance_ratio"] = x.f.into();
+        parameters["variance_ratio_threshold"] = x.threshold.into();
+    }
+    Some(Finding {
+        effect: "unexplained".into(),
+        joint: None,
+        sensor: None,
+        magnitude: rms_res,
+        sigma: f64::NAN, // no fitted parameter: no uncertainty (null)
+        unit: "mm (train residual RMS per reading)".into(),
+        explanation: "structure remains that no effect of the catalogue explains; it is reported rather than forced onto a wrong name".into(),
+        evidence: format!("{located}{region}"),
+        test_rms_before_mm: test,
+        test_rms_after_mm: test,
+        parameters,
+        evidence_plot: super::evidence::unexplained_plot(session, ctx, p, effects, winner, &zs),
+    })
+}
+
+/// A mismatch confined to a few poses, found by [`concentrated`].
+#[derive(Debug, Clone)]
+struct Concentrated {
+    /// Joint (0-based) whose angle gathers them.
+    joint: usize,
+    /// The stretch of its range (rad) the held-out poses were tested in.
+    lo_rad: f64,
+    hi_rad: f64,
+    /// Train poses far off the rest that lie in the stretch, by pose id.
+    train_poses: Vec<String>,
+    /// Held-out poses in the stretch, and the held-out misfit (RMS per
+    /// reading, mm) inside and outside it.
+    n_test_in: usize,
+    test_rms_in: f64,
+    test_rms_out: f64,
+    /// Chance of held-out poses inside ranking this high without a
+    /// mismatch there (permutation test), and what it had to beat.
+    p: f64,
+    alpha: f64,
+}
+
+/// A train pose is "far off" when its misfit passes this multiple of the
+/// train poses' median misfit: about six standard deviations of noise for
+/// three Gaussian readings, so noise alone hardly ever gives one.
+const FAR_OFF_MEDIANS: f64 = 4.0;
+/// Random relabellings of the held-out poses for the permutation test.
+const PERMUTATIONS: usize = 20_000;
+
+/// An error confined to a stretch of one joint's range (a damaged or
+/// eccentric stretch of gear, a cable or dress pack pulling in one
+/// posture, a local collision with the rig) that only a few poses reach:
+/// too few for any smooth model or neighbour test, and with a tracker no
+/// string redundancy gives the noise to compare against. The few train
+/// poses far off the rest (`misfit_train` above [`FAR_OFF_MEDIANS`] times
+/// its median, at most a quarter of them) form, for each joint, a stretch
+/// of its angle: the narrowest holding two thirds of them, padded by half
+/// its width or a twentieth of the joint's range. That is a hypothesis made
+/// on the train poses alone; the held-out poses test it: their misfits
+/// inside the stretch must rank above those outside (rank sum, permutation
+/// p-value) at `alpha` shared among the joints. Misfits are per reading
+/// (string residuals, or point coordinates), whose noise is the same at
+/// every pose, not 3-D errors, whose noise grows where the rig's geometry
+/// is poor.
+fn concentrated(
+    session: &Session,
+    ctx: &Context,
+    misfit_train: &[f64],
+    misfit_test: &[f64],
+    alpha: f64,
+) -> Option<Concentrated> {
+    let (n_tr, n_te) = (misfit_train.len(), misfit_test.len());
+    if n_tr < 8 || n_te < 4 {
+        return None;
+    }
+    let mut sorted = misfit_train.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[n_tr / 2];
+    let far: Vec<usize> = (0..n_tr)
+        .filter(|&k| misfit_train[k] > FAR_OFF_MEDIANS * median)
+        .collect();
+    if far.is_empty() || 4 * far.len() > n_tr {
+        return None;
+    }
+    // Held-out ranks (1 = smallest misfit), ties in pose order.
+    let mut by_misfit: Vec<usize> = (0..n_te).collect();
+    by_misfit.sort_by(|a, b| misfit_test[*a].total_cmp(&misfit_test[*b]));
+    let mut rank = vec![0usize; n_te];
+    for (r, &k) in by_misfit.iter().enumerate() {
+        rank[k] = r + 1;
+    }
+    let alpha_joint = alpha / ctx.n_joints.max(1) as f64;
+    let mut rng = crate::rng::Rng::new(0x5eed);
+    let mut best: Option<Concentrated> = None;
+    for j in 0..ctx.n_joints {
+        let q = |i: usize| ctx.poses[i].q_rad[j];
+        let (lo_all, hi_all) = session
+            .train
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &i| {
+                (a.min(q(i)), b.max(q(i)))
+            });
+        let range = hi_all - lo_all;
+        if range.to_degrees() < 5.0 {
+            continue;
+        }
+        let mut qf: Vec<(f64, usize)> = far.iter().map(|&k| (q(session.train[k]), k)).collect();
+        qf.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let need = if qf.len() <= 2 {
+            qf.len()
+        } else {
+            (2 * qf.len()).div_ceil(3)
+        };
+        let (width, start) = (0..=qf.len() - need)
+            .map(|s| (qf[s + need - 1].0 - qf[s].0, s))
+            .min_by(|a, b| a.0.total_cmp(&b.0))?;
+        if width > range / 4.0 {
+            continue; // spread over the range: not confined to a stretch
+        }
+        let pad = (width / 2.0).max(range / 20.0);
+        let (lo, hi) = (qf[start].0 - pad, qf[start + need - 1].0 + pad);
+        let inside: Vec<usize> = (0..n_te)
+            .filter(|&k| (lo..=hi).contains(&q(session.test[k])))
+            .collect();
+        let m = inside.len();
+        if m == 0 || m == n_te {
+            continue;
+        }
+        let observed: usize = inside.iter().map(|&k| rank[k]).sum();
+        // Rank sums of m held-out poses drawn at random (partial shuffle).
+        let mut ranks: Vec<usize> = (1..=n_te).collect();
+        let mut as_high = 0usize;
+        for _ in 0..PERMUTATIONS {
+            let mut sum = 0;
+            for t in 0..m {
+                let u = t + (rng.next_u64() % (n_te - t) as u64) as usize;
+                ranks.swap(t, u);
+                sum += ranks[t];
+            }
+            if sum >= observed {
+                as_high += 1;
+            }
+        }
+        let p = (as_high + 1) as f64 / (PERMUTATIONS + 1) as f64;
+        if p < alpha_joint && best.as_ref().is_none_or(|b| p < b.p) {
+            let rms_of = |ks: &mut dyn Iterator<Item = usize>| {
+                let (mut ss, mut c) = (0.0, 0usize);
+                for k in ks {
+                    ss += misfit_test[k] * misfit_test[k];
+                    c += 1;
+                }
+                (ss / c.max(1) as f64).sqrt()
+            };
+            best = Some(Concentrated {
+                joint: j,
+                lo_rad: lo,
+                hi_rad: hi,
+                train_poses: qf[start..start + need]
+                    .iter()
+                    .map(|&(_, k)| session.data.poses[session.train[k]].id.clone())
+                    .collect(),
+                n_test_in: m,
+                test_rms_in: rms_of(&mut inside.iter().copied()),
+                test_rms_out: rms_of(&mut (0..n_te).filter(|k| !inside.contains(k))),
+                p,
+                alpha: alpha_joint,
+            });
+        }
+    }
+    best
+}
+
+/// Robot-side residual variance against the strings' noise (see
+/// [`robot_side_excess`]).
+#[derive(Debug, Clone, Copy)]
+struct Excess {
+    /// Ratio of the two variances.
+    f: f64,
+    /// What it must exceed to count.
+    threshold: f64,
+    d1: usize,
+    d2: usize,
+}
+
+/// False-alarm rate of the robot-side excess test (strict: it names no
+/// cause, and a cross-check on 130 effect-free string sessions of other
+/// rigs and arms saw one chance excess at 1e-3).
+const EXCESS_ALPHA: f64 = 1e-4;
+/// Smallest robot-side variance ratio reported, whatever its significance
+/// (a robot-side residual RMS 1.4 times the noise): strings of unequal
+/// noise split their variance between the two parts a little unevenly,
+/// and a large session makes that significant.
+const EXCESS_MIN_RATIO: f64 = 2.0;
+
+/// With more than three strings, each pose's string residuals `res` (train
+/// poses, `rpp` per pose) split into a common displacement of T (3 degrees
+/// of freedom: robot side) and the strings' disagreement with any single
+/// point (`m - 3`: sensor side, which only the strings' noise and
+/// sensor-side effects feed). Without anything left out, both are noise:
+/// their variances per degree of freedom (the robot side less the `n_params`
+/// fitted) have an F distribution.
+fn robot_side_excess(
+    session: &Session,
+    ctx: &Context,
+    res: &[f64],
+    rpp: usize,
+    n_params: usize,
+) -> Option<Excess> {
+    let m = session.anchors.len();
+    if m <= 3 || rpp != m {
+        return None;
+    }
+    let (mut robot, mut total, mut n) = (0.0, 0.0, 0usize);
+    for (pos, &i) in session.train.iter().enumerate() {
+        let r = &res[pos * rpp..(pos + 1) * rpp];
+        // A pose whose anchors do not fix a point tells nothing here.
+        let Some((_, energy)) = common_displacement(&session.anchors, &ctx.poses[i].point_rig, r)
+        else {
+            continue;
+        };
+        robot += energy;
+        total += r.iter().map(|v| v * v).sum::<f64>();
+        n += 1;
+    }
+    let d1 = (3 * n).checked_sub(n_params)?;
+    let d2 = (m - 3) * n;
+    let sensor = total - robot;
+    if d1 < 10 || d2 < 10 || sensor <= 0.0 {
+        return None;
+    }
+    Some(Excess {
+        f: (robot / d1 as f64) / (sensor / d2 as f64),
+        threshold: f_quantile_upper(EXCESS_ALPHA, d1, d2).max(EXCESS_MIN_RATIO),
+        d1,
+        d2,
+    })
+}
+
+/// Per joint and train pose (position in `session.train`), the component of
+/// the pose's residual, as a displacement of T in the rig frame, along the
+/// direction a turn of that joint moves T (mm). A point residual is the
+/// displacement; string residuals give it by least squares through the
+/// anchors' unit vectors (their robot-side part). `None` with fewer than
+/// three strings.
+fn joint_components(
+    session: &Session,
+    ctx: &Context,
+    p: &[f64],
+    res: &[f64],
+    rpp: usize,
+) -> Option<Vec<Vec<f64>>> {
+    let m = session.anchors.len();
+    if m > 0 && (m < 3 || rpp != m) {
+        return None;
+    }
+    let n = ctx.n_joints;
+    let l = session.chain.layout;
+    let mut jac = session.chain.new_jacobian();
+    let mut out = vec![Vec::with_capacity(session.train.len()); n];
+    for (pos, &i) in session.train.iter().enumerate() {
+        let r = &res[pos * rpp..(pos + 1) * rpp];
+        let disp = if m == 0 {
+            Vector3::new(r[0], r[1], r[2])
+        } else {
+            common_displacement(&session.anchors, &ctx.poses[i].point_rig, r)
+                .map_or(Vector3::zeros(), |(d, _)| d)
+        };
+        session.chain.point_jacobian(
+            p,
+            &ctx.poses[i].q_rad,
+            crate::kinematics::chain::OutputFrame::Rig,
+            &mut jac,
+        );
+        for (j, o) in out.iter_mut().enumerate() {
+            let w = jac.d_params[l.joint(j, crate::kinematics::JointParam::Theta)];
+            let norm = w.norm();
+            o.push(if norm > 1e-9 {
+                disp.dot(&w) / norm
+            } else {
+                0.0
+            });
+        }
+    }
+    Some(out)
+}
+
+/// Each train pose (position in `train`) paired with its nearest other
+/// train pose in joint space, each pair once (mutual neighbours would
+/// otherwise count twice and inflate the agreement statistic). Above
+/// 12,000 poses a deterministic stride subsample bounds this quadratic
+/// search.
+fn nearest_in_joint_space(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)> {
+    let stride = train.len().div_ceil(12_000).max(1);
+    let pick: Vec<usize> = (0..train.len()).step_by(stride).collect();
+    let q = |a: usize| &ctx.poses[train[a]].q_rad;
+    pick.iter()
+        .filter_map(|&a| {
+            pick.iter()
+                .filter(|&&b| b != a)
+                .map(|&b| {
+                    let d: f64 = q(a).iter().zip(q(b)).map(|(x, y)| (x - y).powi(2)).sum();
+                    (d, b)
+                })
+                .min_by(|x, y| x.0.total_cmp(&y.0))
+                .map(|(_, b)| (a.min(b), a.max(b)))
+        })
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect()
+}
+
+/// Where in the workspace the residual is largest: the quarter of one
+/// joint's range (over the train poses) with the highest residual RMS,
+/// when it stands out (1.3 times the overall RMS or more).
+fn worst_region(ctx: &Context, train: &[usize], res: &[f64], rpp: usize) -> String {
+    let n_t = train.len();
+    if n_t < 40 {
+        return String::new();
+    }
+    let sq = |a: usize| (0..rpp).map(|c| res[a * rpp + c].powi(2)).sum::<f64>();
+    let all = ((0..n_t).map(sq).sum::<f64>() / n_t as f64).sqrt();
+    let mut best: Option<(f64, String)> = None;
+    for j in 0..ctx.n_joints {
+        let mut order: Vec<usize> = (0..n_t).collect();
+        order.sort_by(|a, b| {
+            ctx.poses[train[*a]].q_rad[j].total_cmp(&ctx.poses[train[*b]].q_rad[j])
+        });
+        let lo = ctx.poses[train[order[0]]].q_rad[j];
+        let hi = ctx.poses[train[order[n_t - 1]]].q_rad[j];
+        if (hi - lo).to_degrees() < 5.0 {
+            continue;
+        }
+        for quarter in order.chunks(n_t.div_ceil(4)) {
+            let r = (quarter.iter().map(|&a| sq(a)).sum::<f64>() / quarter.len() as f64).sqrt();
+            let (a, b) = (
+                ctx.poses[train[quarter[0]]].q_rad[j].to_degrees(),
+                ctx.poses[train[quarter[quarter.len() - 1]]].q_rad[j].to_degrees(),
+            );
+            if best.as_ref().is_none_or(|x| r > x.0) {
+                best = Some((r, format!("joint {} between {a:.0} and {b:.0} deg", j + 1)));
+            }
+        }
+    }
+    match best {
+        Some((r, where_)) if r >= 1.3 * all => format!(
+            "; largest where {where_} (residual RMS {:.3} mm per reading there, {:.3} overall)",
+            r / (rpp as f64).sqrt(),
+            all / (rpp as f64).sqrt()
+        ),
+        _ => String::new(),
+    }
+}
