@@ -163,7 +163,7 @@ struct Proposal {
 /// Held-out residuals in the space of what was measured (string readings
 /// or point coordinates), per test pose: the sum of squares over the pose's
 /// rows and their number.
-fn reading_errors(
+pub(super) fn reading_errors(
     session: &Session,
     ctx: &Context,
     p: &[f64],

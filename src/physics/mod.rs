@@ -1,7 +1,7 @@
 //! Physics beyond the geometric model: a catalogue of effects
 //! ([`effects`]), the calibration problem augmented with them
 //! ([`problem`]), the analysis that finds, names, models and proves them
-//! ([`analyse`]) and says where structure no effect explains remains
+//! ([`analyse`](mod@analyse)) and says where structure no effect explains remains
 //! (`unexplained`), and the simulator that puts them into recordings
 //! ([`simulate`]). One implementation of each effect serves both.
 //!

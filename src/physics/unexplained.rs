@@ -9,10 +9,10 @@
 
 use nalgebra::Vector3;
 
-use super::analyse::{errors_with_effects, rms};
+use super::analyse::{errors_with_effects, reading_errors, rms};
 use super::effects::{Context, EffectModel};
 use super::problem::EffectProblem;
-use super::stats::{f_quantile_upper, normal_quantile};
+use super::stats::{f_quantile_upper, normal_quantile, normal_upper_tail};
 use crate::identify::Session;
 use crate::identify::report::Finding;
 
@@ -198,23 +198,15 @@ pub(super) fn unexplained(
     let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
     let excess = robot_side_excess(session, ctx, &res, rpp, n_params);
     let confined = if best.is_none() {
-        let test_problem = EffectProblem {
-            chain: session.chain,
-            ctx,
-            data: session.data,
-            poses: session.test.clone(),
-            full: p.to_vec(),
-            free: vec![],
-            effects: effects.to_vec(),
-        };
-        let mut test_res = Vec::with_capacity(session.test.len() * rpp);
-        test_problem.rows(&x, |_, r, _| test_res.push(r));
-        let per_pose = |r: &[f64]| -> Vec<f64> {
-            r.chunks(rpp)
-                .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
-                .collect()
-        };
-        concentrated(session, ctx, &per_pose(&res), &per_pose(&test_res), 1e-3)
+        let train: Vec<f64> = res
+            .chunks(rpp)
+            .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
+            .collect();
+        let test: Vec<f64> = reading_errors(session, ctx, p, effects)
+            .iter()
+            .map(|&(ss, n)| (ss / n.max(1) as f64).sqrt())
+            .collect();
+        concentrated(session, ctx, &train, &test, 1e-3)
     } else {
         None
     };
@@ -237,7 +229,7 @@ pub(super) fn unexplained(
             (
                 c.joint,
                 format!(
-                    "the train poses far off the rest ({ids}: misfit over {FAR_OFF_MEDIANS} times the median) lie with joint {j} between {lo:.0} and {hi:.0} deg, and the {m} held-out poses there confirm it (misfit RMS {a:.3} mm per reading, against {b:.3} elsewhere; permutation p = {p:.1e}, threshold {t:.1e}): the mismatch is confined to that stretch of joint {j}'s range, in a form no catalogue effect has",
+                    "the train poses far off the rest ({ids}: misfit over {FAR_OFF_MEDIANS} times the median) lie with joint {j} between {lo:.0} and {hi:.0} deg, and the {m} held-out poses there confirm it (misfit RMS {a:.3} mm per reading, against {b:.3} elsewhere; Wilcoxon rank-sum p = {p:.1e}, threshold {t:.1e}): the mismatch is confined to that stretch of joint {j}'s range, in a form no catalogue effect has",
                     ids = c.train_poses.join(", "),
                     j = c.joint + 1,
                     lo = c.lo_rad.to_degrees(),
@@ -339,8 +331,6 @@ struct Concentrated {
 /// train poses' median misfit: about six standard deviations of noise for
 /// three Gaussian readings, so noise alone hardly ever gives one.
 const FAR_OFF_MEDIANS: f64 = 4.0;
-/// Random relabellings of the held-out poses for the permutation test.
-const PERMUTATIONS: usize = 20_000;
 
 /// An error confined to a stretch of one joint's range (a damaged or
 /// eccentric stretch of gear, a cable or dress pack pulling in one
@@ -349,11 +339,13 @@ const PERMUTATIONS: usize = 20_000;
 /// string redundancy gives the noise to compare against. The few train
 /// poses far off the rest (`misfit_train` above [`FAR_OFF_MEDIANS`] times
 /// its median, at most a quarter of them) form, for each joint, a stretch
-/// of its angle: the narrowest holding two thirds of them, padded by half
-/// its width or a twentieth of the joint's range. That is a hypothesis made
-/// on the train poses alone; the held-out poses test it: their misfits
-/// inside the stretch must rank above those outside (rank sum, permutation
-/// p-value) at `alpha` shared among the joints. Misfits are per reading
+/// of its angle: the narrowest holding two thirds of them (skipped when
+/// wider than a quarter of the joint's range over the train poses), padded
+/// by the larger of half its width and a twentieth of that range. That is a
+/// hypothesis made on the train poses alone; the held-out poses test it:
+/// their misfits inside the stretch must rank above those outside
+/// (Wilcoxon rank sum, [`rank_sum_upper_p`]) at `alpha` shared among the
+/// joints. Misfits are per reading
 /// (string residuals, or point coordinates), whose noise is the same at
 /// every pose, not 3-D errors, whose noise grows where the rig's geometry
 /// is poor.
@@ -368,9 +360,7 @@ fn concentrated(
     if n_tr < 8 || n_te < 4 {
         return None;
     }
-    let mut sorted = misfit_train.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[n_tr / 2];
+    let median = crate::identify::stats::median(misfit_train);
     let far: Vec<usize> = (0..n_tr)
         .filter(|&k| misfit_train[k] > FAR_OFF_MEDIANS * median)
         .collect();
@@ -385,7 +375,6 @@ fn concentrated(
         rank[k] = r + 1;
     }
     let alpha_joint = alpha / ctx.n_joints.max(1) as f64;
-    let mut rng = crate::rng::Rng::new(0x5eed);
     let mut best: Option<Concentrated> = None;
     for j in 0..ctx.n_joints {
         let q = |i: usize| ctx.poses[i].q_rad[j];
@@ -422,21 +411,7 @@ fn concentrated(
             continue;
         }
         let observed: usize = inside.iter().map(|&k| rank[k]).sum();
-        // Rank sums of m held-out poses drawn at random (partial shuffle).
-        let mut ranks: Vec<usize> = (1..=n_te).collect();
-        let mut as_high = 0usize;
-        for _ in 0..PERMUTATIONS {
-            let mut sum = 0;
-            for t in 0..m {
-                let u = t + (rng.next_u64() % (n_te - t) as u64) as usize;
-                ranks.swap(t, u);
-                sum += ranks[t];
-            }
-            if sum >= observed {
-                as_high += 1;
-            }
-        }
-        let p = (as_high + 1) as f64 / (PERMUTATIONS + 1) as f64;
+        let p = rank_sum_upper_p(n_te, m, observed);
         if p < alpha_joint && best.as_ref().is_none_or(|b| p < b.p) {
             let rms_of = |ks: &mut dyn Iterator<Item = usize>| {
                 let (mut ss, mut c) = (0.0, 0usize);
@@ -450,8 +425,9 @@ fn concentrated(
                 joint: j,
                 lo_rad: lo,
                 hi_rad: hi,
-                train_poses: qf[start..start + need]
+                train_poses: qf
                     .iter()
+                    .filter(|(a, _)| (lo..=hi).contains(a))
                     .map(|&(_, k)| session.data.poses[session.train[k]].id.clone())
                     .collect(),
                 n_test_in: m,
@@ -463,6 +439,55 @@ fn concentrated(
         }
     }
     best
+}
+
+/// Largest work (held-out poses x poses inside x their possible rank sums)
+/// for which [`rank_sum_upper_p`] counts exactly.
+const EXACT_RANK_SUM_WORK: usize = 10_000_000;
+
+/// Chance that `m` of `n` ranks (1..=n) drawn at random sum to `observed`
+/// or more: the one-sided Wilcoxon rank-sum p-value. Counted exactly
+/// (subset sums by dynamic programming over the smaller side) while that
+/// is cheap; beyond, the normal approximation with continuity correction,
+/// which for these sizes (tens of poses on each side) errs on the large
+/// side in the far tail (the rank sum is bounded, its tails lighter).
+pub(super) fn rank_sum_upper_p(n: usize, m: usize, observed: usize) -> f64 {
+    if m == 0 || m >= n {
+        return 1.0;
+    }
+    let total = n * (n + 1) / 2;
+    // The other side's sum is fixed by this one's: count the smaller side.
+    let (k, at_least) = if 2 * m <= n {
+        (m, Some(observed))
+    } else {
+        (n - m, None) // the outside's sum must be at most total - observed
+    };
+    let bound = total.saturating_sub(observed);
+    let max_sum = k * n;
+    if n.saturating_mul(k).saturating_mul(max_sum) > EXACT_RANK_SUM_WORK {
+        let (nf, mf) = (n as f64, m as f64);
+        let mean = mf * (nf + 1.0) / 2.0;
+        let sd = (mf * (nf - mf) * (nf + 1.0) / 12.0).sqrt();
+        let z = (observed as f64 - 0.5 - mean) / sd;
+        return normal_upper_tail(z);
+    }
+    // ways[j][s]: subsets of j of the ranks seen so far summing to s.
+    let mut ways = vec![vec![0.0f64; max_sum + 1]; k + 1];
+    ways[0][0] = 1.0;
+    for r in 1..=n {
+        for j in (1..=k.min(r)).rev() {
+            let (lower, upper) = ways.split_at_mut(j);
+            for s in (r..=max_sum).rev() {
+                upper[0][s] += lower[j - 1][s - r];
+            }
+        }
+    }
+    let all: f64 = ways[k].iter().sum();
+    let tail: f64 = match at_least {
+        Some(o) => ways[k].iter().skip(o).sum(),
+        None => ways[k].iter().take(bound + 1).sum(),
+    };
+    (tail / all).clamp(0.0, 1.0)
 }
 
 /// Robot-side residual variance against the strings' noise (see
@@ -643,5 +668,56 @@ fn worst_region(ctx: &Context, train: &[usize], res: &[f64], rpp: usize) -> Stri
             all / (rpp as f64).sqrt()
         ),
         _ => String::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::rank_sum_upper_p;
+
+    /// Every subset of `m` of the ranks 1..=n, by brute force.
+    fn brute_force(n: usize, m: usize, observed: usize) -> f64 {
+        let (mut hit, mut all) = (0u64, 0u64);
+        for mask in 0u32..(1 << n) {
+            if mask.count_ones() as usize != m {
+                continue;
+            }
+            let sum: usize = (0..n).filter(|b| mask & (1 << b) != 0).map(|b| b + 1).sum();
+            all += 1;
+            hit += (sum >= observed) as u64;
+        }
+        hit as f64 / all as f64
+    }
+
+    #[test]
+    fn rank_sum_tail_is_exact_on_both_sides() {
+        for (n, m) in [(10, 3), (9, 6), (12, 1), (12, 11), (8, 4)] {
+            let total = n * (n + 1) / 2;
+            for observed in 0..=total + 1 {
+                let (a, b) = (
+                    rank_sum_upper_p(n, m, observed),
+                    brute_force(n, m, observed),
+                );
+                assert!(
+                    (a - b).abs() < 1e-12,
+                    "n {n} m {m} sum {observed}: {a} vs {b}"
+                );
+            }
+        }
+        // The three highest of 63 held-out ranks: one subset in C(63, 3).
+        let p = rank_sum_upper_p(63, 3, 61 + 62 + 63);
+        assert!((p * 39_711.0 - 1.0).abs() < 1e-9, "{p}");
+    }
+
+    #[test]
+    fn rank_sum_tail_of_large_sessions_is_normal() {
+        // Beyond the exact count: the mean has half the mass above it, and
+        // the tail shrinks with the sum.
+        let (n, m) = (3000, 400);
+        let mean = m * (n + 1) / 2;
+        assert!((rank_sum_upper_p(n, m, mean) - 0.5).abs() < 0.01);
+        let sd = ((m * (n - m) * (n + 1)) as f64 / 12.0).sqrt();
+        let p = rank_sum_upper_p(n, m, mean + (3.0 * sd) as usize);
+        assert!((p / 1.35e-3 - 1.0).abs() < 0.05, "{p}");
     }
 }

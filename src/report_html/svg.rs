@@ -109,9 +109,10 @@ impl YAxis {
             .fold(f64::INFINITY, f64::min);
         let any_negative = finite.clone().any(|v| v < 0.0);
         if !any_negative && min_pos.is_finite() && max / min_pos > 100.0 {
-            // At least 0.3 decade of the smallest bar shows.
-            let lo = (min_pos.log10() - 0.3).floor() as i32;
-            let hi = (max.log10().ceil() as i32).max(lo + 1);
+            // At least 0.3 decade of the smallest bar shows, and at most
+            // six decades are drawn: a bar below them says its value.
+            let hi = max.log10().ceil() as i32;
+            let lo = ((min_pos.log10() - 0.3).floor() as i32).clamp(hi - 6, hi - 1);
             return YAxis::Log10(lo, hi);
         }
         let (lo, hi) = range(finite, true);
@@ -410,6 +411,21 @@ mod tests {
             "{heights:?}"
         );
         assert!(heights[1] > 0.05 * heights[0], "{heights:?}");
+    }
+
+    #[test]
+    fn a_log_axis_spans_at_most_six_decades() {
+        let svg = bars(
+            "t",
+            "mm",
+            &["x"],
+            &[("before", "#aaa"), ("after", "#f00")],
+            &[vec![5.0, 1e-300]],
+        );
+        assert!(svg.contains("mm, log scale"), "{svg}");
+        // Ticks 1e-5 .. 10: seven lines.
+        assert_eq!(svg.matches(r##"stroke="#e4e4e4""##).count(), 7, "{svg}");
+        assert_eq!(svg.matches(r#"class="bar-value""#).count(), 1, "{svg}");
     }
 
     #[test]
