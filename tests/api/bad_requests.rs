@@ -854,45 +854,60 @@ async fn a_stored_rig_that_no_longer_validates_is_a_conflict() {
     app.stop().await;
 }
 
-/// The same rig gone stale under a session whose poses were stored while it
-/// was valid: enqueueing a job answers 409 at once (not a job that fails in
-/// the worker), and no job is stored.
+/// A stored rig or robot model gone stale under a session whose poses were
+/// stored while it was valid: enqueueing a job answers 409 at once (not a
+/// job that fails in the worker), and no job is stored.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_job_on_a_stale_rig_is_refused_when_enqueued() {
-    let app = TestApp::spawn("stalerigjob").await;
-    let (_, _, rig_id, sid) = app.setup(DS, "STALE-2").await;
-    ok_json(
-        app.post_raw(
-            &format!("/sessions/{sid}/poses"),
-            Some("text/csv"),
-            read(DS, "poses.csv"),
-        )
-        .await,
-        200,
-    )
-    .await;
-    let bad = read(DS, "rig.json").replace("\"r_mm\": 35.0", "\"r_mm\": -35.0");
-    assert!(bad.contains("-35.0"));
-    let pool = sqlx::SqlitePool::connect(&app.db_url).await.unwrap();
-    sqlx::query("UPDATE rigs SET rig_json = $1 WHERE id = $2")
-        .bind(&bad)
-        .bind(rig_id)
-        .execute(&pool)
-        .await
-        .unwrap();
-    let e = err_json(
-        app.post_json(&format!("/sessions/{sid}/jobs"), &json!({}))
+async fn a_job_on_a_stale_rig_or_model_is_refused_when_enqueued() {
+    for (what, file, from, to) in [
+        ("rig", "rig.json", "\"r_mm\": 35.0", "\"r_mm\": -35.0"),
+        (
+            "robot model",
+            "robot.json",
+            "\"q_min_deg\": -170.0",
+            "\"q_min_deg\": 200.0",
+        ),
+    ] {
+        let app = TestApp::spawn("stalejob").await;
+        let (model_id, _, rig_id, sid) = app.setup(DS, "STALE-2").await;
+        ok_json(
+            app.post_raw(
+                &format!("/sessions/{sid}/poses"),
+                Some("text/csv"),
+                read(DS, "poses.csv"),
+            )
             .await,
-        409,
-        "conflict",
-    )
-    .await;
-    let m = e["message"].as_str().unwrap();
-    assert!(
-        m.contains(&format!("stored rig {rig_id}")) && m.contains("r_mm"),
-        "{e}"
-    );
-    let jobs = ok_json(app.get(&format!("/jobs?session_id={sid}")).await, 200).await;
-    assert_eq!(jobs["total"], 0, "{jobs}");
-    app.stop().await;
+            200,
+        )
+        .await;
+        let bad = read(DS, file).replacen(from, to, 1);
+        assert_ne!(bad, read(DS, file));
+        let (sql, id) = if what == "rig" {
+            ("UPDATE rigs SET rig_json = $1 WHERE id = $2", rig_id)
+        } else {
+            (
+                "UPDATE robot_models SET robot_json = $1 WHERE id = $2",
+                model_id,
+            )
+        };
+        let pool = sqlx::SqlitePool::connect(&app.db_url).await.unwrap();
+        sqlx::query(sql)
+            .bind(&bad)
+            .bind(id)
+            .execute(&pool)
+            .await
+            .unwrap();
+        let e = err_json(
+            app.post_json(&format!("/sessions/{sid}/jobs"), &json!({}))
+                .await,
+            409,
+            "conflict",
+        )
+        .await;
+        let m = e["message"].as_str().unwrap();
+        assert!(m.contains(&format!("stored {what} {id}")), "{e}");
+        let jobs = ok_json(app.get(&format!("/jobs?session_id={sid}")).await, 200).await;
+        assert_eq!(jobs["total"], 0, "{jobs}");
+        app.stop().await;
+    }
 }
