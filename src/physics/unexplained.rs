@@ -451,7 +451,7 @@ const EXACT_RANK_SUM_WORK: usize = 10_000_000;
 /// is cheap; beyond, the normal approximation with continuity correction,
 /// which for these sizes (tens of poses on each side) errs on the large
 /// side in the far tail (the rank sum is bounded, its tails lighter).
-pub(super) fn rank_sum_upper_p(n: usize, m: usize, observed: usize) -> f64 {
+fn rank_sum_upper_p(n: usize, m: usize, observed: usize) -> f64 {
     if m == 0 || m >= n {
         return 1.0;
     }
