@@ -169,15 +169,14 @@ pub(super) fn reading_errors(
     p: &[f64],
     effects: &[EffectModel],
 ) -> Vec<(f64, usize)> {
-    let problem = EffectProblem {
-        chain: session.chain,
+    let problem = EffectProblem::of_session(
+        session,
         ctx,
-        data: session.data,
-        poses: session.test.clone(),
-        full: p.to_vec(),
-        free: vec![],
-        effects: effects.to_vec(),
-    };
+        session.test.clone(),
+        p,
+        vec![],
+        effects.to_vec(),
+    );
     let mut out = vec![(0.0, 0usize); session.test.len()];
     problem.rows(&problem.x0(), |pos, r, _| {
         out[pos].0 += r * r;
@@ -573,15 +572,14 @@ fn train_normals(
 ) -> Normals {
     let mut effects = accepted.to_vec();
     effects.extend(extra.into_iter().map(EffectModel::zero));
-    let problem = EffectProblem {
-        chain: session.chain,
+    let problem = EffectProblem::of_session(
+        session,
         ctx,
-        data: session.data,
-        poses: session.train.clone(),
-        full: p.to_vec(),
-        free: free.to_vec(),
+        session.train.clone(),
+        p,
+        free.to_vec(),
         effects,
-    };
+    );
     normals(&problem, &problem.x0(), fold_of)
 }
 
@@ -1386,15 +1384,14 @@ fn refit(
     free: &[usize],
     effects: &[EffectModel],
 ) -> Result<Fit> {
-    let problem = EffectProblem {
-        chain: session.chain,
+    let problem = EffectProblem::of_session(
+        session,
         ctx,
-        data: session.data,
-        poses: session.train.clone(),
-        full: p.to_vec(),
-        free: free.to_vec(),
-        effects: effects.to_vec(),
-    };
+        session.train.clone(),
+        p,
+        free.to_vec(),
+        effects.to_vec(),
+    );
     let res = lm::minimize(&problem, &problem.x0(), &LmSettings::default(), |_, _| true)?;
     let (pn, en) = problem.unpack(&res.x);
     let n = res.x.len();

@@ -328,15 +328,7 @@ pub fn evidence_plot(
         }
     } else {
         // Reading residuals (predicted minus read) without the effect.
-        let problem = EffectProblem {
-            chain: session.chain,
-            ctx,
-            data: session.data,
-            poses: idx.clone(),
-            full: p.to_vec(),
-            free: vec![],
-            effects: without,
-        };
+        let problem = EffectProblem::of_session(session, ctx, idx.clone(), p, vec![], without);
         let mut res = vec![0.0; idx.len() * m];
         let mut seen = vec![0usize; idx.len()];
         problem.rows(&problem.x0(), |pos, r, _| {

@@ -5,6 +5,7 @@
 use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::effects::{Basis, Context, EffectModel};
+use crate::identify::Session;
 use crate::identify::lm::LeastSquares;
 use crate::kinematics::JointParam;
 use crate::kinematics::chain::{Chain, OutputFrame, PointJacobian};
@@ -30,6 +31,27 @@ pub struct EffectProblem<'a> {
 }
 
 impl<'a> EffectProblem<'a> {
+    /// The problem over `poses` of a session's recordings, at geometry `p`
+    /// with the parameters `free` unknown beside the effects' coefficients.
+    pub fn of_session(
+        session: &Session<'a>,
+        ctx: &'a Context,
+        poses: Vec<usize>,
+        p: &[f64],
+        free: Vec<usize>,
+        effects: Vec<EffectModel>,
+    ) -> Self {
+        EffectProblem {
+            chain: session.chain,
+            ctx,
+            data: session.data,
+            poses,
+            full: p.to_vec(),
+            free,
+            effects,
+        }
+    }
+
     /// Total number of effect coefficients.
     pub fn n_coef(&self) -> usize {
         self.effects.iter().map(|e| e.kind.n_coef()).sum()

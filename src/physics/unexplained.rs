@@ -82,15 +82,14 @@ pub(super) fn unexplained(
     effects: &[EffectModel],
     n_free: usize,
 ) -> Option<Finding> {
-    let problem = EffectProblem {
-        chain: session.chain,
+    let problem = EffectProblem::of_session(
+        session,
         ctx,
-        data: session.data,
-        poses: session.train.clone(),
-        full: p.to_vec(),
-        free: vec![],
-        effects: effects.to_vec(),
-    };
+        session.train.clone(),
+        p,
+        vec![],
+        effects.to_vec(),
+    );
     let x = problem.x0();
     let rpp = problem.rows_per_pose();
     let mut res = vec![0.0; session.train.len() * rpp];
