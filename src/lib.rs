@@ -22,19 +22,15 @@
 pub mod cli;
 pub mod compensate;
 pub mod error;
-/// The HTTP service (axum): routes, errors, OpenAPI, startup and shutdown.
 pub mod http;
 pub mod identify;
-/// Identification jobs: the persistent queue's worker pool.
 pub mod jobs;
 pub mod kinematics;
 pub mod measure;
 pub mod model;
 pub mod physics;
-/// The calibration report as HTML with inline SVG plots (CLI and service).
 pub mod report_html;
 pub mod rng;
-/// Persistence for the HTTP service (SQLite and PostgreSQL): the only code that speaks SQL.
 pub mod store;
 
 pub use error::{Error, Result};

@@ -4,7 +4,7 @@
 //! A worker *claims* a job by taking a lease (`locked_by`, `locked_until_ms`)
 //! and keeps it alive with a heartbeat that also records progress and reads
 //! the cancel flag. The engine itself runs on `tokio::task::spawn_blocking`
-//! and polls the flag through [`drawcal::identify::Progress`]. If the process
+//! and polls the flag through [`crate::identify::Progress`]. If the process
 //! dies, the heartbeat stops, the lease expires, and the next claim (by this
 //! process after a restart, or by another replica) runs the job again; the
 //! result is written together with the job's success in one transaction.
