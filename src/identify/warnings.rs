@@ -21,7 +21,7 @@ use crate::kinematics::Params;
 use crate::kinematics::chain::OutputFrame;
 use crate::model::BasePose;
 
-pub use crate::model::RADIANS_BOUND;
+use crate::model::RADIANS_BOUND;
 
 /// How many times closer to the measured points the nominal model must
 /// come with the angles read as radians than read as degrees before they

@@ -402,22 +402,25 @@ fn concentrated(
         }
         let pad = (width / 2.0).max(range / 20.0);
         let (lo, hi) = (qf[start].0 - pad, qf[start + need - 1].0 + pad);
-        let inside: Vec<usize> = (0..n_te)
-            .filter(|&k| (lo..=hi).contains(&q(session.test[k])))
+        let inside: Vec<bool> = session
+            .test
+            .iter()
+            .map(|&i| (lo..=hi).contains(&q(i)))
             .collect();
-        let m = inside.len();
+        let m = inside.iter().filter(|b| **b).count();
         if m == 0 || m == n_te {
             continue;
         }
-        let observed: usize = inside.iter().map(|&k| rank[k]).sum();
+        let observed: usize = (0..n_te).filter(|&k| inside[k]).map(|k| rank[k]).sum();
         let p = rank_sum_upper_p(n_te, m, observed);
         if p < alpha_joint && best.as_ref().is_none_or(|b| p < b.p) {
-            let rms_of = |ks: &mut dyn Iterator<Item = usize>| {
-                let (mut ss, mut c) = (0.0, 0usize);
-                for k in ks {
-                    ss += misfit_test[k] * misfit_test[k];
-                    c += 1;
-                }
+            // RMS of the held-out misfits inside (or outside) the stretch.
+            let rms_where = |inner: bool| {
+                let (ss, c) = (0..n_te)
+                    .filter(|&k| inside[k] == inner)
+                    .fold((0.0, 0usize), |(ss, c), k| {
+                        (ss + misfit_test[k] * misfit_test[k], c + 1)
+                    });
                 (ss / c.max(1) as f64).sqrt()
             };
             best = Some(Concentrated {
@@ -430,8 +433,8 @@ fn concentrated(
                     .map(|&(_, k)| session.data.poses[session.train[k]].id.clone())
                     .collect(),
                 n_test_in: m,
-                test_rms_in: rms_of(&mut inside.iter().copied()),
-                test_rms_out: rms_of(&mut (0..n_te).filter(|k| !inside.contains(k))),
+                test_rms_in: rms_where(true),
+                test_rms_out: rms_where(false),
                 p,
                 alpha: alpha_joint,
             });
