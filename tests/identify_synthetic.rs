@@ -221,7 +221,8 @@ fn three_strings_and_robust_outliers() {
 fn expected_test_rms_matches_repeated_sessions() {
     use drawcal::physics::simulate::{Spec, generate};
     let (mut after2, mut expected2, mut floor2) = (0.0, 0.0, 0.0);
-    let runs = 24;
+    let (mut within_floor, mut within_point_noise) = (0, 0);
+    let runs = 60;
     for seed in 0..runs {
         let spec: Spec = serde_json::from_value(serde_json::json!({
             "robot": "er3a", "n_poses": 50, "test_fraction": 0.4, "seed": 500 + seed
@@ -239,14 +240,102 @@ fn expected_test_rms_matches_repeated_sessions() {
             &NoProgress,
         )
         .unwrap();
-        after2 += rep.stats.test.after.rms_mm.powi(2);
+        let after = rep.stats.test.after.rms_mm;
+        let floor = rep.noise_floor_mm.unwrap();
+        after2 += after.powi(2);
         expected2 += rep.expected_test_rms_mm.unwrap().powi(2);
-        floor2 += rep.noise_floor_mm.unwrap().powi(2);
+        floor2 += floor.powi(2);
+        within_floor += usize::from(after <= 1.2 * floor);
+        within_point_noise += usize::from(after <= 1.2 * sim.point_noise_mm);
     }
     let ratio = (after2 / expected2).sqrt();
     let floor_ratio = (after2 / floor2).sqrt();
-    eprintln!("held-out / expected {ratio:.3}, held-out / floor {floor_ratio:.3}");
+    eprintln!(
+        "held-out / expected {ratio:.3}, held-out / floor {floor_ratio:.3}; \
+         within 1.2x the floor in {within_floor} of {runs} sessions, \
+         within 1.2x the simulated point noise in {within_point_noise}"
+    );
     assert!((ratio - 1.0).abs() < 0.08, "held-out / expected {ratio}");
-    // The spread matters here: the floor alone would be clearly short.
+    // The spread matters here: the floor alone would be clearly short, and
+    // an estimator that is on average exactly where it should be still ends
+    // above 1.2x the floor in a good share of sessions (the README quotes
+    // the printed counts).
     assert!(floor_ratio > 1.08, "held-out / floor {floor_ratio}");
+    assert!(
+        within_floor >= runs / 2,
+        "within 1.2x the floor in {within_floor} of {runs}"
+    );
+}
+
+/// The reported 1-sigma uncertainties are what repeated sessions show: over
+/// many simulated sessions of each robot, every identified parameter's
+/// error against the truth (mapped into the same parametrisation by fitting
+/// exact readings of the true points at the same poses) divided by its
+/// reported sigma has an RMS near 1, and |z| > 3 stays as rare as a normal
+/// distribution makes it. A covariance scaled by the wrong sigma, or built
+/// from the wrong Jacobian, moves the RMS far from 1.
+#[test]
+fn reported_sigmas_cover_the_truth_over_repeated_sessions() {
+    use drawcal::physics::simulate::{Spec, generate};
+    use nalgebra::Vector3;
+    let sessions = 30;
+    for robot in ["er3a", "ur5", "arm4_mdh"] {
+        let (mut z2, mut n_z, mut over3, mut skipped) = (0.0, 0usize, 0usize, 0);
+        for seed in 0..sessions {
+            let spec: Spec = serde_json::from_value(serde_json::json!({
+                "robot": robot, "n_poses": 50, "test_fraction": 0.4, "seed": 700 + seed
+            }))
+            .unwrap();
+            let sim = generate(&spec).unwrap();
+            let opts = IdentifyOptions {
+                physics: false,
+                ..Default::default()
+            };
+            let rep = identify(&sim.robot, &sim.rig, &sim.dataset, &opts, &NoProgress).unwrap();
+            let mut exact = sim.dataset.clone();
+            let true_points = sim.truth["true_points_mm"].as_array().unwrap();
+            for (pose, t) in exact.poses.iter_mut().zip(true_points) {
+                let t = Vector3::from_iterator((0..3).map(|c| t[c].as_f64().unwrap()));
+                pose.measurement = Measurement::Strings(
+                    (0..sim.rig.n_strings())
+                        .map(|k| (t - sim.rig.anchor(k)).norm() - sim.rig.r_mm)
+                        .collect(),
+                );
+            }
+            let mapped = identify(&sim.robot, &sim.rig, &exact, &opts, &NoProgress).unwrap();
+            // A nearly aliased pair (the wrist's a5/theta5 when T sits
+            // almost on the joint-6 axis) may be kept on one side of the
+            // identifiability threshold and fixed on the other; the two
+            // parametrisations are then not comparable name by name.
+            if mapped.fixed != rep.fixed {
+                skipped += 1;
+                continue;
+            }
+            assert!(
+                mapped.stats.train.after.rms_mm < 5e-3,
+                "{robot} seed {seed}: the identified parametrisation must represent the truth"
+            );
+            for p in &rep.parameters {
+                let t = mapped.parameters.iter().find(|q| q.name == p.name).unwrap();
+                let z = (p.value - t.value) / p.sigma;
+                z2 += z * z;
+                n_z += 1;
+                over3 += usize::from(z.abs() > 3.0);
+            }
+        }
+        let rms_z = (z2 / n_z as f64).sqrt();
+        eprintln!(
+            "{robot}: {n_z} pulls, RMS {rms_z:.3}, {over3} beyond 3 sigma, {skipped} sessions skipped"
+        );
+        assert!(
+            skipped <= sessions / 10,
+            "{robot}: {skipped} sessions skipped"
+        );
+        assert!((0.85..1.15).contains(&rms_z), "{robot}: pull RMS {rms_z}");
+        // A normal gives 0.27 %; allow for the near-aliased pairs' tails.
+        assert!(
+            (over3 as f64) < 0.015 * n_z as f64,
+            "{robot}: {over3} of {n_z} beyond 3 sigma"
+        );
+    }
 }
