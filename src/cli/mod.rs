@@ -156,6 +156,12 @@ pub struct IdentifyArgs {
     /// Also identify each string's zero offset.
     #[arg(long)]
     pub string_offsets: bool,
+    /// Identifiability tolerance: a parameter whose scaled Jacobian column
+    /// lies within this sine of the span of those kept is held at nominal
+    /// (from 1e-9 to 0.5).
+    #[arg(long, default_value_t = identify::identifiability::DEFAULT_TOLERANCE,
+          value_parser = identifiability_tolerance)]
+    pub identifiability_tolerance: f64,
 }
 
 /// `drawcal compensate`.
@@ -252,7 +258,7 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
         holdout_fraction: a.holdout,
         seed: a.seed,
         identify_string_offsets: a.string_offsets,
-        ..Default::default()
+        identifiability_tolerance: a.identifiability_tolerance,
     };
     let bar = ProgressBar::new(100);
     bar.set_style(
@@ -521,6 +527,17 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
         );
     }
     Ok(())
+}
+
+/// `--identifiability-tolerance`: a sine from 1e-9 to 0.5, refused rather
+/// than clamped.
+fn identifiability_tolerance(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && (1e-9..=0.5).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{s}: a sine from 1e-9 to 0.5"))
+    }
 }
 
 /// `--holdout`: a fraction from 0 to 0.9 (at least a tenth of the poses

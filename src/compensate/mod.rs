@@ -657,6 +657,12 @@ impl Compensator {
         };
         let (pos, rot, seeds) = match &target.kind {
             TargetKind::Joints { q_deg } => {
+                // A correction is a fraction of a degree: a target a turn or
+                // more past a limit stays past it, and at such angles
+                // (1e15 deg) the trigonometry itself has lost its digits.
+                if let Some(msg) = self.far_past_limits(q_deg) {
+                    return fail(CompensationStatus::JointLimit, 0, msg);
+                }
                 let q: Vec<f64> = q_deg.iter().map(|v| v.to_radians()).collect();
                 let (t, r) = self.nominal_pose(&q);
                 (t, orientation.then_some(r), vec![q])
@@ -794,18 +800,54 @@ impl Compensator {
         }
     }
 
+    /// The first joint whose solved angle is past its limits, said with
+    /// the limits and, when the same joint angle a turn away is within
+    /// them, that too (never taken silently: a turn away is another motion
+    /// of the arm, its cables wound the other way).
     fn limit_violation(&self, q: &[f64]) -> Option<String> {
+        let within = |v: f64, (lo, hi): (f64, f64)| v >= lo - 1e-9 && v <= hi + 1e-9;
         q.iter()
             .zip(&self.limits_rad)
             .enumerate()
-            .find_map(|(j, (v, (lo, hi)))| {
-                (*v < lo - 1e-9 || *v > hi + 1e-9).then(|| {
-                    format!(
+            .find_map(|(j, (&v, &limits))| {
+                (!within(v, limits)).then(|| {
+                    let mut msg = format!(
                         "joint {} would need {:.4} deg, outside its limits [{}, {}] deg",
                         j + 1,
                         v.to_degrees(),
-                        lo.to_degrees(),
-                        hi.to_degrees()
+                        display_deg(limits.0),
+                        display_deg(limits.1)
+                    );
+                    let turn = std::f64::consts::TAU;
+                    if let Some(w) = [v - turn, v + turn]
+                        .into_iter()
+                        .find(|&w| within(w, limits))
+                    {
+                        msg += &format!(
+                            " (the same angle a turn away, {:.4} deg, is within them: \
+                             teach the target there to use it)",
+                            w.to_degrees()
+                        );
+                    }
+                    msg
+                })
+            })
+    }
+
+    /// The first joint of a joint target a turn or more past its limits.
+    fn far_past_limits(&self, q_deg: &[f64]) -> Option<String> {
+        q_deg
+            .iter()
+            .zip(&self.limits_rad)
+            .enumerate()
+            .find_map(|(j, (&v, &(lo, hi)))| {
+                (v < lo.to_degrees() - 360.0 || v > hi.to_degrees() + 360.0).then(|| {
+                    format!(
+                        "joint {}'s target {v} deg is a turn or more outside its limits \
+                         [{}, {}] deg: no compensation brings it back",
+                        j + 1,
+                        display_deg(lo),
+                        display_deg(hi)
                     )
                 })
             })
@@ -1072,6 +1114,12 @@ impl Compensator {
 
 /// True when every column of `j` is orthogonal to `e` to within [`GTOL`]
 /// (a column of zeros counts as orthogonal).
+/// An angle limit (rad) in degrees as robot.json gave it: the round trip
+/// through radians leaves 119.99999999999999 where the file said 120.
+fn display_deg(rad: f64) -> f64 {
+    (rad.to_degrees() * 1e9).round() / 1e9
+}
+
 fn stationary(j: &DMatrix<f64>, e: &DVector<f64>) -> bool {
     let e_norm = e.norm();
     j.column_iter()
@@ -1326,6 +1374,51 @@ mod tests {
         assert_eq!(r.status, CompensationStatus::JointLimit, "{r:?}");
         assert!(r.message.unwrap().contains("joint 2"));
         assert!(r.q_deg.is_none());
+    }
+
+    #[test]
+    fn joint_targets_past_the_limits_say_so() {
+        let (nominal, _) = robots();
+        let joints = |q1: f64, q6: f64| Target {
+            target: "t".into(),
+            kind: TargetKind::Joints {
+                q_deg: vec![q1, -30.0, 30.0, 40.0, 50.0, q6],
+            },
+        };
+        // Joint 6 turns +-360 deg; a calibrated joint 6 offset by +0.5 deg
+        // needs 360.5 deg for a target taught at the limit, and the same
+        // angle a turn away is within the limits: said, not taken.
+        let mut cal = nominal.clone();
+        cal.joints[5].q_min_deg = -360.0;
+        cal.joints[5].q_max_deg = 360.0;
+        let mut nom = nominal.clone();
+        nom.joints[5].q_min_deg = -360.0;
+        nom.joints[5].q_max_deg = 360.0;
+        cal.joints[5].theta_offset_deg -= 0.5;
+        let comp = Compensator::new(&nom, &cal).unwrap();
+        let r = comp.compensate(&joints(10.0, 360.0), true);
+        assert_eq!(r.status, CompensationStatus::JointLimit, "{r:?}");
+        let msg = r.message.unwrap();
+        assert!(
+            msg.contains("joint 6") && msg.contains("[-360, 360] deg"),
+            "{msg}"
+        );
+        assert!(
+            msg.contains("a turn away, 0.5000 deg, is within them"),
+            "{msg}"
+        );
+        // Limits print as robot.json gave them, not as the round trip
+        // through radians leaves them.
+        assert_ne!(120f64.to_radians().to_degrees(), 120.0);
+        assert_eq!(display_deg(120f64.to_radians()), 120.0);
+        // Absurd angles: refused at once as past the limits, whatever the
+        // trigonometry makes of them.
+        for q1 in [1e16, -1e16, 600.0] {
+            let r = comp.compensate(&joints(q1, 0.0), false);
+            assert_eq!(r.status, CompensationStatus::JointLimit, "{q1}: {r:?}");
+            assert_eq!(r.iterations, 0);
+            assert!(r.message.unwrap().contains("joint 1's target"));
+        }
     }
 
     /// ER3A-like arms with every parameter random, in both conventions.
