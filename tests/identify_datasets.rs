@@ -61,11 +61,19 @@ fn model_vs_truth_mm(name: &str, rep: &Report, data: &Dataset, n_strings: usize)
     (ss / n as f64).sqrt()
 }
 
-/// The truth expressed in our identifiable parametrisation: the model fitted
-/// to exact, noise-free readings of the true points at the same poses. This
-/// maps the aliased parameters (d2+d3 along parallel axes, joint 6 and the
-/// tool point, joint 1 and the base) the way the calibration does.
-fn mapped_truth(name: &str, robot: &Robot, rig: &drawcal::model::Rig, data: &Dataset) -> Report {
+/// The truth expressed in the parametrisation `rep` identified: the model
+/// fitted to exact, noise-free readings of the true points at the same
+/// poses, with the parameters `rep` held at nominal held too. This maps the
+/// aliased parameters (d2+d3 along parallel axes, joint 6 and the tool
+/// point, joint 1 and the base, the wrist pairs the data did not separate)
+/// the way the calibration does.
+fn mapped_truth(
+    name: &str,
+    robot: &Robot,
+    rig: &drawcal::model::Rig,
+    data: &Dataset,
+    rep: &Report,
+) -> Report {
     let truth = true_points(name);
     let mut exact = data.clone();
     for (pose, t) in exact.poses.iter_mut().zip(&truth) {
@@ -75,7 +83,11 @@ fn mapped_truth(name: &str, robot: &Robot, rig: &drawcal::model::Rig, data: &Dat
                 .collect(),
         );
     }
-    identify(robot, rig, &exact, &geometric_only(), &NoProgress).unwrap()
+    let opts = IdentifyOptions {
+        hold: rep.fixed.clone(),
+        ..geometric_only()
+    };
+    identify(robot, rig, &exact, &opts, &NoProgress).unwrap()
 }
 
 fn check_simulated(name: &str) {
@@ -91,10 +103,11 @@ fn check_simulated(name: &str) {
         (floor / point_noise - 1.0).abs() < 0.25,
         "{name}: floor {floor} vs simulated point noise {point_noise}"
     );
-    // Held-out accuracy near the noise floor (see the note in README on
-    // er3a_paper_like: 30 train poses for 27 parameters).
+    // Held-out accuracy within 1.2x the noise floor as the simulator
+    // measured it (against our estimate of it, see the README's honest
+    // limits on er3a_paper_like: its string sigma came out 12 % low).
     assert!(
-        after < 1.25 * point_noise,
+        after < 1.2 * point_noise,
         "{name}: test RMS {after} vs point noise {point_noise}"
     );
     assert!(
@@ -102,12 +115,15 @@ fn check_simulated(name: &str) {
         "{name}: calibration must remove most of the error"
     );
     let vs_truth = model_vs_truth_mm(name, &rep, &data, rig.n_strings());
+    eprintln!(
+        "{name}: calibrated model {vs_truth:.4} mm RMS from the true points (held-out poses)"
+    );
     assert!(
         vs_truth < 0.03,
         "{name}: calibrated model {vs_truth} mm RMS from the true points"
     );
     // Identifiable parameters within 3 sigma of the mapped truth.
-    let mapped = mapped_truth(name, &robot, &rig, &data);
+    let mapped = mapped_truth(name, &robot, &rig, &data, &rep);
     assert!(
         mapped.stats.train.after.rms_mm < 2e-3,
         "{name}: the model must represent the truth exactly"
@@ -306,7 +322,7 @@ fn uncertainties_come_from_the_final_model_with_its_effects() {
 /// measured against truth.json: the realised string noise (readings minus
 /// the true distances) is 0.0207 mm where the strings' redundancy
 /// estimates 0.0183 mm, and the held-out poses' located points lie
-/// 0.0359 mm from the truth, so the held-out 0.0445 mm is 1.24x their own
+/// 0.0359 mm from the truth, so the held-out 0.0424 mm is 1.18x their own
 /// noise.
 #[test]
 fn er3a_paper_like_noise_as_the_readme_quotes_it() {
@@ -338,7 +354,7 @@ fn er3a_paper_like_noise_as_the_readme_quotes_it() {
     assert!((rep.string_sigma_mm.unwrap() - 0.0183).abs() < 5e-5);
     assert!((located - 0.0359).abs() < 5e-5, "{located}");
     assert!(
-        (held_out / located - 1.24).abs() < 0.005,
+        (held_out / located - 1.18).abs() < 0.005,
         "{held_out} / {located}"
     );
 }

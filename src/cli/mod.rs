@@ -162,6 +162,15 @@ pub struct IdentifyArgs {
     #[arg(long, default_value_t = identify::identifiability::DEFAULT_TOLERANCE,
           value_parser = identifiability_tolerance)]
     pub identifiability_tolerance: f64,
+    /// Deviation (sigmas) under which a nearly aliased joint parameter is
+    /// held at nominal as undetermined; 0 keeps them all free.
+    #[arg(long, default_value_t = identify::identifiability::UNDETERMINED_Z,
+          value_parser = undetermined_z)]
+    pub undetermined_z: f64,
+    /// Parameters to hold at nominal whatever the data say, comma
+    /// separated report names (`--hold j5.a,j5.d`).
+    #[arg(long, value_delimiter = ',')]
+    pub hold: Vec<String>,
 }
 
 /// `drawcal compensate`.
@@ -259,6 +268,8 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
         seed: a.seed,
         identify_string_offsets: a.string_offsets,
         identifiability_tolerance: a.identifiability_tolerance,
+        undetermined_z: a.undetermined_z,
+        hold: a.hold.clone(),
     };
     let bar = ProgressBar::new(100);
     bar.set_style(
@@ -537,6 +548,16 @@ fn identifiability_tolerance(s: &str) -> std::result::Result<f64, String> {
         Ok(v)
     } else {
         Err(format!("{s}: a sine from 1e-9 to 0.5"))
+    }
+}
+
+/// `--undetermined-z`: sigmas from 0 to 100.
+fn undetermined_z(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && (0.0..=100.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{s}: sigmas from 0 to 100"))
     }
 }
 

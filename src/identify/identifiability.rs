@@ -21,6 +21,17 @@ use crate::kinematics::Layout;
 /// parameter.
 pub const DEFAULT_TOLERANCE: f64 = 1e-3;
 
+/// Sine below which a kept parameter counts as nearly aliased with the
+/// others (about 0.6°): its sigma is at least a hundred times that of a
+/// well-placed parameter, and what separates it is a detail like the tool
+/// point's sub-millimetre offset from the last joint's axis.
+pub const NEAR_ALIAS_SINE: f64 = 1e-2;
+
+/// Deviation from nominal, in sigmas, below which a nearly aliased joint
+/// parameter counts as not determined by the data (the default of
+/// [`undetermined`]'s `max_z`).
+pub const UNDETERMINED_Z: f64 = 3.0;
+
 /// Result of the analysis.
 #[derive(Debug, Clone)]
 pub struct Selection {
@@ -89,21 +100,78 @@ pub fn select(jtj: &DMatrix<f64>, candidates: &[usize], layout: &Layout, tol: f6
             });
         }
     }
-    let m = kept.len();
-    let condition_number = if m == 0 {
-        f64::INFINITY
-    } else {
-        let sub = DMatrix::from_fn(m, m, |i, j| g(kept[i], kept[j]));
-        let ev = sub.symmetric_eigenvalues();
-        let max = ev.iter().cloned().fold(0.0, f64::max);
-        let min = ev.iter().cloned().fold(f64::INFINITY, f64::min).max(0.0);
-        (max / min).sqrt()
-    };
+    let sub = DMatrix::from_fn(kept.len(), kept.len(), |i, j| jtj[(kept[i], kept[j])]);
     Selection {
         free: kept.iter().map(|&c| candidates[c]).collect(),
         fixed,
-        condition_number,
+        condition_number: condition_number(&sub),
     }
+}
+
+/// Condition number of the column-scaled Jacobian whose normal matrix is
+/// `jtj`; infinite for an empty or singular one.
+pub fn condition_number(jtj: &DMatrix<f64>) -> f64 {
+    let m = jtj.nrows();
+    if m == 0 {
+        return f64::INFINITY;
+    }
+    let d: Vec<f64> = (0..m).map(|i| jtj[(i, i)].max(1e-300).sqrt()).collect();
+    let ev = DMatrix::from_fn(m, m, |i, j| jtj[(i, j)] / (d[i] * d[j])).symmetric_eigenvalues();
+    let max = ev.iter().cloned().fold(0.0, f64::max);
+    let min = ev.iter().cloned().fold(f64::INFINITY, f64::min).max(0.0);
+    (max / min).sqrt()
+}
+
+/// The next free parameter the data do not determine, if any: a joint
+/// parameter (`holdable`) nearly aliased with the other free ones (its
+/// column within [`NEAR_ALIAS_SINE`] of their span) whose deviation from
+/// nominal is under `max_z` sigmas; of several, the least
+/// significant. `jtj` is the normal matrix over `free` at the fit,
+/// `deviation` each free parameter's distance from nominal in the same
+/// order, `sigma` the residual scale. Returns its position in `free` and
+/// its record, aliased with the free parameters it is most correlated with.
+///
+/// The structural test ([`select`]) keeps such a parameter because some
+/// detail separates it, but the data pin it down no better than its
+/// partner: left free it carries the noise of that weak combination (mm
+/// and degrees of spread, a flange orientation off by degrees) for a
+/// hundredth of its effect on T. Held at nominal, its partner absorbs it
+/// and T moves by at most its deviation times the sine. A significant
+/// deviation is real and stays free.
+pub fn undetermined(
+    jtj: &DMatrix<f64>,
+    free: &[usize],
+    deviation: &[f64],
+    sigma: f64,
+    max_z: f64,
+    holdable: impl Fn(usize) -> bool,
+    layout: &Layout,
+) -> Option<(usize, FixedParam)> {
+    let cov = super::unit_covariance(jtj)?;
+    let n = free.len();
+    let z = |k: usize| deviation[k].abs() / (sigma * cov[(k, k)].sqrt());
+    let weak = (0..n)
+        .filter(|&k| holdable(free[k]))
+        // The part of column k orthogonal to the others, as a sine.
+        .filter(|&k| 1.0 / (jtj[(k, k)] * cov[(k, k)]).sqrt() < NEAR_ALIAS_SINE)
+        .filter(|&k| z(k) < max_z)
+        .min_by(|&a, &b| z(a).total_cmp(&z(b)))?;
+    let corr = |j: usize| cov[(weak, j)] / (cov[(weak, weak)] * cov[(j, j)]).sqrt();
+    let mut partners: Vec<usize> = (0..n)
+        .filter(|&j| j != weak && corr(j).abs() > 0.5)
+        .collect();
+    partners.sort_by(|&a, &b| corr(b).abs().total_cmp(&corr(a).abs()));
+    Some((
+        weak,
+        FixedParam {
+            name: layout.name(free[weak]),
+            aliased_with: partners
+                .iter()
+                .take(4)
+                .map(|&j| layout.name(free[j]))
+                .collect(),
+        },
+    ))
 }
 
 #[cfg(test)]
@@ -131,5 +199,108 @@ mod tests {
         assert_eq!(s.fixed[0].name, "j1.d");
         assert_eq!(s.fixed[0].aliased_with.len(), 2);
         assert!(s.condition_number.is_finite());
+    }
+
+    /// Columns: c0 and c1 nearly aliased (sine 5e-3), c2 independent;
+    /// every parameter a joint parameter.
+    fn near_pair() -> DMatrix<f64> {
+        let e = 5e-3;
+        let j = DMatrix::from_row_slice(3, 3, &[1.0, 1.0, 0.0, 0.0, e, 0.0, 0.0, 0.0, 1.0]);
+        j.transpose() * j
+    }
+
+    #[test]
+    fn holds_the_less_significant_member_of_an_undetermined_pair() {
+        let jtj = near_pair();
+        let layout = Layout {
+            n_joints: 1,
+            n_strings: 0,
+        };
+        let cov = crate::identify::unit_covariance(&jtj).unwrap();
+        let sigma = 0.01;
+        let sd = |k: usize| sigma * cov[(k, k)].sqrt();
+        // Both members within 3 sigma: the one nearer nominal is held and
+        // named with its partner; the independent column is never a
+        // candidate, however small its deviation.
+        let dev = [1.0 * sd(0), 0.5 * sd(1), 0.0];
+        let (at, fixed) = undetermined(
+            &jtj,
+            &[0, 1, 2],
+            &dev,
+            sigma,
+            UNDETERMINED_Z,
+            |_| true,
+            &layout,
+        )
+        .expect("an undetermined pair");
+        assert_eq!(at, 1);
+        assert_eq!(fixed.name, layout.name(1));
+        assert_eq!(fixed.aliased_with, vec![layout.name(0)]);
+        // A significant member stays; its partner, within 3 sigma, goes.
+        let dev = [1.0 * sd(0), 4.0 * sd(1), 0.0];
+        let (at, _) = undetermined(
+            &jtj,
+            &[0, 1, 2],
+            &dev,
+            sigma,
+            UNDETERMINED_Z,
+            |_| true,
+            &layout,
+        )
+        .unwrap();
+        assert_eq!(at, 0);
+        // Both significant, or a non-joint parameter, or max_z 0: none.
+        let dev = [3.5 * sd(0), 4.0 * sd(1), 0.0];
+        assert!(
+            undetermined(
+                &jtj,
+                &[0, 1, 2],
+                &dev,
+                sigma,
+                UNDETERMINED_Z,
+                |_| true,
+                &layout
+            )
+            .is_none()
+        );
+        let dev = [1.0 * sd(0), 0.5 * sd(1), 0.0];
+        assert!(
+            undetermined(
+                &jtj,
+                &[0, 1, 2],
+                &dev,
+                sigma,
+                UNDETERMINED_Z,
+                |_| false,
+                &layout
+            )
+            .is_none()
+        );
+        assert!(undetermined(&jtj, &[0, 1, 2], &dev, sigma, 0.0, |_| true, &layout).is_none());
+        // A pair separated by more than the near-alias sine is left alone.
+        let j = DMatrix::from_row_slice(3, 3, &[1.0, 1.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0, 1.0]);
+        let wide = j.transpose() * j;
+        assert!(
+            undetermined(
+                &wide,
+                &[0, 1, 2],
+                &[0.0; 3],
+                sigma,
+                UNDETERMINED_Z,
+                |_| true,
+                &layout
+            )
+            .is_none()
+        );
+    }
+
+    #[test]
+    fn condition_number_of_the_scaled_columns() {
+        // Column scale does not matter; the angle between columns does.
+        let j = DMatrix::from_row_slice(2, 2, &[1000.0, 0.0, 0.0, 0.001]);
+        assert!((condition_number(&(j.transpose() * &j)) - 1.0).abs() < 1e-9);
+        let c = condition_number(&near_pair());
+        assert!(c > 100.0 && c.is_finite(), "{c}");
+        assert_eq!(condition_number(&DMatrix::zeros(0, 0)), f64::INFINITY);
     }
 }

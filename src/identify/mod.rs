@@ -66,6 +66,15 @@ pub struct IdentifyOptions {
     pub identify_string_offsets: bool,
     /// Identifiability tolerance (sine of the angle to the kept columns).
     pub identifiability_tolerance: f64,
+    /// Deviation (in sigmas) under which a nearly aliased joint parameter
+    /// counts as undetermined and is held at nominal (see
+    /// [`identifiability::undetermined`]); 0 keeps every parameter the
+    /// structural test keeps.
+    pub undetermined_z: f64,
+    /// Parameters held at nominal whatever the data say (report names:
+    /// `j5.a`, `tool.z`...), e.g. to compare with a calibration in the
+    /// same parametrisation.
+    pub hold: Vec<String>,
 }
 
 impl Default for IdentifyOptions {
@@ -78,6 +87,8 @@ impl Default for IdentifyOptions {
             seed: 1,
             identify_string_offsets: false,
             identifiability_tolerance: identifiability::DEFAULT_TOLERANCE,
+            undetermined_z: identifiability::UNDETERMINED_Z,
+            hold: vec![],
         }
     }
 }
@@ -416,7 +427,34 @@ pub struct Geometric {
     pub sigma: f64,
 }
 
-/// Candidate parameters in priority order (see [`identifiability`]).
+/// The parameters `opts.hold` names, as held at nominal by request; an
+/// unknown name is an input error.
+fn held(session: &Session, opts: &IdentifyOptions) -> Result<Vec<FixedParam>> {
+    let l = session.chain.layout;
+    let all = candidates(session, &IdentifyOptions::default());
+    opts.hold
+        .iter()
+        .map(|name| {
+            if all.iter().any(|&k| l.name(k) == *name) {
+                Ok(FixedParam {
+                    name: name.clone(),
+                    aliased_with: vec!["(held at nominal by request)".into()],
+                })
+            } else {
+                Err(Error::field(
+                    "hold",
+                    format!(
+                        "{name:?} is not a parameter of this robot (names like j2.theta, j5.a, \
+                         base.x, tool.z)"
+                    ),
+                ))
+            }
+        })
+        .collect()
+}
+
+/// Candidate parameters in priority order (see [`identifiability`]),
+/// without those `opts.hold` names.
 pub fn candidates(session: &Session, opts: &IdentifyOptions) -> Vec<usize> {
     let l = session.chain.layout;
     let mut c: Vec<usize> = (l.base()..l.base() + 6)
@@ -438,6 +476,7 @@ pub fn candidates(session: &Session, opts: &IdentifyOptions) -> Vec<usize> {
     if opts.identify_string_offsets && l.n_strings > 0 {
         c.extend((0..l.n_strings).map(|k| l.string_offset(k)));
     }
+    c.retain(|&k| !opts.hold.contains(&l.name(k)));
     c
 }
 
@@ -491,7 +530,8 @@ pub fn geometric(
     let mut jtj = DMatrix::zeros(cands.len(), cands.len());
     let mut g = nalgebra::DVector::zeros(cands.len());
     lm::LeastSquares::normal_equations(&pc, &pc.x0(), &mut jtj, &mut g);
-    let selection = identifiability::select(&jtj, &cands, &l, opts.identifiability_tolerance);
+    let mut selection = identifiability::select(&jtj, &cands, &l, opts.identifiability_tolerance);
+    selection.fixed.extend(held(session, opts)?);
     // As many equations (3 per distinct pose: T) as parameters or fewer:
     // the fit passes through the readings and its figures mean nothing.
     // (Fewer poses than parameters, but more equations, is a warning.)
@@ -534,12 +574,55 @@ pub fn geometric(
         }
         result.iterations = iterations;
     }
+    // Nearly aliased joint parameters the data do not determine: held at
+    // nominal one at a time, the least significant first, refitting after
+    // each (its partner takes over what it carried).
+    let residual_scale = |problem: &CalibrationProblem, result: &LmResult| {
+        let dof =
+            (lm::LeastSquares::n_residuals(problem) as f64 - problem.free().len() as f64).max(1.0);
+        let wsum = problem.weights.iter().sum::<f64>() / problem.weights.len().max(1) as f64;
+        (2.0 * result.cost / (dof * wsum.max(1e-12))).sqrt()
+    };
+    loop {
+        let values = problem.expand(&result.x);
+        let deviation: Vec<f64> = selection
+            .free
+            .iter()
+            .map(|&k| values[k] - before.values[k])
+            .collect();
+        let Some((at, fixed)) = identifiability::undetermined(
+            &result.jtj,
+            &selection.free,
+            &deviation,
+            residual_scale(&problem, &result),
+            opts.undetermined_z,
+            |k| k < l.base(),
+            &l,
+        ) else {
+            break;
+        };
+        // Start the refit where the linearised fit lands with the parameter
+        // held: the others move by their covariance with it.
+        let mut start = values;
+        if let Some(cov) = unit_covariance(&result.jtj) {
+            for (j, &k) in selection.free.iter().enumerate() {
+                start[k] -= cov[(j, at)] / cov[(at, at)] * deviation[at];
+            }
+        }
+        start[selection.free[at]] = before.values[selection.free[at]];
+        selection.free.remove(at);
+        selection.fixed.push(fixed);
+        let weights = std::mem::take(&mut problem.weights);
+        problem = session.problem(start, selection.free.clone());
+        problem.weights = weights;
+        let iterations = result.iterations;
+        result = run_lm(&problem, progress, "identifying")?;
+        result.iterations += iterations;
+    }
+    selection.condition_number = identifiability::condition_number(&result.jtj);
     let mut after = before.clone();
     after.values = problem.expand(&result.x);
-    let dof =
-        (lm::LeastSquares::n_residuals(&problem) as f64 - selection.free.len() as f64).max(1.0);
-    let wsum = problem.weights.iter().sum::<f64>() / problem.weights.len().max(1) as f64;
-    let sigma = (2.0 * result.cost / (dof * wsum.max(1e-12))).sqrt();
+    let sigma = residual_scale(&problem, &result);
     Ok(Geometric {
         before,
         after,
