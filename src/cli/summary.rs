@@ -3,7 +3,7 @@
 
 use std::fmt::Write;
 
-use crate::identify::report::{ErrorStats, Report};
+use crate::identify::report::{ErrorStats, FixedReason, Report};
 use crate::model::Robot;
 
 /// Render the summary of a report. The report's warnings come right
@@ -52,19 +52,27 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
             id.condition_number
         );
     }
-    if !id.fixed.is_empty() {
-        let _ = writeln!(s, "held at nominal (this data cannot separate them):");
-        for f in &id.fixed {
-            let _ = writeln!(
-                s,
-                "  {:<11} aliased with {}",
-                f.name,
-                if f.aliased_with.is_empty() {
-                    "-".to_string()
-                } else {
+    for reason in [
+        FixedReason::Aliased,
+        FixedReason::Undetermined,
+        FixedReason::Requested,
+    ] {
+        let group: Vec<_> = id.fixed.iter().filter(|f| f.reason == reason).collect();
+        if group.is_empty() {
+            continue;
+        }
+        let _ = writeln!(s, "{}:", reason.heading());
+        for f in group {
+            if f.aliased_with.is_empty() {
+                let _ = writeln!(s, "  {}", f.name);
+            } else {
+                let _ = writeln!(
+                    s,
+                    "  {:<11} aliased with {}",
+                    f.name,
                     f.aliased_with.join(", ")
-                }
-            );
+                );
+            }
         }
     }
     if let Some(sig) = r.string_sigma_mm {

@@ -657,8 +657,8 @@ impl Compensator {
         };
         let (pos, rot, seeds) = match &target.kind {
             TargetKind::Joints { q_deg } => {
-                // A correction is a fraction of a degree: a target a turn or
-                // more past a limit stays past it, and at such angles
+                // A correction is a fraction of a degree: a target more than
+                // a turn past a limit stays past it, and at such angles
                 // (1e15 deg) the trigonometry itself has lost its digits.
                 if let Some(msg) = self.far_past_limits(q_deg) {
                     return fail(CompensationStatus::JointLimit, 0, msg);
@@ -741,7 +741,7 @@ impl Compensator {
             match solved {
                 Ok(sol) => {
                     last_iterations += sol.iterations;
-                    if let Some(msg) = self.limit_violation(&sol.q) {
+                    if let Some(msg) = self.limit_violation(&sol.q, !cartesian) {
                         limit_msg.get_or_insert(msg);
                         continue;
                     }
@@ -801,10 +801,11 @@ impl Compensator {
     }
 
     /// The first joint whose solved angle is past its limits, said with
-    /// the limits and, when the same joint angle a turn away is within
-    /// them, that too (never taken silently: a turn away is another motion
-    /// of the arm, its cables wound the other way).
-    fn limit_violation(&self, q: &[f64]) -> Option<String> {
+    /// the limits and, for a `taught` joint target whose same joint angle a
+    /// turn away is within them, that too (never taken silently: a turn
+    /// away is another motion of the arm, its cables wound the other way;
+    /// a Cartesian target's branches are the solver's own choice).
+    fn limit_violation(&self, q: &[f64], taught: bool) -> Option<String> {
         let within = |v: f64, (lo, hi): (f64, f64)| v >= lo - 1e-9 && v <= hi + 1e-9;
         q.iter()
             .zip(&self.limits_rad)
@@ -819,10 +820,10 @@ impl Compensator {
                         display_deg(limits.1)
                     );
                     let turn = std::f64::consts::TAU;
-                    if let Some(w) = [v - turn, v + turn]
+                    let turned = [v - turn, v + turn]
                         .into_iter()
-                        .find(|&w| within(w, limits))
-                    {
+                        .find(|&w| within(w, limits));
+                    if let Some(w) = turned.filter(|_| taught) {
                         msg += &format!(
                             " (the same angle a turn away, {:.4} deg, is within them: \
                              teach the target there to use it)",
@@ -834,7 +835,7 @@ impl Compensator {
             })
     }
 
-    /// The first joint of a joint target a turn or more past its limits.
+    /// The first joint of a joint target more than a turn past its limits.
     fn far_past_limits(&self, q_deg: &[f64]) -> Option<String> {
         q_deg
             .iter()
@@ -843,7 +844,7 @@ impl Compensator {
             .find_map(|(j, (&v, &(lo, hi)))| {
                 (v < lo.to_degrees() - 360.0 || v > hi.to_degrees() + 360.0).then(|| {
                     format!(
-                        "joint {}'s target {v} deg is a turn or more outside its limits \
+                        "joint {}'s target {v} deg is more than a turn outside its limits \
                          [{}, {}] deg: no compensation brings it back",
                         j + 1,
                         display_deg(lo),
@@ -1112,14 +1113,14 @@ impl Compensator {
     }
 }
 
-/// True when every column of `j` is orthogonal to `e` to within [`GTOL`]
-/// (a column of zeros counts as orthogonal).
 /// An angle limit (rad) in degrees as robot.json gave it: the round trip
 /// through radians leaves 119.99999999999999 where the file said 120.
 fn display_deg(rad: f64) -> f64 {
     (rad.to_degrees() * 1e9).round() / 1e9
 }
 
+/// True when every column of `j` is orthogonal to `e` to within [`GTOL`]
+/// (a column of zeros counts as orthogonal).
 fn stationary(j: &DMatrix<f64>, e: &DVector<f64>) -> bool {
     let e_norm = e.norm();
     j.column_iter()

@@ -12,7 +12,7 @@
 
 use nalgebra::DMatrix;
 
-use super::report::FixedParam;
+use super::report::{FixedParam, FixedReason};
 use crate::kinematics::Layout;
 
 /// Relative size of the orthogonal part below which a column counts as a
@@ -58,6 +58,7 @@ pub fn select(jtj: &DMatrix<f64>, candidates: &[usize], layout: &Layout, tol: f6
             fixed.push(FixedParam {
                 name: layout.name(candidates[c]),
                 aliased_with: vec!["(does not move the measured point)".into()],
+                reason: FixedReason::Aliased,
             });
             continue;
         }
@@ -97,6 +98,7 @@ pub fn select(jtj: &DMatrix<f64>, candidates: &[usize], layout: &Layout, tol: f6
             fixed.push(FixedParam {
                 name: layout.name(candidates[c]),
                 aliased_with,
+                reason: FixedReason::Aliased,
             });
         }
     }
@@ -122,14 +124,27 @@ pub fn condition_number(jtj: &DMatrix<f64>) -> f64 {
     (max / min).sqrt()
 }
 
+/// A free parameter the data do not determine, found by [`undetermined`].
+#[derive(Debug, Clone)]
+pub struct Undetermined {
+    /// Its position in the free list.
+    pub at: usize,
+    /// Its record, aliased with the free parameters it is most correlated
+    /// with.
+    pub fixed: FixedParam,
+    /// Where the linearised fit puts every free parameter (same order,
+    /// internal units) once it is held at nominal: the others move by their
+    /// covariance with it. A good start for the refit.
+    pub shift: Vec<f64>,
+}
+
 /// The next free parameter the data do not determine, if any: a joint
 /// parameter (`holdable`) nearly aliased with the other free ones (its
 /// column within [`NEAR_ALIAS_SINE`] of their span) whose deviation from
-/// nominal is under `max_z` sigmas; of several, the least
-/// significant. `jtj` is the normal matrix over `free` at the fit,
-/// `deviation` each free parameter's distance from nominal in the same
-/// order, `sigma` the residual scale. Returns its position in `free` and
-/// its record, aliased with the free parameters it is most correlated with.
+/// nominal is under `max_z` sigmas; of several, the least significant.
+/// `jtj` is the normal matrix over `free` at the fit, `deviation` each free
+/// parameter's distance from nominal in the same order, `sigma` the
+/// residual scale.
 ///
 /// The structural test ([`select`]) keeps such a parameter because some
 /// detail separates it, but the data pin it down no better than its
@@ -146,32 +161,34 @@ pub fn undetermined(
     max_z: f64,
     holdable: impl Fn(usize) -> bool,
     layout: &Layout,
-) -> Option<(usize, FixedParam)> {
+) -> Option<Undetermined> {
     let cov = super::unit_covariance(jtj)?;
     let n = free.len();
     let z = |k: usize| deviation[k].abs() / (sigma * cov[(k, k)].sqrt());
-    let weak = (0..n)
+    let at = (0..n)
         .filter(|&k| holdable(free[k]))
         // The part of column k orthogonal to the others, as a sine.
         .filter(|&k| 1.0 / (jtj[(k, k)] * cov[(k, k)]).sqrt() < NEAR_ALIAS_SINE)
         .filter(|&k| z(k) < max_z)
         .min_by(|&a, &b| z(a).total_cmp(&z(b)))?;
-    let corr = |j: usize| cov[(weak, j)] / (cov[(weak, weak)] * cov[(j, j)]).sqrt();
-    let mut partners: Vec<usize> = (0..n)
-        .filter(|&j| j != weak && corr(j).abs() > 0.5)
-        .collect();
+    let corr = |j: usize| cov[(at, j)] / (cov[(at, at)] * cov[(j, j)]).sqrt();
+    let mut partners: Vec<usize> = (0..n).filter(|&j| j != at).collect();
     partners.sort_by(|&a, &b| corr(b).abs().total_cmp(&corr(a).abs()));
-    Some((
-        weak,
-        FixedParam {
-            name: layout.name(free[weak]),
-            aliased_with: partners
-                .iter()
-                .take(4)
-                .map(|&j| layout.name(free[j]))
-                .collect(),
+    // The strongly correlated ones; at least the strongest.
+    let strong = partners.iter().filter(|&&j| corr(j).abs() > 0.5).count();
+    partners.truncate(strong.clamp(1, 4));
+    let shift = (0..n)
+        .map(|j| -cov[(j, at)] / cov[(at, at)] * deviation[at])
+        .collect();
+    Some(Undetermined {
+        at,
+        fixed: FixedParam {
+            name: layout.name(free[at]),
+            aliased_with: partners.iter().map(|&j| layout.name(free[j])).collect(),
+            reason: FixedReason::Undetermined,
         },
-    ))
+        shift,
+    })
 }
 
 #[cfg(test)]
@@ -223,7 +240,7 @@ mod tests {
         // named with its partner; the independent column is never a
         // candidate, however small its deviation.
         let dev = [1.0 * sd(0), 0.5 * sd(1), 0.0];
-        let (at, fixed) = undetermined(
+        let u = undetermined(
             &jtj,
             &[0, 1, 2],
             &dev,
@@ -233,12 +250,18 @@ mod tests {
             &layout,
         )
         .expect("an undetermined pair");
-        assert_eq!(at, 1);
-        assert_eq!(fixed.name, layout.name(1));
-        assert_eq!(fixed.aliased_with, vec![layout.name(0)]);
+        assert_eq!(u.at, 1);
+        assert_eq!(u.fixed.name, layout.name(1));
+        assert_eq!(u.fixed.aliased_with, vec![layout.name(0)]);
+        assert_eq!(u.fixed.reason, FixedReason::Undetermined);
+        // The linearised shift takes the held one back to nominal and hands
+        // its part to the partner; the independent column does not move.
+        assert!((u.shift[1] + dev[1]).abs() < 1e-9 * sd(1));
+        assert!(u.shift[0].abs() > 0.1 * sd(0));
+        assert!(u.shift[2].abs() < 1e-9 * sd(2));
         // A significant member stays; its partner, within 3 sigma, goes.
         let dev = [1.0 * sd(0), 4.0 * sd(1), 0.0];
-        let (at, _) = undetermined(
+        let u = undetermined(
             &jtj,
             &[0, 1, 2],
             &dev,
@@ -248,7 +271,7 @@ mod tests {
             &layout,
         )
         .unwrap();
-        assert_eq!(at, 0);
+        assert_eq!(u.at, 0);
         // Both significant, or a non-joint parameter, or max_z 0: none.
         let dev = [3.5 * sd(0), 4.0 * sd(1), 0.0];
         assert!(

@@ -427,30 +427,57 @@ pub struct Geometric {
     pub sigma: f64,
 }
 
-/// The parameters `opts.hold` names, as held at nominal by request; an
-/// unknown name is an input error.
+/// The parameters `opts.hold` names, as held at nominal by request: joint
+/// parameters, and string offsets when those are identified. The base pose
+/// and the tool point are fitted in every calibration (their nominal is a
+/// guess), and the paper's one-step method identifies every parameter at
+/// once; either with `hold` is an input error, as is an unknown name.
 fn held(session: &Session, opts: &IdentifyOptions) -> Result<Vec<FixedParam>> {
     let l = session.chain.layout;
-    let all = candidates(session, &IdentifyOptions::default());
-    opts.hold
-        .iter()
-        .map(|name| {
-            if all.iter().any(|&k| l.name(k) == *name) {
-                Ok(FixedParam {
-                    name: name.clone(),
-                    aliased_with: vec!["(held at nominal by request)".into()],
-                })
-            } else {
-                Err(Error::field(
-                    "hold",
-                    format!(
-                        "{name:?} is not a parameter of this robot (names like j2.theta, j5.a, \
-                         base.x, tool.z)"
-                    ),
-                ))
-            }
-        })
-        .collect()
+    if !opts.hold.is_empty() && opts.method == Method::Paper {
+        return Err(Error::field(
+            "hold",
+            "the paper's method identifies every parameter in one step; hold parameters with \
+             the default method (lm)",
+        ));
+    }
+    let holdable = candidates(
+        session,
+        &IdentifyOptions {
+            hold: vec![],
+            ..opts.clone()
+        },
+    );
+    let mut fixed: Vec<FixedParam> = Vec::new();
+    for name in &opts.hold {
+        let Some(&k) = holdable.iter().find(|&&k| l.name(k) == *name) else {
+            return Err(Error::field(
+                "hold",
+                format!(
+                    "{name:?} is not a joint parameter of this robot (names like j2.theta, j5.a; \
+                     s1.offset with string offsets); the base pose and the tool point are always \
+                     fitted"
+                ),
+            ));
+        };
+        if k >= l.base() && k < l.tool() + 3 {
+            return Err(Error::field(
+                "hold",
+                format!(
+                    "{name:?}: the base pose and the tool point are fitted in every calibration \
+                     (their nominal is only a starting guess)"
+                ),
+            ));
+        }
+        if !fixed.iter().any(|f| f.name == *name) {
+            fixed.push(FixedParam {
+                name: name.clone(),
+                aliased_with: vec![],
+                reason: FixedReason::Requested,
+            });
+        }
+    }
+    Ok(fixed)
 }
 
 /// Candidate parameters in priority order (see [`identifiability`]),
@@ -583,6 +610,9 @@ pub fn geometric(
         let wsum = problem.weights.iter().sum::<f64>() / problem.weights.len().max(1) as f64;
         (2.0 * result.cost / (dof * wsum.max(1e-12))).sqrt()
     };
+    // (The robust weights stay those of the fit before: holding a
+    // parameter moves T by its deviation times its sine, a fraction of the
+    // noise, which leaves every pose's weight where it was.)
     loop {
         let values = problem.expand(&result.x);
         let deviation: Vec<f64> = selection
@@ -590,7 +620,7 @@ pub fn geometric(
             .iter()
             .map(|&k| values[k] - before.values[k])
             .collect();
-        let Some((at, fixed)) = identifiability::undetermined(
+        let Some(held) = identifiability::undetermined(
             &result.jtj,
             &selection.free,
             &deviation,
@@ -601,17 +631,12 @@ pub fn geometric(
         ) else {
             break;
         };
-        // Start the refit where the linearised fit lands with the parameter
-        // held: the others move by their covariance with it.
         let mut start = values;
-        if let Some(cov) = unit_covariance(&result.jtj) {
-            for (j, &k) in selection.free.iter().enumerate() {
-                start[k] -= cov[(j, at)] / cov[(at, at)] * deviation[at];
-            }
+        for (&k, d) in selection.free.iter().zip(&held.shift) {
+            start[k] += d;
         }
-        start[selection.free[at]] = before.values[selection.free[at]];
-        selection.free.remove(at);
-        selection.fixed.push(fixed);
+        selection.free.remove(held.at);
+        selection.fixed.push(held.fixed);
         let weights = std::mem::take(&mut problem.weights);
         problem = session.problem(start, selection.free.clone());
         problem.weights = weights;
@@ -893,7 +918,15 @@ pub fn identify(
         None => vec![],
     };
     let identifiability = Identifiability {
-        n_candidates: candidates(&session, opts).len(),
+        // Every parameter considered, held by request or not.
+        n_candidates: candidates(
+            &session,
+            &IdentifyOptions {
+                hold: vec![],
+                ..opts.clone()
+            },
+        )
+        .len(),
         n_identified: fixed_sel.map(|s| s.free.len()).unwrap_or(5 * l.n_joints),
         condition_number: geo.selection.condition_number,
         fixed: fixed_sel.map(|s| s.fixed.clone()).unwrap_or_default(),

@@ -95,13 +95,44 @@ pub struct JointDeviation {
     pub beta_deg_sigma: Option<f64>,
 }
 
-/// A parameter the data cannot separate from others, held at nominal.
+/// A parameter held at nominal, and why.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FixedParam {
     /// Parameter name (`j3.d`).
     pub name: String,
     /// The free parameters it moves T like (its alias), strongest first.
     pub aliased_with: Vec<String>,
+    /// Why it is held (`aliased` in reports written before the field).
+    #[serde(default)]
+    pub reason: FixedReason,
+}
+
+/// Why a parameter is held at nominal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FixedReason {
+    /// It moves T like a combination of the kept parameters: no data of
+    /// this kind can separate it.
+    #[default]
+    Aliased,
+    /// Nearly aliased, and its deviation from nominal was under
+    /// `undetermined_z` sigmas: these data do not determine it.
+    Undetermined,
+    /// Held by the caller (`hold`).
+    Requested,
+}
+
+impl FixedReason {
+    /// How the CLI summary and the HTML report head each group.
+    pub fn heading(self) -> &'static str {
+        match self {
+            FixedReason::Aliased => "held at nominal (this data cannot separate them)",
+            FixedReason::Undetermined => {
+                "held at nominal (nearly aliased and not significantly off nominal: this data does not determine them)"
+            }
+            FixedReason::Requested => "held at nominal by request",
+        }
+    }
 }
 
 /// What the data can identify.

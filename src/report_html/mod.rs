@@ -667,20 +667,17 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
     if r.identifiability.fixed.is_empty() && r.fixed.is_empty() {
         o.push_str(r#"<p id="fixed-none">None.</p>"#);
     } else {
-        o.push_str(r#"<table id="fixed-table"><tr><th>parameter</th><th>aliased with</th></tr>"#);
+        o.push_str(
+            r#"<table id="fixed-table"><tr><th>parameter</th><th>aliased with</th><th>why</th></tr>"#,
+        );
         for name in &r.fixed {
-            let aliases = r
-                .identifiability
-                .fixed
-                .iter()
-                .find(|f| &f.name == name)
-                .map(|f| f.aliased_with.join(", "))
-                .unwrap_or_default();
+            let f = r.identifiability.fixed.iter().find(|f| &f.name == name);
             let _ = write!(
                 o,
-                "<tr><td>{}</td><td>{}</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td>{}</td></tr>",
                 esc(name),
-                esc(&aliases)
+                esc(&f.map(|f| f.aliased_with.join(", ")).unwrap_or_default()),
+                esc(f.map_or("", |f| f.reason.heading()))
             );
         }
         o.push_str("</table>");
