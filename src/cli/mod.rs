@@ -314,6 +314,13 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
     if let Some(w) = crate::model::targets::radians_warning(&targets, comp.dof()) {
         eprintln!("WARNING: {}: {w}", a.targets.display());
     }
+    if let (true, Some(o)) = (a.orientation, report.flange_orientation_sigma_deg) {
+        eprintln!(
+            "note: the flange orientation is held as the calibration knows it: its data \
+             determine it to {o:.3} deg (1 sigma), with joint 6's theta and alpha, which \
+             position data never see, taken as nominal"
+        );
+    }
     if !comp.has_backlash() && a.approach != ApproachArg::Positive {
         eprintln!("note: --approach is not used: the calibration has no backlash");
     }

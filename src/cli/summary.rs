@@ -92,6 +92,12 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
             r.stats.train.n
         );
     }
+    if let Some(o) = r.flange_orientation_sigma_deg {
+        let _ = writeln!(
+            s,
+            "these data determine the flange orientation to {o:.3} deg (1 sigma, robot base frame; joint 6's theta and alpha, which position data never see, taken as nominal)"
+        );
+    }
     if let Some(c) = &r.closed_form_vs_lsq {
         let _ = writeln!(
             s,

@@ -312,7 +312,53 @@ impl<'a> Session<'a> {
         let spread = s * s * spread / self.test.len() as f64;
         spread.is_finite().then(|| (floor * floor + spread).sqrt())
     }
+
+    /// 1-sigma of the calibrated flange orientation in the robot base frame
+    /// (rad), RMS over the poses (at most [`ORIENTATION_POSES`] of them,
+    /// evenly spread): the identified parameters' covariance
+    /// `σ² (JᵀWJ)⁻¹` over `free`, at `values`, carried to the flange's
+    /// rotation. Parameters held at nominal add nothing: joint 6's θ and α,
+    /// which position data never see, are taken as nominal. `None` without
+    /// a covariance.
+    pub fn flange_orientation_sigma(
+        &self,
+        values: &[f64],
+        free: &[usize],
+        jtj: &DMatrix<f64>,
+        sigma: f64,
+    ) -> Option<f64> {
+        let cov = unit_covariance(jtj)?;
+        let n = self.data.poses.len();
+        let step = n.div_ceil(ORIENTATION_POSES).max(1);
+        let trig = self.chain.trig(values);
+        let mut pj = self.chain.new_jacobian();
+        let (mut sum, mut count) = (0.0, 0);
+        for i in (0..n).step_by(step) {
+            self.chain.point_jacobian_trig(
+                values,
+                &trig,
+                &self.q_trig[i],
+                OutputFrame::Base,
+                &mut pj,
+            );
+            for c in 0..3 {
+                let g = nalgebra::DVector::from_iterator(
+                    free.len(),
+                    free.iter()
+                        .map(|&k| pj.d_orientation.get(k).map_or(0.0, |v| v[c])),
+                );
+                sum += g.dot(&(&cov * &g));
+            }
+            count += 1;
+        }
+        let v = sigma * sigma * sum / count.max(1) as f64;
+        v.is_finite().then(|| v.sqrt())
+    }
 }
+
+/// Most poses [`Session::flange_orientation_sigma`] looks at: an RMS over
+/// a few hundred poses is as good as over all 11,911 of a grid.
+const ORIENTATION_POSES: usize = 500;
 
 fn choose_split(data: &Dataset, opts: &IdentifyOptions) -> (Vec<usize>, Vec<usize>) {
     let has_test = data.poses.iter().any(|p| p.split == Some(Split::Test));
@@ -425,6 +471,10 @@ pub struct Geometric {
     pub weights: Vec<f64>,
     /// Residual scale of the final fit: `sqrt(2 cost / (N - k))` (mm).
     pub sigma: f64,
+    /// How well the data determine the flange orientation (rad, 1 sigma,
+    /// see [`Session::flange_orientation_sigma`]), from the fit before the
+    /// undetermined parameters were held.
+    pub flange_orientation_sigma_rad: Option<f64>,
 }
 
 /// The parameters `opts.hold` names, as held at nominal by request: joint
@@ -613,6 +663,15 @@ pub fn geometric(
     // (The robust weights stay those of the fit before: holding a
     // parameter moves T by its deviation times its sine, a fraction of the
     // noise, which leaves every pose's weight where it was.)
+    // How well these data determine the flange orientation: from the fit
+    // before the undetermined parameters are held, since holding them
+    // replaces their spread by an assumption (nominal), not by knowledge.
+    let flange_orientation_sigma_rad = session.flange_orientation_sigma(
+        &problem.expand(&result.x),
+        &selection.free,
+        &result.jtj,
+        residual_scale(&problem, &result),
+    );
     loop {
         let values = problem.expand(&result.x);
         let deviation: Vec<f64> = selection
@@ -655,6 +714,7 @@ pub fn geometric(
         result,
         weights: problem.weights,
         sigma,
+        flange_orientation_sigma_rad,
     })
 }
 
@@ -780,6 +840,10 @@ pub fn identify(
         string_sigma,
     );
 
+    let flange_orientation_sigma_deg = (opts.method == Method::Lm)
+        .then_some(geo.flange_orientation_sigma_rad)
+        .flatten()
+        .map(f64::to_degrees);
     let paper = paper::one_step(&session, &geo.before);
     let (mut after_values, method, fixed_sel, mut sig) = match opts.method {
         Method::Lm => (
@@ -1015,6 +1079,7 @@ pub fn identify(
         paper_stats,
         noise_floor_mm,
         expected_test_rms_mm,
+        flange_orientation_sigma_deg,
         string_sigma_mm: string_sigma,
         held_out: session
             .test

@@ -402,6 +402,16 @@ pub struct Report {
     /// before it existed).
     #[serde(default)]
     pub expected_test_rms_mm: Option<f64>,
+    /// How well these data determine the flange orientation in the robot
+    /// base frame (deg, 1 sigma, RMS over the poses): the geometric fit's
+    /// covariance, before the undetermined parameters are held (holding
+    /// them at nominal assumes, it does not measure). What holding the
+    /// flange orientation (`compensate --orientation`) can rest on, beyond
+    /// what position data never see: the aliased parameters (joint 6's θ
+    /// and α) are taken as nominal. `None` with the paper's method (and in
+    /// reports written before it existed).
+    #[serde(default)]
+    pub flange_orientation_sigma_deg: Option<f64>,
     /// String noise (1 sigma, mm) estimated from the strings' redundancy.
     pub string_sigma_mm: Option<f64>,
     /// Held-out pose ids.

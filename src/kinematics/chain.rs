@@ -92,6 +92,10 @@ pub struct PointJacobian {
     pub flange: Frame,
     /// dT/dp for every geometric parameter (length `Layout::n_geometric`).
     pub d_params: Vec<Vector3<f64>>,
+    /// The flange frame's rotation per unit of each geometric parameter, as
+    /// a rotation vector (`dR/dp = [ω]× R`): a rotation parameter's world
+    /// axis, zero for lengths and the tool point.
+    pub d_orientation: Vec<Vector3<f64>>,
 }
 
 /// The kinematic structure: convention and number of joints.
@@ -217,6 +221,8 @@ impl Chain {
         let ng = l.n_geometric();
         out.d_params.clear();
         out.d_params.resize(ng, Vector3::zeros());
+        out.d_orientation.clear();
+        out.d_orientation.resize(ng, Vector3::zeros());
         // Rotations are recorded as (parameter index, world axis, origin) and
         // turned into columns once T is known.
         let mut rots: [(usize, Vector3<f64>, Vector3<f64>); 3 + 3 * 12] =
@@ -283,6 +289,7 @@ impl Chain {
         }
         for (idx, w, o) in rots.iter().take(nr) {
             out.d_params[*idx] = w.cross(&(point - o));
+            out.d_orientation[*idx] = *w;
         }
         out.point = point;
         out.flange = f;
@@ -305,6 +312,7 @@ impl Chain {
             point: Vector3::zeros(),
             flange: Frame::identity(),
             d_params: vec![Vector3::zeros(); self.layout.n_geometric()],
+            d_orientation: vec![Vector3::zeros(); self.layout.n_geometric()],
         }
     }
 
@@ -420,6 +428,21 @@ mod tests {
                     "{conv:?} {} fd {fd:?} analytic {:?}",
                     chain.layout.name(i),
                     jac.d_params[i]
+                );
+                // The flange's rotation: (R(p+h) R(p-h)ᵀ) as a rotation
+                // vector over 2h.
+                pp[i] += 2.0 * h;
+                let (fa, _) = chain.point(&pp, &q, frame);
+                pp[i] -= 2.0 * h;
+                let (fb, _) = chain.point(&pp, &q, frame);
+                let w = nalgebra::Rotation3::from_matrix_unchecked(fa.r * fb.r.transpose())
+                    .scaled_axis()
+                    / (2.0 * h);
+                assert!(
+                    (w - jac.d_orientation[i]).norm() < 1e-5 * (1.0 + w.norm()),
+                    "{conv:?} {} orientation fd {w:?} analytic {:?}",
+                    chain.layout.name(i),
+                    jac.d_orientation[i]
                 );
             }
         }
