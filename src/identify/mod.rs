@@ -358,7 +358,7 @@ impl<'a> Session<'a> {
 
 /// Most poses [`Session::flange_orientation_sigma`] looks at: an RMS over
 /// a few hundred poses is as good as over all 11,911 of a grid.
-const ORIENTATION_POSES: usize = 500;
+pub const ORIENTATION_POSES: usize = 500;
 
 fn choose_split(data: &Dataset, opts: &IdentifyOptions) -> (Vec<usize>, Vec<usize>) {
     let has_test = data.poses.iter().any(|p| p.split == Some(Split::Test));
