@@ -349,7 +349,7 @@ fn undetermined_wrist_pairs_are_held_for_the_flange_orientation() {
         // [held, all free]: sums of squares over sessions / held-out poses.
         let (mut held_out2, mut orient2, mut n_poses) = ([0.0; 2], [0.0; 2], 0.0);
         let mut sessions_holding = 0;
-        let mut reported2 = 0.0;
+        let (mut reported2, mut reported2_last) = (0.0, 0.0);
         for seed in 0..sessions {
             let spec: Spec = serde_json::from_value(serde_json::json!({
                 "robot": robot, "n_poses": 50, "test_fraction": 0.4, "seed": 900 + seed
@@ -375,9 +375,17 @@ fn undetermined_wrist_pairs_are_held_for_the_flange_orientation() {
                 };
                 let rep = identify(&sim.robot, &sim.rig, &sim.dataset, &opts, &NoProgress).unwrap();
                 n_fixed[i] = rep.fixed.len();
+                let o = rep.flange_orientation_sigma_deg.unwrap();
                 if i == 0 {
-                    reported2 += rep.flange_orientation_sigma_deg.unwrap().powi(2);
+                    reported2 += o * o;
+                } else {
+                    // Taken before the holds: the same with none.
+                    assert!(
+                        (o * o - reported2_last).abs() < 1e-9 * o * o,
+                        "{robot} {seed}"
+                    );
                 }
+                reported2_last = o * o;
                 held_out2[i] += rep.stats.test.after.rms_mm.powi(2);
                 let cal = Params::nominal(&rep.calibrated_robot, &rep.base_in_rig, &sim.rig, m);
                 for pose in sim

@@ -316,9 +316,10 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
     }
     if let (true, Some(o)) = (a.orientation, report.flange_orientation_sigma_deg) {
         eprintln!(
-            "note: the flange orientation is held as the calibration knows it: its data \
-             determine it to {o:.3} deg (1 sigma), with joint 6's theta and alpha, which \
-             position data never see, taken as nominal"
+            "note: the flange orientation is held to the calibrated model's; the calibration's \
+             data determine that orientation to {o:.3} deg (RMS rotation angle, 1 sigma, \
+             before undetermined parameters were held), with every parameter held at nominal \
+             (among them those position data never see) taken as exact"
         );
     }
     if !comp.has_backlash() && a.approach != ApproachArg::Positive {

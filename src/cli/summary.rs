@@ -95,7 +95,7 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
     if let Some(o) = r.flange_orientation_sigma_deg {
         let _ = writeln!(
             s,
-            "these data determine the flange orientation to {o:.3} deg (1 sigma, robot base frame; joint 6's theta and alpha, which position data never see, taken as nominal)"
+            "these data determine the flange orientation to {o:.3} deg (RMS rotation angle, 1 sigma, robot base frame, before undetermined parameters are held; parameters held at nominal, among them those position data never see, taken as exact)"
         );
     }
     if let Some(c) = &r.closed_form_vs_lsq {

@@ -542,7 +542,14 @@ pub async fn enqueue_job(
     // Refused now rather than failing in the worker: a model or rig stored
     // by an earlier version that today's checks refuse is the client's to
     // replace (409), as on upload.
-    robot_and_rig(&app, &session).await?;
+    let (robot, rig) = robot_and_rig(&app, &session).await?;
+    // Held parameters name this robot's joints: checked now, not in the
+    // worker.
+    let layout = crate::kinematics::Layout {
+        n_joints: robot.dof(),
+        n_strings: rig.n_strings(),
+    };
+    crate::identify::held(layout, &options.to_identify())?;
     let opts = serde_json::to_string(&options).map_err(|e| ApiError::Internal(e.to_string()))?;
     let job = app.store.create_job(id, session.robot_id, &opts, 3).await?;
     app.jobs.wake();

@@ -30,7 +30,7 @@ use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use crate::error::{Error, Result};
 use crate::kinematics::chain::{Chain, OutputFrame, joint_trig};
-use crate::kinematics::{JointParam, Params};
+use crate::kinematics::{JointParam, Layout, Params};
 use crate::measure::{self, Located};
 use crate::model::{BasePose, Dataset, Measurement, Rig, Robot, Split};
 use crate::rng::Rng;
@@ -317,9 +317,10 @@ impl<'a> Session<'a> {
     /// (rad), RMS over the poses (at most [`ORIENTATION_POSES`] of them,
     /// evenly spread): the identified parameters' covariance
     /// `σ² (JᵀWJ)⁻¹` over `free`, at `values`, carried to the flange's
-    /// rotation. Parameters held at nominal add nothing: joint 6's θ and α,
-    /// which position data never see, are taken as nominal. `None` without
-    /// a covariance.
+    /// rotation: the RMS rotation angle (the square root of the trace of its
+    /// covariance). Parameters held at nominal add nothing: those position
+    /// data never see (the last joint's θ...) count as exact. `None`
+    /// without a covariance.
     pub fn flange_orientation_sigma(
         &self,
         values: &[f64],
@@ -477,13 +478,13 @@ pub struct Geometric {
     pub flange_orientation_sigma_rad: Option<f64>,
 }
 
-/// The parameters `opts.hold` names, as held at nominal by request: joint
+/// The parameters `opts.hold` names (for a robot and rig of layout `l`), as
+/// held at nominal by request: joint
 /// parameters, and string offsets when those are identified. The base pose
 /// and the tool point are fitted in every calibration (their nominal is a
 /// guess), and the paper's one-step method identifies every parameter at
 /// once; either with `hold` is an input error, as is an unknown name.
-fn held(session: &Session, opts: &IdentifyOptions) -> Result<Vec<FixedParam>> {
-    let l = session.chain.layout;
+pub fn held(l: Layout, opts: &IdentifyOptions) -> Result<Vec<FixedParam>> {
     if !opts.hold.is_empty() && opts.method == Method::Paper {
         return Err(Error::field(
             "hold",
@@ -492,7 +493,7 @@ fn held(session: &Session, opts: &IdentifyOptions) -> Result<Vec<FixedParam>> {
         ));
     }
     let holdable = candidates(
-        session,
+        l,
         &IdentifyOptions {
             hold: vec![],
             ..opts.clone()
@@ -532,8 +533,7 @@ fn held(session: &Session, opts: &IdentifyOptions) -> Result<Vec<FixedParam>> {
 
 /// Candidate parameters in priority order (see [`identifiability`]),
 /// without those `opts.hold` names.
-pub fn candidates(session: &Session, opts: &IdentifyOptions) -> Vec<usize> {
-    let l = session.chain.layout;
+pub fn candidates(l: Layout, opts: &IdentifyOptions) -> Vec<usize> {
     let mut c: Vec<usize> = (l.base()..l.base() + 6)
         .chain(l.tool()..l.tool() + 3)
         .collect();
@@ -602,13 +602,13 @@ pub fn geometric(
     before.values = pb.expand(&rb.x);
 
     // Identifiability at the before solution.
-    let cands = candidates(session, opts);
+    let cands = candidates(l, opts);
     let pc = session.problem(before.values.clone(), cands.clone());
     let mut jtj = DMatrix::zeros(cands.len(), cands.len());
     let mut g = nalgebra::DVector::zeros(cands.len());
     lm::LeastSquares::normal_equations(&pc, &pc.x0(), &mut jtj, &mut g);
     let mut selection = identifiability::select(&jtj, &cands, &l, opts.identifiability_tolerance);
-    selection.fixed.extend(held(session, opts)?);
+    selection.fixed.extend(held(l, opts)?);
     // As many equations (3 per distinct pose: T) as parameters or fewer:
     // the fit passes through the readings and its figures mean nothing.
     // (Fewer poses than parameters, but more equations, is a warning.)
@@ -984,7 +984,7 @@ pub fn identify(
     let identifiability = Identifiability {
         // Every parameter considered, held by request or not.
         n_candidates: candidates(
-            &session,
+            session.chain.layout,
             &IdentifyOptions {
                 hold: vec![],
                 ..opts.clone()

@@ -403,13 +403,15 @@ pub struct Report {
     #[serde(default)]
     pub expected_test_rms_mm: Option<f64>,
     /// How well these data determine the flange orientation in the robot
-    /// base frame (deg, 1 sigma, RMS over the poses): the geometric fit's
-    /// covariance, before the undetermined parameters are held (holding
-    /// them at nominal assumes, it does not measure). What holding the
-    /// flange orientation (`compensate --orientation`) can rest on, beyond
-    /// what position data never see: the aliased parameters (joint 6's θ
-    /// and α) are taken as nominal. `None` with the paper's method (and in
-    /// reports written before it existed).
+    /// base frame (deg: 1-sigma RMS rotation angle, RMS over the poses):
+    /// the geometric fit's covariance, before the undetermined parameters
+    /// are held (holding them at nominal assumes, it does not measure), and
+    /// before any physics refit. What holding the flange orientation
+    /// (`compensate --orientation`) can rest on, beyond what position data
+    /// never see: every parameter held at nominal (the last joint's θ, in
+    /// DH also its α and β, aliased with the tool point) counts as exact.
+    /// `None` with the paper's method (and in reports written before it
+    /// existed).
     #[serde(default)]
     pub flange_orientation_sigma_deg: Option<f64>,
     /// String noise (1 sigma, mm) estimated from the strings' redundancy.

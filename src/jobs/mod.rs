@@ -45,6 +45,15 @@ pub struct JobOptions {
     /// Seed of the hold-out choice.
     #[serde(default)]
     pub seed: Option<u64>,
+    /// Deviation (sigmas, 0 to 100; default 3) under which a nearly aliased
+    /// joint parameter counts as undetermined and is held at nominal; 0
+    /// keeps every parameter the structural identifiability test keeps.
+    #[serde(default)]
+    pub undetermined_z: Option<f64>,
+    /// Joint parameters to hold at nominal whatever the data say (`j5.a`,
+    /// `j2.theta`...); not with the paper's method.
+    #[serde(default)]
+    pub hold: Option<Vec<String>>,
 }
 
 /// Identification method.
@@ -65,6 +74,14 @@ impl JobOptions {
                 return Err((
                     "holdout_fraction".into(),
                     format!("must be in (0, 0.9], got {h}"),
+                ));
+            }
+        }
+        if let Some(z) = self.undetermined_z {
+            if !(z.is_finite() && (0.0..=100.0).contains(&z)) {
+                return Err((
+                    "undetermined_z".into(),
+                    format!("must be in [0, 100] sigmas, got {z}"),
                 ));
             }
         }
@@ -91,6 +108,12 @@ impl JobOptions {
         }
         if let Some(s) = self.seed {
             o.seed = s;
+        }
+        if let Some(z) = self.undetermined_z {
+            o.undetermined_z = z;
+        }
+        if let Some(h) = &self.hold {
+            o.hold = h.clone();
         }
         o
     }

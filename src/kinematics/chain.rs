@@ -83,7 +83,7 @@ fn add_angles((s1, c1): (f64, f64), (s2, c2): (f64, f64)) -> (f64, f64) {
     (s1 * c2 + c1 * s2, c1 * c2 - s1 * s2)
 }
 
-/// T with its derivatives.
+/// T with its derivatives, and the flange's rotation per parameter.
 #[derive(Debug, Clone)]
 pub struct PointJacobian {
     /// The point T (mm).
@@ -195,8 +195,8 @@ impl Chain {
 
     /// T and its derivatives with respect to every geometric parameter.
     /// `dT/dq_j` equals the column of `θ_j`. Columns of the base pose are
-    /// zero in the base frame. `out.d_params` is resized as needed, so a
-    /// caller looping over poses reuses one buffer.
+    /// zero in the base frame. `out.d_params` and `out.d_orientation` are
+    /// resized as needed, so a caller looping over poses reuses one buffer.
     pub fn point_jacobian(
         &self,
         p: &[f64],

@@ -432,6 +432,13 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
     row(&mut o, "string noise (1σ)", fmt_opt(r.string_sigma_mm));
     row(
         &mut o,
+        "flange orientation from these data (1σ RMS angle)",
+        r.flange_orientation_sigma_deg
+            .map(|v| format!("{v:.3} deg"))
+            .unwrap_or("-".into()),
+    );
+    row(
+        &mut o,
         "solver",
         format!(
             "{} iterations, {}, residual RMS {:.4} mm",

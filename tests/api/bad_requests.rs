@@ -602,6 +602,29 @@ async fn bad_requests_are_refused_and_change_nothing() {
     refused(
         &app,
         c.post(app.url(&format!("/sessions/{sid}/jobs")))
+            .json(&json!({"undetermined_z": -1.0})),
+        422,
+        "invalid_input",
+        Some("undetermined_z"),
+        None,
+    )
+    .await;
+    // Held parameters must name this robot's joints, checked at once.
+    for hold in ["j9.a", "base.x"] {
+        refused(
+            &app,
+            c.post(app.url(&format!("/sessions/{sid}/jobs")))
+                .json(&json!({"hold": [hold]})),
+            422,
+            "invalid_input",
+            Some("hold"),
+            None,
+        )
+        .await;
+    }
+    refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/jobs")))
             .json(&json!({"method": "magic"})),
         422,
         "invalid_input",

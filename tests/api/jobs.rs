@@ -368,6 +368,50 @@ async fn a_cancel_as_the_job_finishes_stores_nothing_and_says_so() {
     app.stop().await;
 }
 
+/// Job options reach the engine: a parameter held by request is held, and
+/// `undetermined_z: 0` keeps the wrist pair these data do not determine.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn held_parameters_reach_the_calibration() {
+    let app = TestApp::spawn("hold").await;
+    let (_, _, _, sid) = app.setup(DS, "HOLD").await;
+    app.upload_poses(sid, read(DS, "poses.csv")).await;
+    let job = ok_json(
+        app.post_raw(
+            &format!("/sessions/{sid}/jobs"),
+            Some("application/json"),
+            json!({"hold": ["j2.a"], "undetermined_z": 0.0, "physics": false}).to_string(),
+        )
+        .await,
+        202,
+    )
+    .await;
+    let j = app
+        .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(120))
+        .await;
+    assert_eq!(j["state"], "succeeded", "{j}");
+    let cal = ok_json(
+        app.get(&format!("/calibrations/{}", j["calibration_id"]))
+            .await,
+        200,
+    )
+    .await;
+    let fixed = cal["report"]["identifiability"]["fixed"]
+        .as_array()
+        .unwrap();
+    let reason = |name: &str| {
+        fixed
+            .iter()
+            .find(|f| f["name"] == name)
+            .map(|f| f["reason"].clone())
+    };
+    assert_eq!(reason("j2.a"), Some(json!("requested")), "{fixed:?}");
+    assert!(
+        fixed.iter().all(|f| f["reason"] != "undetermined"),
+        "{fixed:?}"
+    );
+    app.stop().await;
+}
+
 /// A calibration with nothing held out (a `holdout_fraction` that rounds
 /// to no pose, on a file
 /// without a split column) has no held-out figures: null in the
