@@ -548,34 +548,37 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// `--identifiability-tolerance`: a sine from 1e-9 to 0.5, refused rather
-/// than clamped.
-fn identifiability_tolerance(s: &str) -> std::result::Result<f64, String> {
+/// A number within `range`, refused rather than clamped; `what` names the
+/// unit in the message.
+fn in_range(
+    s: &str,
+    range: std::ops::RangeInclusive<f64>,
+    what: &str,
+) -> std::result::Result<f64, String> {
     let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    if v.is_finite() && (1e-9..=0.5).contains(&v) {
+    if v.is_finite() && range.contains(&v) {
         Ok(v)
     } else {
-        Err(format!("{s}: a sine from 1e-9 to 0.5"))
+        Err(format!(
+            "{s}: {what} from {} to {}",
+            range.start(),
+            range.end()
+        ))
     }
+}
+
+/// `--identifiability-tolerance`: a sine from 1e-9 to 0.5.
+fn identifiability_tolerance(s: &str) -> std::result::Result<f64, String> {
+    in_range(s, 1e-9..=0.5, "a sine")
 }
 
 /// `--undetermined-z`: sigmas from 0 to 100.
 fn undetermined_z(s: &str) -> std::result::Result<f64, String> {
-    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    if v.is_finite() && (0.0..=100.0).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("{s}: sigmas from 0 to 100"))
-    }
+    in_range(s, 0.0..=100.0, "sigmas")
 }
 
 /// `--holdout`: a fraction from 0 to 0.9 (at least a tenth of the poses
-/// must train), refused rather than clamped.
+/// must train).
 fn holdout_fraction(s: &str) -> std::result::Result<f64, String> {
-    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    if v.is_finite() && (0.0..=0.9).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("{s}: a fraction from 0 to 0.9"))
-    }
+    in_range(s, 0.0..=0.9, "a fraction")
 }

@@ -236,20 +236,14 @@ mod tests {
         let cov = crate::identify::unit_covariance(&jtj).unwrap();
         let sigma = 0.01;
         let sd = |k: usize| sigma * cov[(k, k)].sqrt();
+        let find = |jtj: &DMatrix<f64>, dev: &[f64], max_z: f64, joint: bool| {
+            undetermined(jtj, &[0, 1, 2], dev, sigma, max_z, |_| joint, &layout)
+        };
         // Both members within 3 sigma: the one nearer nominal is held and
         // named with its partner; the independent column is never a
         // candidate, however small its deviation.
         let dev = [1.0 * sd(0), 0.5 * sd(1), 0.0];
-        let u = undetermined(
-            &jtj,
-            &[0, 1, 2],
-            &dev,
-            sigma,
-            UNDETERMINED_Z,
-            |_| true,
-            &layout,
-        )
-        .expect("an undetermined pair");
+        let u = find(&jtj, &dev, UNDETERMINED_Z, true).expect("an undetermined pair");
         assert_eq!(u.at, 1);
         assert_eq!(u.fixed.name, layout.name(1));
         assert_eq!(u.fixed.aliased_with, vec![layout.name(0)]);
@@ -259,62 +253,18 @@ mod tests {
         assert!((u.shift[1] + dev[1]).abs() < 1e-9 * sd(1));
         assert!(u.shift[0].abs() > 0.1 * sd(0));
         assert!(u.shift[2].abs() < 1e-9 * sd(2));
+        // Not with a non-joint parameter, nor with max_z 0.
+        assert!(find(&jtj, &dev, UNDETERMINED_Z, false).is_none());
+        assert!(find(&jtj, &dev, 0.0, true).is_none());
         // A significant member stays; its partner, within 3 sigma, goes.
         let dev = [1.0 * sd(0), 4.0 * sd(1), 0.0];
-        let u = undetermined(
-            &jtj,
-            &[0, 1, 2],
-            &dev,
-            sigma,
-            UNDETERMINED_Z,
-            |_| true,
-            &layout,
-        )
-        .unwrap();
-        assert_eq!(u.at, 0);
-        // Both significant, or a non-joint parameter, or max_z 0: none.
+        assert_eq!(find(&jtj, &dev, UNDETERMINED_Z, true).unwrap().at, 0);
+        // Both significant: none.
         let dev = [3.5 * sd(0), 4.0 * sd(1), 0.0];
-        assert!(
-            undetermined(
-                &jtj,
-                &[0, 1, 2],
-                &dev,
-                sigma,
-                UNDETERMINED_Z,
-                |_| true,
-                &layout
-            )
-            .is_none()
-        );
-        let dev = [1.0 * sd(0), 0.5 * sd(1), 0.0];
-        assert!(
-            undetermined(
-                &jtj,
-                &[0, 1, 2],
-                &dev,
-                sigma,
-                UNDETERMINED_Z,
-                |_| false,
-                &layout
-            )
-            .is_none()
-        );
-        assert!(undetermined(&jtj, &[0, 1, 2], &dev, sigma, 0.0, |_| true, &layout).is_none());
+        assert!(find(&jtj, &dev, UNDETERMINED_Z, true).is_none());
         // A pair separated by more than the near-alias sine is left alone.
         let j = DMatrix::from_row_slice(3, 3, &[1.0, 1.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0, 1.0]);
-        let wide = j.transpose() * j;
-        assert!(
-            undetermined(
-                &wide,
-                &[0, 1, 2],
-                &[0.0; 3],
-                sigma,
-                UNDETERMINED_Z,
-                |_| true,
-                &layout
-            )
-            .is_none()
-        );
+        assert!(find(&(j.transpose() * j), &[0.0; 3], UNDETERMINED_Z, true).is_none());
     }
 
     #[test]

@@ -29,7 +29,7 @@ pub mod warnings;
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use crate::error::{Error, Result};
-use crate::kinematics::chain::{Chain, OutputFrame, joint_trig};
+use crate::kinematics::chain::{Chain, OutputFrame, PointJacobian, joint_trig};
 use crate::kinematics::{JointParam, Layout, Params};
 use crate::measure::{self, Located};
 use crate::model::{BasePose, Dataset, Measurement, Rig, Robot, Split};
@@ -288,29 +288,43 @@ impl<'a> Session<'a> {
         let floor = self.noise_floor(sigma)?;
         let s = sigma?;
         let cov = unit_covariance(jtj)?;
+        // String offsets (past the geometric block) do not move T.
+        let spread = self.mean_spread(values, free, &cov, &self.test, OutputFrame::Rig, |pj| {
+            &pj.d_params
+        });
+        let spread = s * s * spread;
+        spread.is_finite().then(|| (floor * floor + spread).sqrt())
+    }
+
+    /// Mean over `poses` of `Σ_c g_cᵀ C g_c`: the unit covariance `cov`
+    /// (over `free`) carried to a per-pose 3-vector whose derivative per
+    /// parameter `columns` reads from the chain's Jacobian in `frame` (T's,
+    /// or the flange's rotation); parameters past the columns count zero.
+    fn mean_spread(
+        &self,
+        values: &[f64],
+        free: &[usize],
+        cov: &DMatrix<f64>,
+        poses: &[usize],
+        frame: OutputFrame,
+        columns: impl Fn(&PointJacobian) -> &Vec<Vector3<f64>>,
+    ) -> f64 {
         let trig = self.chain.trig(values);
         let mut pj = self.chain.new_jacobian();
-        let mut spread = 0.0;
-        for &i in &self.test {
-            self.chain.point_jacobian_trig(
-                values,
-                &trig,
-                &self.q_trig[i],
-                OutputFrame::Rig,
-                &mut pj,
-            );
+        let mut sum = 0.0;
+        for &i in poses {
+            self.chain
+                .point_jacobian_trig(values, &trig, &self.q_trig[i], frame, &mut pj);
+            let col = columns(&pj);
             for c in 0..3 {
-                // String offsets (past the geometric block) do not move T.
                 let g = nalgebra::DVector::from_iterator(
                     free.len(),
-                    free.iter()
-                        .map(|&k| pj.d_params.get(k).map_or(0.0, |v| v[c])),
+                    free.iter().map(|&k| col.get(k).map_or(0.0, |v| v[c])),
                 );
-                spread += g.dot(&(&cov * &g));
+                sum += g.dot(&(cov * &g));
             }
         }
-        let spread = s * s * spread / self.test.len() as f64;
-        spread.is_finite().then(|| (floor * floor + spread).sqrt())
+        sum / poses.len().max(1) as f64
     }
 
     /// 1-sigma of the calibrated flange orientation in the robot base frame
@@ -330,29 +344,14 @@ impl<'a> Session<'a> {
     ) -> Option<f64> {
         let cov = unit_covariance(jtj)?;
         let n = self.data.poses.len();
-        let step = n.div_ceil(ORIENTATION_POSES).max(1);
-        let trig = self.chain.trig(values);
-        let mut pj = self.chain.new_jacobian();
-        let (mut sum, mut count) = (0.0, 0);
-        for i in (0..n).step_by(step) {
-            self.chain.point_jacobian_trig(
-                values,
-                &trig,
-                &self.q_trig[i],
-                OutputFrame::Base,
-                &mut pj,
-            );
-            for c in 0..3 {
-                let g = nalgebra::DVector::from_iterator(
-                    free.len(),
-                    free.iter()
-                        .map(|&k| pj.d_orientation.get(k).map_or(0.0, |v| v[c])),
-                );
-                sum += g.dot(&(&cov * &g));
-            }
-            count += 1;
-        }
-        let v = sigma * sigma * sum / count.max(1) as f64;
+        let poses: Vec<usize> = (0..n)
+            .step_by(n.div_ceil(ORIENTATION_POSES).max(1))
+            .collect();
+        let v = sigma
+            * sigma
+            * self.mean_spread(values, free, &cov, &poses, OutputFrame::Base, |pj| {
+                &pj.d_orientation
+            });
         v.is_finite().then(|| v.sqrt())
     }
 }
