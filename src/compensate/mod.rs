@@ -1386,8 +1386,8 @@ mod tests {
                 q_deg: vec![q1, -30.0, 30.0, 40.0, 50.0, q6],
             },
         };
-        // Joint 6 turns +-360 deg; a calibrated joint 6 offset by +0.5 deg
-        // needs 360.5 deg for a target taught at the limit, and the same
+        // Joint 6 turns +-360 deg; a calibrated joint 6 whose zero is 0.5
+        // deg off needs 360.5 deg for a target taught at the limit, and the same
         // angle a turn away is within the limits: said, not taken.
         let mut cal = nominal.clone();
         cal.joints[5].q_min_deg = -360.0;

@@ -132,9 +132,10 @@ pub struct Undetermined {
     /// Its record, aliased with the free parameters it is most correlated
     /// with.
     pub fixed: FixedParam,
-    /// Where the linearised fit puts every free parameter (same order,
-    /// internal units) once it is held at nominal: the others move by their
-    /// covariance with it. A good start for the refit.
+    /// How far the linearised fit moves every free parameter (same order,
+    /// internal units) when it is held: itself back to nominal, the others
+    /// by their covariance with it. Added to the fit, a good start for the
+    /// refit.
     pub shift: Vec<f64>,
 }
 

@@ -71,9 +71,10 @@ pub struct IdentifyOptions {
     /// [`identifiability::undetermined`]); 0 keeps every parameter the
     /// structural test keeps.
     pub undetermined_z: f64,
-    /// Parameters held at nominal whatever the data say (report names:
-    /// `j5.a`, `tool.z`...), e.g. to compare with a calibration in the
-    /// same parametrisation.
+    /// Parameters held at nominal whatever the data say (report names of
+    /// joint parameters, `j5.a`, `j2.theta`..., or string offsets,
+    /// `s1.offset`), e.g. to compare with a calibration in the same
+    /// parametrisation.
     pub hold: Vec<String>,
 }
 
@@ -478,11 +479,11 @@ pub struct Geometric {
 }
 
 /// The parameters `opts.hold` names (for a robot and rig of layout `l`), as
-/// held at nominal by request: joint
-/// parameters, and string offsets when those are identified. The base pose
-/// and the tool point are fitted in every calibration (their nominal is a
-/// guess), and the paper's one-step method identifies every parameter at
-/// once; either with `hold` is an input error, as is an unknown name.
+/// held at nominal by request: joint parameters, and string offsets when
+/// those are identified. The base pose and the tool point are fitted in
+/// every calibration (their nominal is a guess), and the paper's one-step
+/// method identifies every parameter at once; either with `hold` is an
+/// input error, as is an unknown name.
 pub fn held(l: Layout, opts: &IdentifyOptions) -> Result<Vec<FixedParam>> {
     if !opts.hold.is_empty() && opts.method == Method::Paper {
         return Err(Error::field(
@@ -659,9 +660,6 @@ pub fn geometric(
         let wsum = problem.weights.iter().sum::<f64>() / problem.weights.len().max(1) as f64;
         (2.0 * result.cost / (dof * wsum.max(1e-12))).sqrt()
     };
-    // (The robust weights stay those of the fit before: holding a
-    // parameter moves T by its deviation times its sine, a fraction of the
-    // noise, which leaves every pose's weight where it was.)
     // How well these data determine the flange orientation: from the fit
     // before the undetermined parameters are held, since holding them
     // replaces their spread by an assumption (nominal), not by knowledge.
@@ -671,6 +669,9 @@ pub fn geometric(
         &result.jtj,
         residual_scale(&problem, &result),
     );
+    // (The robust weights stay those of the fit before: holding a
+    // parameter moves T by its deviation times its sine, a fraction of the
+    // noise, which leaves every pose's weight where it was.)
     loop {
         let values = problem.expand(&result.x);
         let deviation: Vec<f64> = selection
