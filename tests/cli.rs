@@ -491,6 +491,24 @@ fn options_and_files_are_checked_as_given() {
         assert!(!out.status.success(), "--holdout {h} accepted");
         assert!(err.contains("a fraction from 0 to 0.9"), "{err}");
     }
+    // The new numeric options are refused out of range, and a bad --hold
+    // is blamed on the option, not on poses.csv.
+    for (arg, says) in [
+        ("--identifiability-tolerance=7", "a sine from"),
+        ("--undetermined-z=-1", "sigmas from 0 to 100"),
+        (
+            "--hold=j9.a",
+            "--hold: hold: \"j9.a\" is not a joint parameter",
+        ),
+    ] {
+        let out = run(&data("robot.json"), &data("rig.json"), &[arg]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{arg} accepted");
+        assert!(
+            err.contains(says) && !err.contains("poses.csv"),
+            "{arg}: {err}"
+        );
+    }
     let bom = dir.join("robot.json");
     let text = std::fs::read_to_string(data("robot.json")).unwrap();
     std::fs::write(&bom, format!("\u{feff}{text}")).unwrap();

@@ -57,6 +57,13 @@ fn read(path: &Path) -> Result<String, CliError> {
         })
 }
 
+/// Text to stdout; a reader that went away (`drawcal identify | head`)
+/// ends the output quietly instead of the panic `print!` gives.
+fn to_stdout(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+}
+
 fn core<T>(path: &Path, r: crate::Result<T>) -> Result<T, CliError> {
     r.map_err(|source| CliError::Core {
         path: path.into(),
@@ -276,6 +283,12 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
         ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}%")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
+    // A bad --hold is the command line's fault, not the poses file's.
+    let layout = crate::kinematics::Layout {
+        n_joints: robot.dof(),
+        n_strings: rig.n_strings(),
+    };
+    core(Path::new("--hold"), identify::held(layout, &opts))?;
     let report = core(
         &a.poses,
         identify::identify(&robot, &rig, &data, &opts, &Bar(bar.clone())),
@@ -285,10 +298,12 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
     for w in &report.warnings {
         eprintln!("warning: {w}");
     }
-    print!(
-        "{}",
-        summary::render(&report, &robot, data.poses.len(), data.n_strings)
-    );
+    to_stdout(&summary::render(
+        &report,
+        &robot,
+        data.poses.len(),
+        data.n_strings,
+    ));
     if let Some(out) = &a.out {
         let text =
             serde_json::to_string_pretty(&report).map_err(|e| CliError::Other(e.to_string()))?;
@@ -296,7 +311,7 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
             path: out.clone(),
             source,
         })?;
-        println!("report written to {}", out.display());
+        to_stdout(&format!("report written to {}\n", out.display()));
     }
     Ok(())
 }
@@ -526,7 +541,7 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
             path: out.clone(),
             source,
         })?,
-        None => print!("{}", String::from_utf8_lossy(&bytes)),
+        None => to_stdout(&String::from_utf8_lossy(&bytes)),
     }
     eprintln!(
         "{} poses located by least squares from {} strings",
