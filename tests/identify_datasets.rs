@@ -8,7 +8,7 @@ use drawcal::identify::report::Report;
 use drawcal::identify::{IdentifyOptions, Method, NoProgress, identify};
 use drawcal::kinematics::Params;
 use drawcal::kinematics::chain::{Chain, OutputFrame};
-use drawcal::model::{Dataset, Measurement, Robot};
+use drawcal::model::{Dataset, Measurement};
 use nalgebra::Vector3;
 
 fn geometric_only() -> IdentifyOptions {
@@ -19,19 +19,7 @@ fn geometric_only() -> IdentifyOptions {
 }
 
 fn true_points(name: &str) -> Vec<Vector3<f64>> {
-    let t = common::truth(name);
-    t["true_points_mm"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| {
-            Vector3::new(
-                p[0].as_f64().unwrap(),
-                p[1].as_f64().unwrap(),
-                p[2].as_f64().unwrap(),
-            )
-        })
-        .collect()
+    common::true_points(&common::truth(name))
 }
 
 /// RMS distance between the calibrated model's T and the true T over the
@@ -59,35 +47,6 @@ fn model_vs_truth_mm(name: &str, rep: &Report, data: &Dataset, n_strings: usize)
         }
     }
     (ss / n as f64).sqrt()
-}
-
-/// The truth expressed in the parametrisation `rep` identified: the model
-/// fitted to exact, noise-free readings of the true points at the same
-/// poses, with the parameters `rep` held at nominal held too. This maps the
-/// aliased parameters (d2+d3 along parallel axes, joint 6 and the tool
-/// point, joint 1 and the base, the wrist pairs the data did not separate)
-/// the way the calibration does.
-fn mapped_truth(
-    name: &str,
-    robot: &Robot,
-    rig: &drawcal::model::Rig,
-    data: &Dataset,
-    rep: &Report,
-) -> Report {
-    let truth = true_points(name);
-    let mut exact = data.clone();
-    for (pose, t) in exact.poses.iter_mut().zip(&truth) {
-        pose.measurement = Measurement::Strings(
-            (0..rig.n_strings())
-                .map(|k| (t - rig.anchor(k)).norm() - rig.r_mm)
-                .collect(),
-        );
-    }
-    let opts = IdentifyOptions {
-        hold: rep.fixed.clone(),
-        ..geometric_only()
-    };
-    identify(robot, rig, &exact, &opts, &NoProgress).unwrap()
 }
 
 fn check_simulated(name: &str) {
@@ -123,7 +82,7 @@ fn check_simulated(name: &str) {
         "{name}: calibrated model {vs_truth} mm RMS from the true points"
     );
     // Identifiable parameters within 3 sigma of the mapped truth.
-    let mapped = mapped_truth(name, &robot, &rig, &data, &rep);
+    let mapped = common::mapped_truth(&robot, &rig, &data, &true_points(name), &rep);
     assert!(
         mapped.stats.train.after.rms_mm < 2e-3,
         "{name}: the model must represent the truth exactly"

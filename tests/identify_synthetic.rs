@@ -277,7 +277,6 @@ fn expected_test_rms_matches_repeated_sessions() {
 #[test]
 fn reported_sigmas_cover_the_truth_over_repeated_sessions() {
     use drawcal::physics::simulate::{Spec, generate};
-    use nalgebra::Vector3;
     let sessions = 30;
     for robot in ["er3a", "ur5", "arm4_mdh"] {
         let (mut z2, mut n_z, mut over3) = (0.0, 0usize, 0usize);
@@ -292,22 +291,14 @@ fn reported_sigmas_cover_the_truth_over_repeated_sessions() {
                 ..Default::default()
             };
             let rep = identify(&sim.robot, &sim.rig, &sim.dataset, &opts, &NoProgress).unwrap();
-            let mut exact = sim.dataset.clone();
-            let true_points = sim.truth["true_points_mm"].as_array().unwrap();
-            for (pose, t) in exact.poses.iter_mut().zip(true_points) {
-                let t = Vector3::from_iterator((0..3).map(|c| t[c].as_f64().unwrap()));
-                pose.measurement = Measurement::Strings(
-                    (0..sim.rig.n_strings())
-                        .map(|k| (t - sim.rig.anchor(k)).norm() - sim.rig.r_mm)
-                        .collect(),
-                );
-            }
             // The truth in the parametrisation the noisy session chose.
-            let hold = IdentifyOptions {
-                hold: rep.fixed.clone(),
-                ..opts.clone()
-            };
-            let mapped = identify(&sim.robot, &sim.rig, &exact, &hold, &NoProgress).unwrap();
+            let mapped = common::mapped_truth(
+                &sim.robot,
+                &sim.rig,
+                &sim.dataset,
+                &common::true_points(&sim.truth),
+                &rep,
+            );
             assert!(
                 mapped.stats.train.after.rms_mm < 5e-3,
                 "{robot} seed {seed}: the identified parametrisation must represent the truth"

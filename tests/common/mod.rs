@@ -57,6 +57,47 @@ pub fn truth(name: &str) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir(name).join("truth.json")).unwrap()).unwrap()
 }
 
+/// truth.json's `true_points_mm`, in pose order.
+pub fn true_points(truth: &serde_json::Value) -> Vec<nalgebra::Vector3<f64>> {
+    truth["true_points_mm"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| nalgebra::Vector3::from_iterator((0..3).map(|c| p[c].as_f64().unwrap())))
+        .collect()
+}
+
+/// The truth expressed in the parametrisation `rep` identified: the
+/// geometric model fitted to exact, noise-free string readings of the true
+/// points at the same poses, with the parameters `rep` held at nominal
+/// held too. This maps the aliased parameters (d2+d3 along parallel axes,
+/// joint 6 and the tool point, joint 1 and the base, the wrist pairs the
+/// data did not separate) the way the calibration does.
+pub fn mapped_truth(
+    robot: &Robot,
+    rig: &Rig,
+    data: &Dataset,
+    true_points: &[nalgebra::Vector3<f64>],
+    rep: &drawcal::identify::report::Report,
+) -> drawcal::identify::report::Report {
+    use drawcal::identify::{IdentifyOptions, NoProgress, identify};
+    use drawcal::model::Measurement;
+    let mut exact = data.clone();
+    for (pose, t) in exact.poses.iter_mut().zip(true_points) {
+        pose.measurement = Measurement::Strings(
+            (0..rig.n_strings())
+                .map(|k| (t - rig.anchor(k)).norm() - rig.r_mm)
+                .collect(),
+        );
+    }
+    let opts = IdentifyOptions {
+        physics: false,
+        hold: rep.fixed.clone(),
+        ..Default::default()
+    };
+    identify(robot, rig, &exact, &opts, &NoProgress).unwrap()
+}
+
 /// Proptest settings for the fuzz tests: `n` cases (a few seconds in CI),
 /// or `PROPTEST_CASES` for a long campaign; no failure files written.
 pub fn proptest_cases(n: u32) -> proptest::prelude::ProptestConfig {
