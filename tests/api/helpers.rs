@@ -216,12 +216,23 @@ impl TestApp {
     /// Upload poses.csv to a session and run its identification job to
     /// success; returns the finished job.
     pub async fn identify_session(&self, session: i64, poses_csv: String) -> Value {
+        self.identify_session_with(session, poses_csv, &serde_json::json!({}))
+            .await
+    }
+
+    /// [`Self::identify_session`] with job options.
+    pub async fn identify_session_with(
+        &self,
+        session: i64,
+        poses_csv: String,
+        options: &Value,
+    ) -> Value {
         self.upload_poses(session, poses_csv).await;
         let job = ok_json(
             self.post_raw(
                 &format!("/sessions/{session}/jobs"),
                 Some("application/json"),
-                "{}",
+                options.to_string(),
             )
             .await,
             202,

@@ -374,21 +374,10 @@ async fn a_cancel_as_the_job_finishes_stores_nothing_and_says_so() {
 async fn held_parameters_reach_the_calibration() {
     let app = TestApp::spawn("hold").await;
     let (_, _, _, sid) = app.setup(DS, "HOLD").await;
-    app.upload_poses(sid, read(DS, "poses.csv")).await;
-    let job = ok_json(
-        app.post_raw(
-            &format!("/sessions/{sid}/jobs"),
-            Some("application/json"),
-            json!({"hold": ["j2.a"], "undetermined_z": 0.0, "physics": false}).to_string(),
-        )
-        .await,
-        202,
-    )
-    .await;
+    let options = json!({"hold": ["j2.a"], "undetermined_z": 0.0, "physics": false});
     let j = app
-        .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(120))
+        .identify_session_with(sid, read(DS, "poses.csv"), &options)
         .await;
-    assert_eq!(j["state"], "succeeded", "{j}");
     let cal = ok_json(
         app.get(&format!("/calibrations/{}", j["calibration_id"]))
             .await,
