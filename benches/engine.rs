@@ -8,11 +8,12 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use drawcal::compensate::{CompensationStatus, Compensator};
-use drawcal::identify::{IdentifyOptions, NoProgress, Session, geometric, identify};
+use drawcal::identify::{IdentifyOptions, NoProgress, Observations, geometric};
 use drawcal::kinematics::Params;
 use drawcal::kinematics::chain::{Chain, OutputFrame};
 use drawcal::model::{Dataset, Measurement, PoseRecord, Rig, Robot, Split, Target, TargetKind};
 use drawcal::physics::{self, simulate};
+use drawcal::pipeline::{self, calibrate};
 use drawcal::rng::Rng;
 
 fn load(name: &str) -> (Robot, Rig, Dataset) {
@@ -94,23 +95,25 @@ fn benches(c: &mut Criterion) {
         })
     });
 
-    let opts = IdentifyOptions {
+    let opts = pipeline::Options {
+        identify: IdentifyOptions {
+            ..IdentifyOptions::default()
+        },
         physics: false,
-        ..Default::default()
     };
     c.bench_function("identify_50_string_poses", |b| {
-        b.iter(|| identify(&robot, &rig, black_box(&data50), &opts, &NoProgress).unwrap())
+        b.iter(|| calibrate(&robot, &rig, black_box(&data50), &opts, &NoProgress).unwrap())
     });
 
     let (r2, rig2, d2000) = ur5_strings(2000);
     let mut g = c.benchmark_group("large");
     g.sample_size(10);
     g.bench_function("identify_2000_string_poses", |b| {
-        b.iter(|| identify(&r2, &rig2, black_box(&d2000), &opts, &NoProgress).unwrap())
+        b.iter(|| calibrate(&r2, &rig2, black_box(&d2000), &opts, &NoProgress).unwrap())
     });
     let (rg, rigg, grid) = load("real_ur10_ipa_grid");
     g.bench_function("identify_ur10_grid_11911_points", |b| {
-        b.iter(|| identify(&rg, &rigg, black_box(&grid), &opts, &NoProgress).unwrap())
+        b.iter(|| calibrate(&rg, &rigg, black_box(&grid), &opts, &NoProgress).unwrap())
     });
     // The physics analysis alone (after the geometric fit) on 2000 string
     // poses: effect-free (every candidate tried, nothing kept) and with a
@@ -134,15 +137,15 @@ fn benches(c: &mut Criterion) {
         .unwrap();
         let sim = simulate::generate(&spec).unwrap();
         let po = IdentifyOptions::default();
-        let session = Session::new(&sim.robot, &sim.rig, &sim.dataset, &po).unwrap();
+        let session = Observations::new(&sim.robot, &sim.rig, &sim.dataset, &po).unwrap();
         let geo = geometric(&session, &po, &NoProgress).unwrap();
         g.bench_function(name, |b| {
-            b.iter(|| physics::analyse(&session, black_box(&geo), &po, &NoProgress).unwrap())
+            b.iter(|| physics::analyse(&session, black_box(&geo), &NoProgress).unwrap())
         });
     }
     g.finish();
 
-    let report = identify(&robot, &rig, &data50, &opts, &NoProgress).unwrap();
+    let report = calibrate(&robot, &rig, &data50, &opts, &NoProgress).unwrap();
     let comp = Compensator::from_report(&report).unwrap();
     let t = Target {
         target: "t".into(),
@@ -253,11 +256,11 @@ fn thermal(c: &mut Criterion) {
     }))
     .unwrap();
     let sim = simulate::generate(&spec).unwrap();
-    let report = identify(
+    let report = calibrate(
         &sim.robot,
         &sim.rig,
         &sim.dataset,
-        &IdentifyOptions::default(),
+        &pipeline::Options::default(),
         &NoProgress,
     )
     .unwrap();

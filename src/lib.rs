@@ -29,8 +29,11 @@ pub mod kinematics;
 pub mod measure;
 pub mod model;
 pub mod physics;
+pub mod pipeline;
+pub mod report;
 pub mod report_html;
 pub mod rng;
+pub mod stats;
 pub mod store;
 
 pub use error::{Error, Result};

@@ -1,7 +1,7 @@
 //! `drawcal evaluate`: the blind sweep of simulated datasets with concealed
 //! effects, printing the confusion table recorded in EVAL.md.
 
-use crate::physics::evaluate::{self, Sweep};
+use crate::pipeline::evaluate::{self, Sweep};
 
 /// Arguments of `drawcal evaluate`.
 #[derive(Debug, Clone, clap::Args)]
@@ -37,7 +37,13 @@ pub struct EvaluateArgs {
 pub fn run(args: EvaluateArgs) -> Result<(), Box<dyn std::error::Error>> {
     let cfg = Sweep {
         robots: args.robots,
-        rig: args.rig,
+        rig: match &args.rig {
+            Some(path) => Some(crate::model::Rig::from_json(
+                &std::fs::read_to_string(path)
+                    .map_err(|e| crate::Error::field(path, e.to_string()))?,
+            )?),
+            None => None,
+        },
         sizes: args.sizes,
         per_cell: args.per_cell,
         two_effects: args.two_effects,

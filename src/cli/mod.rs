@@ -14,10 +14,11 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::compensate::{self, Compensator};
-use crate::identify::report::{ClosedFormComparison, Report};
 use crate::identify::{self, IdentifyOptions, Method, Progress};
 use crate::measure;
 use crate::model::{Dataset, Rig, Robot, targets::targets_from_csv};
+use crate::pipeline;
+use crate::report::{ClosedFormComparison, Report};
 
 /// The CLI layer's error: what went wrong and with which file.
 #[derive(Debug, thiserror::Error)]
@@ -270,7 +271,6 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
             MethodArg::Paper => Method::Paper,
         },
         robust: a.robust,
-        physics: a.physics == Switch::On,
         holdout_fraction: a.holdout,
         seed: a.seed,
         identify_string_offsets: a.string_offsets,
@@ -291,7 +291,16 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
     core(Path::new("--hold"), identify::held(layout, &opts))?;
     let report = core(
         &a.poses,
-        identify::identify(&robot, &rig, &data, &opts, &Bar(bar.clone())),
+        pipeline::calibrate(
+            &robot,
+            &rig,
+            &data,
+            &pipeline::Options {
+                identify: opts,
+                physics: a.physics == Switch::On,
+            },
+            &Bar(bar.clone()),
+        ),
     )?;
     bar.finish_and_clear();
     // In the summary too, but a summary sent to a file must not hide them.

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use crate::identify::report::Report;
+use crate::report::Report;
 use crate::report_html::{self, PoseColumns};
 
 /// Write a calibration report as one self-contained HTML file (tables and

@@ -3,8 +3,8 @@
 
 use std::fmt::Write;
 
-use crate::identify::report::{ErrorStats, FixedReason, Report};
 use crate::model::Robot;
+use crate::report::{ErrorStats, FixedReason, Report};
 
 /// Render the summary of a report. The report's warnings come right
 /// after the first line, each as `WARNING: ...`.
@@ -164,12 +164,8 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
     for note in &r.physics_notes {
         let _ = writeln!(s, "physics: {note}");
     }
-    let ran = !r
-        .physics_notes
-        .iter()
-        .any(|n| n.starts_with(crate::identify::PHYSICS_NOT_RUN));
     if r.findings.is_empty() {
-        if ran {
+        if r.physics.ran() {
             let _ = writeln!(s, "physics: nothing found beyond the geometric model");
         }
     } else {

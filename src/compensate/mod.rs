@@ -50,12 +50,12 @@ use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::identify::report::Report;
 use crate::kinematics::chain::{Chain, OutputFrame};
 use crate::kinematics::ik::{self, ClosedFormIk};
 use crate::kinematics::{JointParam, Params, rpy_matrix};
 use crate::model::{Convention, Robot, Target, TargetKind};
-use crate::physics::{EffectModel, JointEffects};
+use crate::physics::JointEffects;
+use crate::report::Report;
 use crate::rng::Rng;
 
 /// Outcome of one target.
@@ -198,7 +198,8 @@ struct Thermal {
 fn thermal_of(report: &Report) -> Option<ThermalInfo> {
     use crate::physics::effects::{Kind, ThermalDriver};
     report.findings.iter().find_map(|f| {
-        let e: crate::physics::EffectModel = serde_json::from_value(f.parameters.clone()).ok()?;
+        let p = f.effect_parameters()?;
+        let e = &p.model;
         if !matches!(
             e.kind,
             Kind::ThermalExpansion {
@@ -209,7 +210,7 @@ fn thermal_of(report: &Report) -> Option<ThermalInfo> {
             return None;
         }
         let coef_per_k = *e.coef.first()?;
-        let reference_temp_c = f.parameters.get("reference_temp_c")?.as_f64()?;
+        let reference_temp_c = p.reference_temp_c?;
         (coef_per_k.is_finite() && reference_temp_c.is_finite()).then_some(ThermalInfo {
             coef_per_k,
             reference_temp_c,
@@ -372,7 +373,7 @@ impl Reach {
 /// A damped least squares solve stops at a stationary point of its error
 /// (MINPACK's `gtol`): when every column of the Jacobian is this close to
 /// orthogonal to the error (`|J_j·e| <= GTOL |J_j| |e|`), with the error
-/// far above the tolerance. Over the targets of `tests/compensate_ik.rs`
+/// far above the tolerance. Over the targets of `tests/engine/compensate_ik.rs`
 /// the converging solves never came below 7e-4.
 const GTOL: f64 = 1e-6;
 
@@ -439,8 +440,9 @@ impl Compensator {
                 continue;
             }
             let field = || format!("findings[{i}].parameters");
-            let e = serde_json::from_value::<EffectModel>(f.parameters.clone())
-                .map_err(|m| Error::field(field(), m.to_string()))?;
+            let e = f
+                .effect_model()
+                .ok_or_else(|| Error::field(field(), format!("{}: no effect model", f.effect)))?;
             e.check(robot.dof(), has_masses)
                 .map_err(|m| Error::field(field(), m))?;
         }
@@ -958,7 +960,7 @@ impl Compensator {
     ///   allowance.
     ///
     /// Neither test stopped a solve that would have converged: over 6,210
-    /// targets on the arms of `tests/compensate_ik.rs` (BENCHMARKS.md),
+    /// targets on the arms of `tests/engine/compensate_ik.rs` (BENCHMARKS.md),
     /// every answer is the same as without them, joint for joint.
     fn solve_on(
         &self,

@@ -32,9 +32,9 @@ use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiQuery, RawBody, is_json, parse_json};
 use super::{ApiError, ApiResult, AppState, ErrorBody, MAX_COMPENSATE_TARGETS};
 use crate::compensate::{Compensated, CompensationStatus, Compensator};
-use crate::identify::report::Report;
 use crate::model::targets::targets_from_csv;
 use crate::model::{Target, TargetKind};
+use crate::report::Report;
 
 /// A built compensator and what it came from.
 pub struct Cached {
@@ -328,7 +328,7 @@ async fn compensator(app: &AppState, calibration_id: i64) -> ApiResult<Arc<Cache
     let cal = app.store.get_calibration(calibration_id).await?;
     let text = app.store.calibration_report(calibration_id).await?;
     let built = tokio::task::spawn_blocking(move || -> ApiResult<Compensator> {
-        let report: Report = serde_json::from_str(&text)
+        let report = Report::from_json(&text)
             .map_err(|e| ApiError::Internal(format!("stored report: {e}")))?;
         Compensator::from_report(&report)
             .map_err(|e| ApiError::Internal(format!("compensator: {e}")))

@@ -14,7 +14,7 @@ use axum::routing::get;
 
 use super::extract::Id;
 use super::{ApiError, ApiResult, AppState, ErrorBody};
-use crate::identify::report::Report;
+use crate::report::Report;
 use crate::report_html::{self, PoseColumns};
 
 /// The page (HTML and CSS).
@@ -82,7 +82,7 @@ pub async fn calibration_report_html(
         calibration.serial_number, calibration.version, calibration.id
     );
     let html = tokio::task::spawn_blocking(move || -> Result<String, String> {
-        let report: Report = serde_json::from_str(&text).map_err(|e| e.to_string())?;
+        let report = Report::from_json(&text).map_err(|e| e.to_string())?;
         let poses = poses_csv.and_then(|c| PoseColumns::from_csv(c.as_bytes()).ok());
         Ok(report_html::render(&report, &title, poses.as_ref()))
     })

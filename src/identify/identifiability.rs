@@ -12,8 +12,8 @@
 
 use nalgebra::DMatrix;
 
-use super::report::{FixedParam, FixedReason};
 use crate::kinematics::Layout;
+use crate::report::{FixedParam, FixedReason};
 
 /// Relative size of the orthogonal part below which a column counts as a
 /// combination of the others: 1e-3 in sine (about 0.06°), where the

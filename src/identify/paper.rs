@@ -8,7 +8,7 @@
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
-use super::Session;
+use super::Observations;
 use crate::error::{Error, Result};
 use crate::kinematics::chain::OutputFrame;
 use crate::kinematics::error_model::paper_columns;
@@ -17,24 +17,24 @@ use crate::model::Convention;
 
 /// One pseudo-inverse step from `before` (nominal joints, fitted base and
 /// tool) on the train poses.
-pub fn one_step(session: &Session, before: &Params) -> Result<Params> {
-    let chain = session.chain;
+pub fn one_step(obs: &Observations, before: &Params) -> Result<Params> {
+    let chain = obs.chain;
     let l = chain.layout;
     let n = 5 * l.n_joints;
     let cols_used: Vec<usize> = (0..n)
         .filter(|&j| j % 5 != 4 || beta_applies(before, j / 5))
         .collect();
     let (rb, tb) = before.base_rt();
-    let rows = 3 * session.train.len();
+    let rows = 3 * obs.train.len();
     let mut a = DMatrix::zeros(rows, cols_used.len());
     let mut b = DVector::zeros(rows);
     let mut jac = chain.new_jacobian();
-    for (k, &i) in session.train.iter().enumerate() {
-        let pose = &session.data.poses[i];
+    for (k, &i) in obs.train.iter().enumerate() {
+        let pose = &obs.data.poses[i];
         // The least-squares point: the paper's closed form fails outright
         // for points behind anchor A (see `closed_form_comparison`), and the
         // method under test here is the identification, not the location.
-        let measured_rig = session.measured[i];
+        let measured_rig = obs.measured[i];
         let measured: Vector3<f64> = rb.transpose() * (measured_rig - tb);
         let cols = if chain.convention == Convention::Dh {
             paper_columns(&chain, &before.values, &pose.q_rad, OutputFrame::Base)

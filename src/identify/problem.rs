@@ -107,7 +107,13 @@ impl<'a> CalibrationProblem<'a> {
                 let g = self.chain.layout.n_geometric();
                 let r = p[self.chain.layout.r()];
                 for (k, a) in self.anchors.iter().enumerate() {
-                    out.push((t - a).norm() - r - p[g + k] - l[k]);
+                    out.push(crate::measure::string_residual_mm(
+                        (t - a).norm(),
+                        r,
+                        p[g + k],
+                        0.0,
+                        l[k],
+                    ));
                 }
             }
             Measurement::Point(m) => out.extend((t - m).iter()),

@@ -9,14 +9,14 @@
 //! may really move only a few degrees. So the suspicion (every angle within
 //! ±2π) is only voiced when the measurements confirm it: the nominal model
 //! with the angles read as radians follows the measured points of T
-//! ([`Session::measured`], located from the strings or as measured) far
+//! ([`Observations::measured`], located from the strings or as measured) far
 //! better than with them read as degrees. Each reading is given its best
 //! rigid placement of the robot base (a Kabsch fit, as the identification
 //! starts from), so no base pose guess is needed.
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::{Session, rigid_fit};
+use super::{Observations, rigid_fit};
 use crate::kinematics::Params;
 use crate::kinematics::chain::OutputFrame;
 use crate::model::BasePose;
@@ -40,8 +40,8 @@ const MAX_IDS_LISTED: usize = 20;
 
 /// The input warnings of a session, in the order found (empty when
 /// nothing is suspect).
-pub fn input_warnings(session: &Session) -> Vec<String> {
-    radians_in_degree_columns(session)
+pub fn input_warnings(obs: &Observations) -> Vec<String> {
+    radians_in_degree_columns(obs)
 }
 
 /// The file's number for each joint angle (degrees, as the file holds it).
@@ -55,19 +55,19 @@ fn within_two_pi(q_rad: &[f64]) -> bool {
 }
 
 /// Joint angles that look like radians: the whole file, or single poses.
-pub fn radians_in_degree_columns(session: &Session) -> Vec<String> {
-    let poses = &session.data.poses;
-    if poses.len() < 3 || session.measured.len() != poses.len() {
+pub fn radians_in_degree_columns(obs: &Observations) -> Vec<String> {
+    let poses = &obs.data.poses;
+    if poses.len() < 3 || obs.measured.len() != poses.len() {
         return vec![];
     }
     let nominal = Params::nominal(
-        session.robot,
+        obs.robot,
         &BasePose {
             xyz_mm: [0.0; 3],
             rpy_deg: [0.0; 3],
         },
-        session.rig,
-        session.chain.layout.n_strings,
+        obs.rig,
+        obs.chain.layout.n_strings,
     );
     // T of the nominal model in its base frame, the angles read as degrees
     // (as parsed) or as radians (the file's numbers taken as radians).
@@ -78,24 +78,21 @@ pub fn radians_in_degree_columns(session: &Session) -> Vec<String> {
         } else {
             q.clone()
         };
-        session
-            .chain
-            .point(&nominal.values, &q, OutputFrame::Base)
-            .1
+        obs.chain.point(&nominal.values, &q, OutputFrame::Base).1
     };
     let within: Vec<bool> = poses.iter().map(|p| within_two_pi(&p.q_rad)).collect();
     if within.iter().all(|&w| w) {
-        whole_file(session, &point).into_iter().collect()
+        whole_file(obs, &point).into_iter().collect()
     } else {
-        single_poses(session, &point, &within)
+        single_poses(obs, &point, &within)
     }
 }
 
 /// The whole file within ±2π: do the measurements say radians?
-fn whole_file(session: &Session, point: &dyn Fn(usize, bool) -> Vector3<f64>) -> Option<String> {
-    let poses = &session.data.poses;
+fn whole_file(obs: &Observations, point: &dyn Fn(usize, bool) -> Vector3<f64>) -> Option<String> {
+    let poses = &obs.data.poses;
     let all: Vec<usize> = (0..poses.len()).collect();
-    let measured = &session.measured;
+    let measured = &obs.measured;
     let fit = |as_radians: bool| {
         let a: Vec<Vector3<f64>> = all.iter().map(|&i| point(i, as_radians)).collect();
         let (r, t) = rigid_fit(&a, measured)?;
@@ -111,7 +108,7 @@ fn whole_file(session: &Session, point: &dyn Fn(usize, bool) -> Vector3<f64>) ->
         .iter()
         .flat_map(|p| file_numbers(&p.q_rad))
         .fold(0.0_f64, |m, v| m.max(v.abs()));
-    let limit_deg = session.robot.joints.iter().fold(0.0_f64, |m, j| {
+    let limit_deg = obs.robot.joints.iter().fold(0.0_f64, |m, j| {
         m.max(j.q_min_deg.abs()).max(j.q_max_deg.abs())
     });
     Some(format!(
@@ -122,7 +119,7 @@ fn whole_file(session: &Session, point: &dyn Fn(usize, bool) -> Vector3<f64>) ->
 /// Poses within ±2π among poses that are not: does each one's measurement
 /// say radians?
 fn single_poses(
-    session: &Session,
+    obs: &Observations,
     point: &dyn Fn(usize, bool) -> Vector3<f64>,
     within: &[bool],
 ) -> Vec<String> {
@@ -132,14 +129,14 @@ fn single_poses(
         return vec![];
     }
     let a: Vec<Vector3<f64>> = others.iter().map(|&i| point(i, false)).collect();
-    let b: Vec<Vector3<f64>> = others.iter().map(|&i| session.measured[i]).collect();
+    let b: Vec<Vector3<f64>> = others.iter().map(|&i| obs.measured[i]).collect();
     let Some((r, t)) = rigid_fit(&a, &b) else {
         return vec![];
     };
     let scale_mm = rms(&a, &b, &r, &t);
     let mut flagged = Vec::new();
     for &i in &candidates {
-        let m = session.measured[i];
+        let m = obs.measured[i];
         let e_deg_mm = (r * point(i, false) + t - m).norm();
         let e_rad_mm = (r * point(i, true) + t - m).norm();
         if e_rad_mm.is_finite()
@@ -156,7 +153,7 @@ fn single_poses(
         .map(|&(i, e_deg_mm, e_rad_mm)| {
             format!(
                 "pose {} (row {} after the header): its joint angles look like radians, not degrees: all within ±2π unlike the other poses', and read as radians the nominal model puts T {e_rad_mm:.2} mm from the measured point against {e_deg_mm:.2} mm read as degrees (the other poses: {scale_mm:.2} mm RMS); poses.csv holds degrees: correct the row (deg = rad × 180/π) or drop it",
-                session.data.poses[i].id,
+                obs.data.poses[i].id,
                 i + 1
             )
         })
@@ -166,7 +163,7 @@ fn single_poses(
         let ids: Vec<&str> = rest
             .iter()
             .take(MAX_IDS_LISTED)
-            .map(|&(i, _, _)| session.data.poses[i].id.as_str())
+            .map(|&(i, _, _)| obs.data.poses[i].id.as_str())
             .collect();
         out.push(format!(
             "{} more poses' joint angles look like radians in the same way: {}{}",

@@ -21,9 +21,10 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::{Notify, watch};
 use utoipa::ToSchema;
 
-use crate::identify::report::Report;
 use crate::identify::{IdentifyOptions, Method, Progress};
 use crate::model::{Dataset, Rig, Robot};
+use crate::pipeline;
+use crate::report::Report;
 use crate::store::{JobRec, NewCalibration, Store, now_ms};
 
 /// Options of an identification job, as a client sends them (all optional).
@@ -89,6 +90,14 @@ impl JobOptions {
     }
 
     /// The engine's options.
+    pub fn to_pipeline(&self) -> pipeline::Options {
+        pipeline::Options {
+            identify: self.to_identify(),
+            physics: self.physics.unwrap_or(true),
+        }
+    }
+
+    /// The geometric identification's options.
     pub fn to_identify(&self) -> IdentifyOptions {
         let mut o = IdentifyOptions::default();
         if let Some(m) = self.method {
@@ -99,9 +108,6 @@ impl JobOptions {
         }
         if let Some(r) = self.robust {
             o.robust = r;
-        }
-        if let Some(p) = self.physics {
-            o.physics = p;
         }
         if let Some(h) = self.holdout_fraction {
             o.holdout_fraction = h;
@@ -128,10 +134,10 @@ pub struct JobInput {
     /// The session's poses, validated.
     pub data: Dataset,
     /// Engine options.
-    pub options: IdentifyOptions,
+    pub options: pipeline::Options,
 }
 
-/// The numerical work of a job (the engine's `identify`, or a stand-in in
+/// The numerical work of a job (the engine's calibration, or a stand-in in
 /// tests). Runs on a blocking thread.
 pub type JobFn =
     Arc<dyn Fn(&JobInput, &dyn Progress) -> crate::Result<Report> + Send + Sync + 'static>;
@@ -141,10 +147,10 @@ pub type JobFn =
 pub const CANCELLED_AS_IT_FINISHED: &str =
     "cancel requested while the job finished: its result was not stored";
 
-/// The engine's identification as a [`JobFn`].
+/// The engine's calibration ([`pipeline::calibrate`]) as a [`JobFn`].
 pub fn engine_job_fn() -> JobFn {
     Arc::new(|input: &JobInput, progress: &dyn Progress| {
-        crate::identify::identify(
+        pipeline::calibrate(
             &input.robot,
             &input.rig,
             &input.data,
@@ -230,7 +236,7 @@ pub async fn load_input(store: &Store, job: &JobRec) -> Result<JobInput, String>
         robot,
         rig,
         data,
-        options: options.to_identify(),
+        options: options.to_pipeline(),
     })
 }
 

@@ -25,18 +25,18 @@
 
 use nalgebra::{DMatrix, DVector, Vector3};
 
-use super::effects::{Context, EffectModel, Kind, PoseInput};
+use super::effects::{Context, EffectModel, Kind, PoseInput, ThermalDriver};
 use super::problem::{EffectProblem, accumulate};
-use super::stats::chi2_quantile_upper;
 use super::unexplained::{robot_side_share, unexplained};
 use crate::error::Result;
 use crate::identify::lm::{self, LeastSquares, LmSettings};
-use crate::identify::report::Finding;
-use crate::identify::{Geometric, IdentifyOptions, Progress, Session};
+use crate::identify::{Geometric, Observations, Progress};
 use crate::kinematics::Params;
 use crate::measure;
 use crate::model::Measurement;
+use crate::report::{EffectParameters, Finding, FindingModel};
 use crate::rng::Rng;
+use crate::stats::chi2_quantile_upper;
 
 /// Family-wise false-alarm rate of one selection round.
 pub const ALPHA: f64 = 0.005;
@@ -164,20 +164,14 @@ struct Proposal {
 /// or point coordinates), per test pose: the sum of squares over the pose's
 /// rows and their number.
 pub(super) fn reading_errors(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     effects: &[EffectModel],
 ) -> Vec<(f64, usize)> {
-    let problem = EffectProblem::of_session(
-        session,
-        ctx,
-        session.test.clone(),
-        p,
-        vec![],
-        effects.to_vec(),
-    );
-    let mut out = vec![(0.0, 0usize); session.test.len()];
+    let problem =
+        EffectProblem::of_observations(obs, ctx, obs.test.clone(), p, vec![], effects.to_vec());
+    let mut out = vec![(0.0, 0usize); obs.test.len()];
     problem.rows(&problem.x0(), |pos, r, _| {
         out[pos].0 += r * r;
         out[pos].1 += 1;
@@ -260,13 +254,13 @@ fn paired_gain_z(before: &[Vector3<f64>], after: &[Vector3<f64>]) -> f64 {
 }
 
 /// Build the effect context of a session (located or measured points).
-pub fn session_context(session: &Session, p: &Params) -> Context {
+pub fn effect_context(obs: &Observations, p: &Params) -> Context {
     let (rb, _) = p.base_rt();
-    let inputs: Vec<PoseInput> = session
+    let inputs: Vec<PoseInput> = obs
         .data
         .poses
         .iter()
-        .zip(&session.measured)
+        .zip(&obs.measured)
         .map(|(pose, m)| PoseInput {
             q_rad: &pose.q_rad,
             time_s: pose.time_s,
@@ -275,13 +269,7 @@ pub fn session_context(session: &Session, p: &Params) -> Context {
             point_rig: *m,
         })
         .collect();
-    Context::new(
-        session.robot,
-        session.anchors.clone(),
-        session.rig.r_mm,
-        &rb,
-        &inputs,
-    )
+    Context::new(obs.robot, obs.anchors.clone(), obs.rig.r_mm, &rb, &inputs)
 }
 
 /// Errors (model minus measured T, robot base frame, mm) at poses `idx` of
@@ -289,39 +277,38 @@ pub fn session_context(session: &Session, p: &Params) -> Context {
 /// move the model's T, sensor-side effects correct the readings before the
 /// point is located again. Without effects this equals `Session::errors`.
 pub fn errors_with_effects(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     effects: &[EffectModel],
     idx: &[usize],
 ) -> Vec<Vector3<f64>> {
-    let rb = p_base_rotation(session, p);
+    let rb = p_base_rotation(obs, p);
     let sensor = effects.iter().any(|e| !e.kind.robot_side());
     idx.iter()
         .map(|&i| {
-            let pose = &session.data.poses[i];
-            let (t, dl) =
-                EffectProblem::model_point(&session.chain, ctx, p, effects, i, &pose.q_rad);
+            let pose = &obs.data.poses[i];
+            let (t, dl) = EffectProblem::model_point(&obs.chain, ctx, p, effects, i, &pose.q_rad);
             let measured = match (&pose.measurement, sensor) {
                 (Measurement::Strings(l), true) => {
                     let dist: Vec<f64> = l
                         .iter()
                         .zip(&dl)
-                        .map(|(v, d)| v - d + session.rig.r_mm)
+                        .map(|(v, d)| v - d + obs.rig.r_mm)
                         .collect();
-                    measure::locate(&session.anchors, &dist, Some(&session.measured[i]))
+                    measure::locate(&obs.anchors, &dist, Some(&obs.measured[i]))
                         .map(|x| x.point)
-                        .unwrap_or(session.measured[i])
+                        .unwrap_or(obs.measured[i])
                 }
-                _ => session.measured[i],
+                _ => obs.measured[i],
             };
             rb.transpose() * (t - measured)
         })
         .collect()
 }
 
-fn p_base_rotation(session: &Session, p: &[f64]) -> nalgebra::Matrix3<f64> {
-    let b = session.chain.layout.base();
+fn p_base_rotation(obs: &Observations, p: &[f64]) -> nalgebra::Matrix3<f64> {
+    let b = obs.chain.layout.base();
     crate::kinematics::rpy_matrix(p[b + 3], p[b + 4], p[b + 5])
 }
 
@@ -340,10 +327,10 @@ struct Candidate {
     what: String,
 }
 
-fn candidates(session: &Session, ctx: &Context, accepted: &[EffectModel]) -> Vec<Candidate> {
+fn candidates(obs: &Observations, ctx: &Context, accepted: &[EffectModel]) -> Vec<Candidate> {
     let n = ctx.n_joints;
     let m = ctx.anchors.len();
-    let train = &session.train;
+    let train = &obs.train;
     let mut out = Vec::new();
     let taken = |k: &Kind| accepted.iter().any(|e| same_slot(&e.kind, k));
     let mut push = |kind: Kind, scanned: usize, what: String| {
@@ -562,7 +549,7 @@ fn same_slot(a: &Kind, b: &Kind) -> bool {
 /// accepted effects at their fitted values and `extra` effects appended at
 /// zero (their columns are what a candidate would add).
 fn train_normals(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     free: &[usize],
@@ -572,21 +559,15 @@ fn train_normals(
 ) -> Normals {
     let mut effects = accepted.to_vec();
     effects.extend(extra.into_iter().map(EffectModel::zero));
-    let problem = EffectProblem::of_session(
-        session,
-        ctx,
-        session.train.clone(),
-        p,
-        free.to_vec(),
-        effects,
-    );
+    let problem =
+        EffectProblem::of_observations(obs, ctx, obs.train.clone(), p, free.to_vec(), effects);
     normals(&problem, &problem.x0(), fold_of)
 }
 
 /// Each member of a pair significant given the other (chi-square of its
 /// columns over its threshold), linearised at the current parameters.
 fn pair_holds(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     free: &[usize],
@@ -595,13 +576,13 @@ fn pair_holds(
     thresholds: &[f64],
 ) -> bool {
     let nm = train_normals(
-        session,
+        obs,
         ctx,
         p,
         free,
         accepted,
         pair.iter().map(|c| c.kind.clone()),
-        &vec![0; session.train.len()],
+        &vec![0; obs.train.len()],
     );
     let (a, b, rr) = nm.total();
     let n_acc: usize = accepted.iter().map(|e| e.kind.n_coef()).sum();
@@ -785,23 +766,18 @@ struct Scored {
 }
 
 /// Run the analysis after `geometric()`.
-pub fn analyse(
-    session: &Session,
-    geo: &Geometric,
-    _opts: &IdentifyOptions,
-    progress: &dyn Progress,
-) -> Result<Analysis> {
-    let ctx = session_context(session, &geo.after);
+pub fn analyse(obs: &Observations, geo: &Geometric, progress: &dyn Progress) -> Result<Analysis> {
+    let ctx = effect_context(obs, &geo.after);
     let free = geo.selection.free.clone();
     let mut p = geo.after.values.clone();
     let mut accepted: Vec<EffectModel> = Vec::new();
     let mut findings = Vec::new();
     let mut notes = Vec::new();
-    let mut fold_of: Vec<usize> = (0..session.train.len()).map(|i| i % FOLDS).collect();
+    let mut fold_of: Vec<usize> = (0..obs.train.len()).map(|i| i % FOLDS).collect();
     Rng::new(7).shuffle(&mut fold_of);
 
     // Where the residual lives: robot side versus sensor side.
-    let (share, share_noise) = robot_side_share(session, &p);
+    let (share, share_noise) = robot_side_share(obs, &p);
     if let (Some(s), Some(s0)) = (share, share_noise) {
         notes.push(format!(
             "string residuals after the geometric fit: {:.0}% is a common displacement of T (robot side), {:.0}% disagreement between strings (sensor side); noise alone would give {:.0}% / {:.0}%",
@@ -824,7 +800,7 @@ pub fn analyse(
         if progress.cancelled() {
             return Err(crate::Error::Cancelled);
         }
-        let cands: Vec<Candidate> = candidates(session, &ctx, &accepted)
+        let cands: Vec<Candidate> = candidates(obs, &ctx, &accepted)
             .into_iter()
             .filter(|c| !rejected.iter().any(|r| same_slot(r, &c.kind)))
             .collect();
@@ -832,7 +808,7 @@ pub fn analyse(
             break;
         }
         let nm = train_normals(
-            session,
+            obs,
             &ctx,
             &p,
             &free,
@@ -966,8 +942,8 @@ pub fn analyse(
         }
         proposals.sort_by(|x, y| y.score.total_cmp(&x.score));
         let cv0 = cv_sse(&nm, &a, &b, &base);
-        let e_before = errors_with_effects(session, &ctx, &p, &accepted, &session.test);
-        let r_before = reading_errors(session, &ctx, &p, &accepted);
+        let e_before = errors_with_effects(obs, &ctx, &p, &accepted, &obs.test);
+        let r_before = reading_errors(obs, &ctx, &p, &accepted);
         let test_before = rms(&e_before);
         let mut progressed = false;
         // At most TRIES proposals of each size: a pair turned down because
@@ -1004,7 +980,7 @@ pub fn analyse(
                             .filter(|(j, _)| *j != i)
                             .map(|(_, c)| EffectModel::zero(c.kind.clone())),
                     );
-                    let t0 = refine_step(session, &ctx, &p, &free, &ctx_eff, &cs[i].kind, t0_s);
+                    let t0 = refine_step(obs, &ctx, &p, &free, &ctx_eff, &cs[i].kind, t0_s);
                     cs[i].kind = cs[i].kind.with_change_time(t0);
                     cs[i].what = match cs[i].kind.sensor() {
                         Some(k) => format!("a change {} on string {}", ctx.when(t0), k + 1),
@@ -1019,7 +995,7 @@ pub fn analyse(
             if !single && cs.iter().any(|c| c.kind.change_time_s().is_some()) {
                 let thresholds: Vec<f64> =
                     prop.members.iter().map(|m| scored[m.0].threshold).collect();
-                if !pair_holds(session, &ctx, &p, &free, &accepted, &cs, &thresholds) {
+                if !pair_holds(obs, &ctx, &p, &free, &accepted, &cs, &thresholds) {
                     continue;
                 }
             }
@@ -1037,17 +1013,17 @@ pub fn analyse(
             // Nonlinear refit of geometry, accepted effects and the new ones.
             let mut trial = accepted.clone();
             trial.extend(cs.iter().map(|c| EffectModel::zero(c.kind.clone())));
-            let Ok((p_new, eff_new, fit)) = refit(session, &ctx, &p, &free, &trial) else {
+            let Ok((p_new, eff_new, fit)) = refit(obs, &ctx, &p, &free, &trial) else {
                 if single {
                     rejected.push(grid[0].clone());
                 }
                 continue;
             };
-            let e_after = errors_with_effects(session, &ctx, &p_new, &eff_new, &session.test);
+            let e_after = errors_with_effects(obs, &ctx, &p_new, &eff_new, &obs.test);
             let test_after = rms(&e_after);
             // Held-out gate on what was measured (string readings or
             // points): noise there is homogeneous, unlike located points.
-            let r_after = reading_errors(session, &ctx, &p_new, &eff_new);
+            let r_after = reading_errors(obs, &ctx, &p_new, &eff_new);
             let gain_z = paired_gain_z_sums(&r_before, &r_after);
             let (rb, ra) = (rms_sums(&r_before), rms_sums(&r_after));
             // The 3-D held-out errors the report shows must not get worse
@@ -1056,7 +1032,7 @@ pub fn analyse(
             // seen on the readings first).
             let gain_z_3d = paired_gain_z(&e_before, &e_after);
             let held_out_gain = ra < rb && gain_z > HELD_OUT_Z && gain_z_3d > -HELD_OUT_Z;
-            if !session.test.is_empty() && !held_out_gain {
+            if !obs.test.is_empty() && !held_out_gain {
                 let names: Vec<String> = cs
                     .iter()
                     .map(|c| format!("{} ({})", c.kind.name(), c.what))
@@ -1086,7 +1062,7 @@ pub fn analyse(
                 let e = &eff_new[accepted.len() + mi];
                 let at = n_acc_coef + cs[..mi].iter().map(|c| c.kind.n_coef()).sum::<usize>();
                 let info = fit.block(at, e.kind.n_coef());
-                let (mag, sig, unit) = magnitude(&ctx, session, e, &info);
+                let (mag, sig, unit) = magnitude(&ctx, obs, e, &info);
                 (!distinguishable_from_zero(e, &info, mag, sig))
                     .then(|| format!("{} ({}): {mag:.4} ± {sig:.4} {unit}", c.kind.name(), c.what))
             });
@@ -1112,21 +1088,13 @@ pub fn analyse(
                     .map(|mi| {
                         let mut first = accepted.clone();
                         first.push(trial[accepted.len() + mi].clone());
-                        refit(session, &ctx, &p, &free, &first)
-                            .ok()
-                            .map(|(pm, em, _)| {
-                                let r_alone = reading_errors(session, &ctx, &pm, &em);
-                                (
-                                    rms(&errors_with_effects(
-                                        session,
-                                        &ctx,
-                                        &pm,
-                                        &em,
-                                        &session.test,
-                                    )),
-                                    paired_gain_z_sums(&r_alone, &r_after),
-                                )
-                            })
+                        refit(obs, &ctx, &p, &free, &first).ok().map(|(pm, em, _)| {
+                            let r_alone = reading_errors(obs, &ctx, &pm, &em);
+                            (
+                                rms(&errors_with_effects(obs, &ctx, &pm, &em, &obs.test)),
+                                paired_gain_z_sums(&r_alone, &r_after),
+                            )
+                        })
                     })
                     .collect();
                 // A member that cannot be refitted alone shows nothing.
@@ -1134,7 +1102,7 @@ pub fn analyse(
                     .iter()
                     .map(|a| a.map_or(f64::NEG_INFINITY, |(_, z)| z))
                     .fold(f64::INFINITY, f64::min);
-                if !session.test.is_empty() && weakest <= PAIR_MEMBER_Z {
+                if !obs.test.is_empty() && weakest <= PAIR_MEMBER_Z {
                     let names: Vec<String> = cs
                         .iter()
                         .map(|c| format!("{} ({})", c.kind.name(), c.what))
@@ -1157,14 +1125,14 @@ pub fn analyse(
                 pair_note = Some(weakest);
             }
             stage_rms.push(test_after);
-            let (rs, _) = robot_side_share(session, &p);
+            let (rs, _) = robot_side_share(obs, &p);
             for (stage, &mi) in order.iter().enumerate() {
                 let c = &cs[mi];
                 let e = eff_new[accepted.len() + mi].clone();
                 let nc = e.kind.n_coef();
                 let coef_at = n_acc_coef + cs[..mi].iter().map(|c| c.kind.n_coef()).sum::<usize>();
                 let info = fit.block(coef_at, nc);
-                let (mag, sig, unit) = magnitude(&ctx, session, &e, &info);
+                let (mag, sig, unit) = magnitude(&ctx, obs, &e, &info);
                 let side = match rs {
                     Some(v) if e.kind.robot_side() => format!(
                         "; the residual it explains is robot-side (all strings agree on one displacement of T: {:.0}% of the residual energy)",
@@ -1227,38 +1195,7 @@ pub fn analyse(
                         twins.join(" or ")
                     )
                 };
-                let mut params = serde_json::to_value(&e).unwrap_or(serde_json::Value::Null);
-                if let serde_json::Value::Object(o) = &mut params {
-                    o.insert(
-                        "units".into(),
-                        "internal: angles rad, lengths mm; compliance rad/(N*m) with masses, rad/m per unit-mass regressor without; thermal per K, per hour (initial rate with tau_h) or per 1000 rows; joint scale rad per rad; string drift mm per hour or per 1000 rows".into(),
-                    );
-                    // The payload the compliance was fitted around: what
-                    // compensation assumes the robot carries.
-                    if let (Kind::JointCompliance { .. }, Some(p)) = (&e.kind, ctx.payload_ref_kg) {
-                        o.insert("reference_payload_kg".into(), p.into());
-                    }
-                    // Whether compensation takes a payload for it (what a
-                    // client should send), as compensation decides it.
-                    if let Kind::JointCompliance { .. } = e.kind {
-                        o.insert(
-                            "payload_matters".into(),
-                            e.payload_matters(ctx.n_joints).into(),
-                        );
-                    }
-                    if let Kind::ThermalExpansion { driver, .. } = e.kind {
-                        o.insert(
-                            "reference".into(),
-                            "driver zero at the first pose (temperature, time or row)".into(),
-                        );
-                        // The temperature compensation scales from.
-                        if let (super::effects::ThermalDriver::Temperature, Some(t)) =
-                            (driver, ctx.temp_ref_c)
-                        {
-                            o.insert("reference_temp_c".into(), t.into());
-                        }
-                    }
-                }
+                let params = finding_parameters(&ctx, &e);
                 findings.push(Finding {
                     effect: e.kind.name().into(),
                     joint: e.kind.joint().map(|j| j + 1),
@@ -1270,9 +1207,9 @@ pub fn analyse(
                     evidence,
                     test_rms_before_mm: stage_rms[stage],
                     test_rms_after_mm: stage_rms[stage + 1],
-                    parameters: params,
+                    parameters: Some(FindingModel::Effect(params)),
                     evidence_plot: super::evidence::evidence_plot(
-                        session,
+                        obs,
                         &ctx,
                         &p_new,
                         &eff_new,
@@ -1296,27 +1233,27 @@ pub fn analyse(
     // magnitude and sigma, evidence plot), not as the round that kept it.
     if let Some(fit) = &final_fit {
         for f in findings.iter_mut() {
-            let Some(k) = super::effects_of(std::slice::from_ref(f))
-                .first()
+            let Some(k) = f
+                .effect_model()
                 .and_then(|em| accepted.iter().position(|e| e.kind == em.kind))
             else {
                 continue;
             };
             let e = &accepted[k];
             let at: usize = accepted[..k].iter().map(|e| e.kind.n_coef()).sum();
-            let (mag, sig, _) = magnitude(&ctx, session, e, &fit.block(at, e.kind.n_coef()));
+            let (mag, sig, _) = magnitude(&ctx, obs, e, &fit.block(at, e.kind.n_coef()));
             f.magnitude = mag;
             f.sigma = sig;
-            if let Some(o) = f.parameters.as_object_mut() {
-                o.insert("coef".into(), serde_json::json!(e.coef));
+            if let Some(FindingModel::Effect(fp)) = &mut f.parameters {
+                fp.model.coef = e.coef.clone();
             }
-            f.evidence_plot = super::evidence::evidence_plot(session, &ctx, &p, &accepted, k);
+            f.evidence_plot = super::evidence::evidence_plot(obs, &ctx, &p, &accepted, k);
         }
     }
 
     // Terms of one joint that cancel each other are a series fitted to an
     // angle error of another shape, not separate physics: say so.
-    for (j, largest_deg, net_deg, k) in cancelling_terms(session, &ctx, &accepted) {
+    for (j, largest_deg, net_deg, k) in cancelling_terms(obs, &ctx, &accepted) {
         let doubt = format!(
             "doubt: the {k} effects kept on joint {} largely cancel each other (each spreads the angle by up to {largest_deg:.4} deg over the train poses, together by {net_deg:.4} deg): together they describe an error of joint {}'s angle that none of them is alone; read them as one angle error of that joint, not as separate physics",
             j + 1,
@@ -1327,15 +1264,15 @@ pub fn analyse(
         }
     }
     // Anything left that varies smoothly?
-    if let Some(f) = unexplained(session, &ctx, &p, &accepted, free.len()) {
+    if let Some(f) = unexplained(obs, &ctx, &p, &accepted, free.len()) {
         findings.push(f);
     }
     progress.update("physics analysis", 1.0);
-    let test_errors = errors_with_effects(session, &ctx, &p, &accepted, &session.test);
+    let test_errors = errors_with_effects(obs, &ctx, &p, &accepted, &obs.test);
     Ok(Analysis {
         findings,
         final_params: Params {
-            layout: session.chain.layout,
+            layout: obs.chain.layout,
             values: p,
         },
         effects: accepted,
@@ -1349,6 +1286,25 @@ pub fn analyse(
 }
 
 type Fit = (Vec<f64>, Vec<EffectModel>, FitInfo);
+
+/// What a named finding records of its effect: the model, and what
+/// compensation needs beside it (the payload a compliance was fitted
+/// around and whether a payload changes it, as compensation decides it;
+/// the temperature a thermal expansion scales from).
+fn finding_parameters(ctx: &Context, e: &EffectModel) -> EffectParameters {
+    let mut p = EffectParameters::new(e.clone());
+    if let Kind::JointCompliance { .. } = e.kind {
+        p.reference_payload_kg = ctx.payload_ref_kg;
+        p.payload_matters = Some(e.payload_matters(ctx.n_joints));
+    }
+    if let Kind::ThermalExpansion { driver, .. } = e.kind {
+        p.reference = Some("driver zero at the first pose (temperature, time or row)".into());
+        if driver == ThermalDriver::Temperature {
+            p.reference_temp_c = ctx.temp_ref_c;
+        }
+    }
+    p
+}
 
 /// Covariance information of a refit.
 pub struct FitInfo {
@@ -1378,16 +1334,16 @@ impl FitInfo {
 }
 
 fn refit(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     free: &[usize],
     effects: &[EffectModel],
 ) -> Result<Fit> {
-    let problem = EffectProblem::of_session(
-        session,
+    let problem = EffectProblem::of_observations(
+        obs,
         ctx,
-        session.train.clone(),
+        obs.train.clone(),
         p,
         free.to_vec(),
         effects.to_vec(),
@@ -1435,7 +1391,7 @@ fn refit(
 /// Scan the change point of an anchor step around `t0` over the train
 /// pose times between its coarse-grid neighbours.
 fn refine_step(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     free: &[usize],
@@ -1443,7 +1399,7 @@ fn refine_step(
     kind: &Kind,
     t0: f64,
 ) -> f64 {
-    let mut times: Vec<f64> = session.train.iter().map(|&i| ctx.poses[i].time_s).collect();
+    let mut times: Vec<f64> = obs.train.iter().map(|&i| ctx.poses[i].time_s).collect();
     times.sort_by(|a, b| a.total_cmp(b));
     times.dedup();
     let n = times.len();
@@ -1459,12 +1415,12 @@ fn refine_step(
     let mut best = (f64::NEG_INFINITY, t0);
     let n_acc: usize = accepted.iter().map(|e| e.kind.n_coef()).sum();
     let base: Vec<usize> = (0..free.len() + n_acc).collect();
-    let fold0 = vec![0usize; session.train.len()];
+    let fold0 = vec![0usize; obs.train.len()];
     let mut at = lo;
     while at <= hi {
         let t = 0.5 * (times[at - 1] + times[at]);
         let nm = train_normals(
-            session,
+            obs,
             ctx,
             p,
             free,
@@ -1491,7 +1447,7 @@ fn refine_step(
 /// Reported magnitude, 1-sigma and unit of an effect.
 fn magnitude(
     ctx: &Context,
-    session: &Session,
+    obs: &Observations,
     e: &EffectModel,
     fit: &FitInfo,
 ) -> (f64, f64, String) {
@@ -1507,7 +1463,7 @@ fn magnitude(
                 // Lumped coefficients: report the RMS deflection.
                 let j = *joint_index;
                 let kind = e.kind.clone();
-                let train = session.train.clone();
+                let train = obs.train.clone();
                 Box::new(move |c: &[f64]| {
                     let mut buf = super::effects::Basis::default();
                     let mut s = 0.0;
@@ -1542,7 +1498,7 @@ fn magnitude(
         }
         Kind::RigStep { .. } | Kind::RigDrift => {
             let kind = e.kind.clone();
-            let train = session.train.clone();
+            let train = obs.train.clone();
             Box::new(move |c: &[f64]| ctx.rigid_rms_mm(&kind, c, &train))
         }
     };
@@ -1594,7 +1550,7 @@ const CANCEL_RATIO: f64 = 3.0;
 /// over the train poses: `(joint, largest effect's spread of dq, their
 /// sum's spread (standard deviations, deg), number of effects)`.
 fn cancelling_terms(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     accepted: &[EffectModel],
 ) -> Vec<(usize, f64, f64, usize)> {
@@ -1612,7 +1568,7 @@ fn cancelling_terms(
         // Per train pose, each effect's angle change and their sum; the
         // constant part of each is the joint's zero offset (the geometry
         // takes it), so spreads are compared about the mean.
-        let rows: Vec<Vec<f64>> = session
+        let rows: Vec<Vec<f64>> = obs
             .train
             .iter()
             .map(|&i| {

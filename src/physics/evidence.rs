@@ -26,10 +26,10 @@ use nalgebra::{Matrix3, Vector3};
 use super::analyse::errors_with_effects;
 use super::effects::{Basis, Context, EffectModel, Kind, ThermalDriver};
 use super::problem::EffectProblem;
-use crate::identify::Session;
-use crate::identify::report::{EvidencePlot, EvidencePoint};
+use crate::identify::Observations;
 use crate::kinematics::chain::OutputFrame;
 use crate::model::Split;
+use crate::report::{EvidencePlot, EvidencePoint};
 
 /// Finite-difference step of the signature direction (rad of a joint, or
 /// thermal multiplier).
@@ -173,7 +173,7 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
 /// of `effects`, plus an extra rotation of one joint and an extra thermal
 /// multiplier: for finite differences only (a difference of two calls).
 fn point(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     effects: &[EffectModel],
@@ -185,7 +185,7 @@ fn point(
     let delta = ctx.apply(effects, i, &mut buf);
     let mut pp = p.to_vec();
     ctx.apply_thermal(&mut pp, delta.thermal + extra_thermal);
-    let mut q: Vec<f64> = session.data.poses[i]
+    let mut q: Vec<f64> = obs.data.poses[i]
         .q_rad
         .iter()
         .zip(&delta.dq)
@@ -194,7 +194,7 @@ fn point(
     if let Some((j, h)) = extra_dq {
         q[j] += h;
     }
-    session.chain.point(&pp, &q, OutputFrame::Rig).1
+    obs.chain.point(&pp, &q, OutputFrame::Rig).1
 }
 
 fn pearson(a: &[f64], b: &[f64]) -> Option<f64> {
@@ -219,7 +219,7 @@ fn pearson(a: &[f64], b: &[f64]) -> Option<f64> {
 /// subsampled to at most [`EvidencePlot::MAX_POINTS`] points. `None` when
 /// `k` is out of range, or for a sensor-side effect on point data.
 pub fn evidence_plot(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     effects: &[EffectModel],
@@ -232,10 +232,10 @@ pub fn evidence_plot(
         .filter(|(i, _)| *i != k)
         .map(|(_, e)| e.clone())
         .collect();
-    let n = session.data.poses.len();
+    let n = obs.data.poses.len();
     let m = ctx.anchors.len();
     let robot = e.kind.robot_side();
-    if !robot && (m == 0 || session.data.n_strings != m) {
+    if !robot && (m == 0 || obs.data.n_strings != m) {
         return None;
     }
     let drv = driver(ctx, &e.kind);
@@ -251,7 +251,7 @@ pub fn evidence_plot(
         .div_ceil((EvidencePlot::MAX_POINTS / per_pose.max(1)).max(1))
         .max(1);
     let idx: Vec<usize> = (0..n).step_by(stride).collect();
-    let test: std::collections::HashSet<usize> = session.test.iter().copied().collect();
+    let test: std::collections::HashSet<usize> = obs.test.iter().copied().collect();
     let split = |i: usize| {
         if test.contains(&i) {
             Split::Test
@@ -262,18 +262,18 @@ pub fn evidence_plot(
     let mut buf = Basis::default();
     let mut points = Vec::with_capacity(idx.len() * per_pose);
     if robot {
-        let b = session.chain.layout.base();
+        let b = obs.chain.layout.base();
         let rb: Matrix3<f64> = crate::kinematics::rpy_matrix(p[b + 3], p[b + 4], p[b + 5]);
         // Model minus measured (base frame) without the effect; measured
         // points re-located with the other sensor-side effects applied.
-        let errs = errors_with_effects(session, ctx, p, &without, &idx);
+        let errs = errors_with_effects(obs, ctx, p, &without, &idx);
         // The displacement the effect causes at every pose (rig frame).
         let disp: Vec<Vector3<f64>> = idx
             .iter()
             .map(|&i| {
-                let q = &session.data.poses[i].q_rad;
-                EffectProblem::model_point(&session.chain, ctx, p, effects, i, q).0
-                    - EffectProblem::model_point(&session.chain, ctx, p, &without, i, q).0
+                let q = &obs.data.poses[i].q_rad;
+                EffectProblem::model_point(&obs.chain, ctx, p, effects, i, q).0
+                    - EffectProblem::model_point(&obs.chain, ctx, p, &without, i, q).0
             })
             .collect();
         // For effects without a joint angle or thermal multiplier to
@@ -291,12 +291,12 @@ pub fn evidence_plot(
             // moves (a joint angle, the thermal multiplier).
             let g = match (&e.kind, e.kind.joint()) {
                 (_, Some(j)) => {
-                    point(session, ctx, p, effects, i, Some((j, STEP)), 0.0)
-                        - point(session, ctx, p, effects, i, None, 0.0)
+                    point(obs, ctx, p, effects, i, Some((j, STEP)), 0.0)
+                        - point(obs, ctx, p, effects, i, None, 0.0)
                 }
                 (Kind::ThermalExpansion { .. }, _) => {
-                    point(session, ctx, p, effects, i, None, STEP)
-                        - point(session, ctx, p, effects, i, None, 0.0)
+                    point(obs, ctx, p, effects, i, None, STEP)
+                        - point(obs, ctx, p, effects, i, None, 0.0)
                 }
                 _ if d.norm() > 1e-9 * reference.norm() => {
                     if d.dot(&reference) < 0.0 {
@@ -318,7 +318,7 @@ pub fn evidence_plot(
                 continue;
             }
             points.push(EvidencePoint {
-                pose: session.data.poses[i].id.clone(),
+                pose: obs.data.poses[i].id.clone(),
                 split: split(i),
                 sensor: None,
                 x: driver_value(ctx, &e.kind, i, 0, &mut buf),
@@ -328,7 +328,7 @@ pub fn evidence_plot(
         }
     } else {
         // Reading residuals (predicted minus read) without the effect.
-        let problem = EffectProblem::of_session(session, ctx, idx.clone(), p, vec![], without);
+        let problem = EffectProblem::of_observations(obs, ctx, idx.clone(), p, vec![], without);
         let mut res = vec![0.0; idx.len() * m];
         let mut seen = vec![0usize; idx.len()];
         problem.rows(&problem.x0(), |pos, r, _| {
@@ -346,7 +346,7 @@ pub fn evidence_plot(
                     continue;
                 }
                 points.push(EvidencePoint {
-                    pose: session.data.poses[i].id.clone(),
+                    pose: obs.data.poses[i].id.clone(),
                     split: split(i),
                     sensor: Some(s + 1),
                     x: driver_value(ctx, &e.kind, i, s, &mut buf),
@@ -415,7 +415,7 @@ enum OrderKey {
 /// Same bound and stride rule as [`evidence_plot`]; train and test poses
 /// marked. `None` without train poses or with an unknown `winner`.
 pub fn unexplained_plot(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     effects: &[EffectModel],
@@ -423,8 +423,8 @@ pub fn unexplained_plot(
     z: &[f64],
 ) -> Option<EvidencePlot> {
     let nj = ctx.n_joints;
-    let n = session.data.poses.len();
-    if winner >= z.len() || z.len() < nj + 2 || session.train.is_empty() {
+    let n = obs.data.poses.len();
+    if winner >= z.len() || z.len() < nj + 2 || obs.train.is_empty() {
         return None;
     }
     let with_temp = z.len() == nj + 3;
@@ -446,13 +446,13 @@ pub fn unexplained_plot(
             )
         }
     };
-    let has_time = session.data.poses.iter().all(|p| p.time_s.is_some());
+    let has_time = obs.data.poses.iter().all(|p| p.time_s.is_some());
     let t0 = ctx.poses.first().map_or(0.0, |p| p.time_s);
     let key_value = |i: usize| match key {
         OrderKey::Joint(j) => ctx.poses[i].q_rad[j].to_degrees(),
         OrderKey::Time if has_time => (ctx.poses[i].time_s - t0) / 3600.0,
         OrderKey::Time => i as f64,
-        OrderKey::Temperature => session.data.poses[i].temp_c.unwrap_or(f64::NAN),
+        OrderKey::Temperature => obs.data.poses[i].temp_c.unwrap_or(f64::NAN),
     };
     let (mut x_label, x_unit) = match key {
         OrderKey::Joint(j) => (format!("joint {} angle", j + 1), "deg"),
@@ -466,13 +466,13 @@ pub fn unexplained_plot(
 
     // Errors of the final model at every pose, measured minus model.
     let all: Vec<usize> = (0..n).collect();
-    let err: Vec<Vector3<f64>> = errors_with_effects(session, ctx, p, effects, &all)
+    let err: Vec<Vector3<f64>> = errors_with_effects(obs, ctx, p, effects, &all)
         .into_iter()
         .map(|e| -e)
         .collect();
     let ok = |i: usize| err[i].iter().all(|v| v.is_finite()) && key_value(i).is_finite();
     let mut m2 = Matrix3::zeros();
-    for &i in session.train.iter().filter(|&&i| ok(i)) {
+    for &i in obs.train.iter().filter(|&&i| ok(i)) {
         m2 += err[i] * err[i].transpose();
     }
     let eig = nalgebra::SymmetricEigen::new(m2);
@@ -488,7 +488,7 @@ pub fn unexplained_plot(
     let y = |i: usize| err[i].dot(&u);
 
     // Train poses sorted by (x, pose): the running mean's neighbours.
-    let mut sorted: Vec<(f64, usize, f64)> = session
+    let mut sorted: Vec<(f64, usize, f64)> = obs
         .train
         .iter()
         .filter(|&&i| ok(i))
@@ -528,7 +528,7 @@ pub fn unexplained_plot(
     };
 
     let stride = n.div_ceil(EvidencePlot::MAX_POINTS).max(1);
-    let test: std::collections::HashSet<usize> = session.test.iter().copied().collect();
+    let test: std::collections::HashSet<usize> = obs.test.iter().copied().collect();
     let mut points = Vec::new();
     for i in (0..n).step_by(stride) {
         if !ok(i) {
@@ -540,7 +540,7 @@ pub fn unexplained_plot(
             continue;
         }
         points.push(EvidencePoint {
-            pose: session.data.poses[i].id.clone(),
+            pose: obs.data.poses[i].id.clone(),
             split: if test.contains(&i) {
                 Split::Test
             } else {

@@ -5,31 +5,29 @@
 //! (`unexplained`), and the simulator that puts them into recordings
 //! ([`simulate`]). One implementation of each effect serves both.
 //!
-//! Hooks for the engine: [`analyse()`] after `identify::geometric()`,
-//! [`errors_with_effects`] for `stats.test.after`, and
-//! [`JointEffects`] for compensation.
+//! Used by the pipeline ([`crate::pipeline`]): [`analyse()`] after
+//! `identify::geometric()`, [`errors_with_effects`] for `stats.test.after`;
+//! by compensation: [`JointEffects`].
 
 pub mod analyse;
 pub mod effects;
-pub mod evaluate;
 pub mod evidence;
 pub mod problem;
 pub mod simulate;
-pub mod stats;
 mod unexplained;
 
-pub use analyse::{Analysis, analyse, errors_with_effects, session_context};
+pub use analyse::{Analysis, analyse, effect_context, errors_with_effects};
 pub use effects::{Context, EffectModel, Kind};
 
-use crate::identify::report::Finding;
 use crate::model::Robot;
+use crate::report::Finding;
 
-/// Accepted effect models recovered from report findings (those whose
-/// `parameters` hold an effect model; `unexplained` is skipped).
+/// The accepted effect models of report findings (`unexplained` has
+/// none).
 pub fn effects_of(findings: &[Finding]) -> Vec<EffectModel> {
     findings
         .iter()
-        .filter_map(|f| serde_json::from_value::<EffectModel>(f.parameters.clone()).ok())
+        .filter_map(|f| f.effect_model().cloned())
         .collect()
 }
 
@@ -69,7 +67,7 @@ impl JointEffects {
         }
         let reference_payload_kg = findings
             .iter()
-            .find_map(|f| f.parameters.get("reference_payload_kg")?.as_f64());
+            .find_map(|f| f.effect_parameters()?.reference_payload_kg);
         Some(JointEffects {
             robot: robot.clone(),
             effects,

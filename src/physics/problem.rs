@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::effects::{Basis, Context, EffectModel};
-use crate::identify::Session;
+use crate::identify::Observations;
 use crate::identify::lm::LeastSquares;
 use crate::kinematics::JointParam;
 use crate::kinematics::chain::{Chain, OutputFrame, PointJacobian};
@@ -33,8 +33,8 @@ pub struct EffectProblem<'a> {
 impl<'a> EffectProblem<'a> {
     /// The problem over `poses` of a session's recordings, at geometry `p`
     /// with the parameters `free` unknown beside the effects' coefficients.
-    pub fn of_session(
-        session: &Session<'a>,
+    pub fn of_observations(
+        obs: &Observations<'a>,
         ctx: &'a Context,
         poses: Vec<usize>,
         p: &[f64],
@@ -42,9 +42,9 @@ impl<'a> EffectProblem<'a> {
         effects: Vec<EffectModel>,
     ) -> Self {
         EffectProblem {
-            chain: session.chain,
+            chain: obs.chain,
             ctx,
-            data: session.data,
+            data: obs.data,
             poses,
             full: p.to_vec(),
             free,
@@ -165,7 +165,13 @@ impl<'a> EffectProblem<'a> {
                         let v = t - a;
                         let dist = v.norm();
                         let u = v / dist;
-                        let res = dist - r - p[g + k] + delta.dl[k] - readings[k];
+                        let res = crate::measure::string_residual_mm(
+                            dist,
+                            r,
+                            p[g + k],
+                            delta.dl[k],
+                            readings[k],
+                        );
                         for (col, &fi) in self.free.iter().enumerate() {
                             row[col] = if fi < g {
                                 u.dot(&jac.d_params[fi])

@@ -1,7 +1,7 @@
 //! The simulator behind `drawcal simulate`: recordings in the DATA_FORMAT
 //! files from a robot, a rig, parameter deviations, a base pose, noise and
 //! any set of physical effects (the same [`Context::basis`] the analysis
-//! fits). The spec is documented in the README's physics section.
+//! fits). The spec is documented in docs/PHYSICS.md.
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -319,23 +319,36 @@ pub fn preset(name: &str) -> Option<(Robot, Rig, Vec<f64>)> {
     }
 }
 
-fn load(spec: &Spec) -> Result<(Robot, Rig, Vec<f64>, String)> {
+/// The robot and rig of `spec`: its preset's, or the files the caller read
+/// for the paths it names (`files`: robot.json, rig.json; the engine reads
+/// no files).
+fn load(spec: &Spec, files: SpecFiles) -> Result<(Robot, Rig, Vec<f64>, String)> {
+    let rig_file = |files: &SpecFiles| match (&spec.rig, &files.rig) {
+        (_, Some(rig)) => Ok(Some(rig.clone())),
+        (Some(path), None) => Err(Error::field(
+            "spec.rig",
+            format!("{path}: a rig.json path, but its file was not read (the CLI reads it)"),
+        )),
+        (None, _) => Ok(None),
+    };
     if let Some((robot, rig, home)) = preset(&spec.robot) {
-        let rig = match &spec.rig {
-            Some(path) => Rig::from_json(&read(path)?)?,
-            None => rig,
-        };
+        let rig = rig_file(&files)?.unwrap_or(rig);
         return Ok((robot, rig, home, spec.robot.clone()));
     }
-    let robot = Robot::from_json(&read(&spec.robot)?)?;
-    let rig = match &spec.rig {
-        Some(path) => Rig::from_json(&read(path)?)?,
-        None => {
-            return Err(Error::field(
-                "spec.rig",
-                "a robot.json path needs a rig.json path too",
-            ));
-        }
+    let Some(robot) = files.robot.clone() else {
+        return Err(Error::field(
+            "spec.robot",
+            format!(
+                "{:?} is not a preset (er3a, ur5, arm4_mdh); a robot.json path is read by the CLI",
+                spec.robot
+            ),
+        ));
+    };
+    let Some(rig) = rig_file(&files)? else {
+        return Err(Error::field(
+            "spec.rig",
+            "a robot.json path needs a rig.json path too",
+        ));
     };
     let home = robot
         .joints
@@ -345,13 +358,26 @@ fn load(spec: &Spec) -> Result<(Robot, Rig, Vec<f64>, String)> {
     Ok((robot, rig, home, "file".into()))
 }
 
-fn read(path: &str) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|e| Error::field(path, e.to_string()))
+/// The files a [`Spec`] names, read by the caller: the robot.json of a
+/// `robot` that is not a preset, the rig.json of `rig` (a rig given here
+/// replaces a preset's even when the spec names none).
+#[derive(Debug, Clone, Default)]
+pub struct SpecFiles {
+    /// The robot `spec.robot` names (none for a preset).
+    pub robot: Option<Robot>,
+    /// The rig `spec.rig` names.
+    pub rig: Option<Rig>,
 }
 
-/// Generate a dataset from a spec.
+/// Generate a dataset from a spec whose robot is a preset (and whose rig is
+/// the preset's).
 pub fn generate(spec: &Spec) -> Result<Simulated> {
-    let (robot, rig, home_deg, preset_name) = load(spec)?;
+    generate_with(spec, SpecFiles::default())
+}
+
+/// Generate a dataset from a spec and the files it names.
+pub fn generate_with(spec: &Spec, files: SpecFiles) -> Result<Simulated> {
+    let (robot, rig, home_deg, preset_name) = load(spec, files)?;
     let n = robot.dof();
     let m = rig.n_strings();
     if m < 3 {
@@ -919,28 +945,4 @@ pub fn effect_rms(
         }
     }
     (s / q_rad.len().max(1) as f64).sqrt()
-}
-
-/// Write robot.json, rig.json, poses.csv and truth.json into `dir`.
-pub fn write(sim: &Simulated, dir: &std::path::Path) -> Result<()> {
-    let io = |e: std::io::Error| Error::field(dir.display().to_string(), e.to_string());
-    std::fs::create_dir_all(dir).map_err(io)?;
-    let json = |v: &dyn erased::Ser| v.to_pretty();
-    std::fs::write(dir.join("robot.json"), json(&sim.robot)).map_err(io)?;
-    std::fs::write(dir.join("rig.json"), json(&sim.rig)).map_err(io)?;
-    std::fs::write(dir.join("poses.csv"), &sim.poses_csv).map_err(io)?;
-    std::fs::write(dir.join("truth.json"), json(&sim.truth)).map_err(io)?;
-    Ok(())
-}
-
-mod erased {
-    /// Pretty JSON of anything serialisable, behind a trait object.
-    pub trait Ser {
-        fn to_pretty(&self) -> String;
-    }
-    impl<T: serde::Serialize> Ser for T {
-        fn to_pretty(&self) -> String {
-            serde_json::to_string_pretty(self).unwrap_or_default() + "\n"
-        }
-    }
 }

@@ -12,9 +12,9 @@ use nalgebra::Vector3;
 use super::analyse::{errors_with_effects, reading_errors, rms};
 use super::effects::{Context, EffectModel};
 use super::problem::EffectProblem;
-use super::stats::{f_quantile_upper, normal_quantile, normal_upper_tail};
-use crate::identify::Session;
-use crate::identify::report::Finding;
+use crate::identify::Observations;
+use crate::report::{Finding, FindingModel, UnexplainedLocation};
+use crate::stats::{f_quantile_upper, normal_quantile, normal_upper_tail};
 
 /// The part of one pose's string residuals `r` (one per anchor, mm) that a
 /// displacement of T explains: least squares through the anchors' unit
@@ -39,22 +39,21 @@ fn common_displacement(
 
 /// Share of the train string residual energy that a displacement of T per
 /// pose explains, and the share noise alone would give (3/m).
-pub(super) fn robot_side_share(session: &Session, p: &[f64]) -> (Option<f64>, Option<f64>) {
-    let m = session.anchors.len();
+pub(super) fn robot_side_share(obs: &Observations, p: &[f64]) -> (Option<f64>, Option<f64>) {
+    let m = obs.anchors.len();
     if m <= 3 {
         return (None, None);
     }
-    let problem = session.problem(p.to_vec(), vec![]);
+    let problem = obs.problem(p.to_vec(), vec![]);
     let mut r = Vec::new();
     let (mut robot, mut total) = (0.0, 0.0);
-    for &i in &session.train {
-        let pose = &session.data.poses[i];
+    for &i in &obs.train {
+        let pose = &obs.data.poses[i];
         problem.pose_residuals(p, pose, &mut r);
-        let (_, t) =
-            session
-                .chain
-                .point(p, &pose.q_rad, crate::kinematics::chain::OutputFrame::Rig);
-        if let Some((_, energy)) = common_displacement(&session.anchors, &t, &r) {
+        let (_, t) = obs
+            .chain
+            .point(p, &pose.q_rad, crate::kinematics::chain::OutputFrame::Rig);
+        if let Some((_, energy)) = common_displacement(&obs.anchors, &t, &r) {
             robot += energy;
         }
         total += r.iter().map(|v| v * v).sum::<f64>();
@@ -76,23 +75,17 @@ pub(super) fn robot_side_share(session: &Session, p: &[f64]) -> (Option<f64>, Op
 /// ([`concentrated`]). `n_free` is the number of geometric parameters
 /// fitted.
 pub(super) fn unexplained(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     effects: &[EffectModel],
     n_free: usize,
 ) -> Option<Finding> {
-    let problem = EffectProblem::of_session(
-        session,
-        ctx,
-        session.train.clone(),
-        p,
-        vec![],
-        effects.to_vec(),
-    );
+    let problem =
+        EffectProblem::of_observations(obs, ctx, obs.train.clone(), p, vec![], effects.to_vec());
     let x = problem.x0();
     let rpp = problem.rows_per_pose();
-    let mut res = vec![0.0; session.train.len() * rpp];
+    let mut res = vec![0.0; obs.train.len() * rpp];
     let mut at = 0;
     problem.rows(&x, |_, r, _| {
         res[at] = r;
@@ -103,25 +96,20 @@ pub(super) fn unexplained(
         .map(|j| {
             (
                 format!("joint {} angle", j + 1),
-                session
-                    .train
-                    .iter()
-                    .map(|&i| ctx.poses[i].q_rad[j])
-                    .collect(),
+                obs.train.iter().map(|&i| ctx.poses[i].q_rad[j]).collect(),
             )
         })
         .collect();
     keys.push((
         "time (visiting order)".into(),
-        session.train.iter().map(|&i| ctx.poses[i].time_s).collect(),
+        obs.train.iter().map(|&i| ctx.poses[i].time_s).collect(),
     ));
-    if session.data.poses.iter().all(|p| p.temp_c.is_some()) {
+    if obs.data.poses.iter().all(|p| p.temp_c.is_some()) {
         keys.push((
             "temperature".into(),
-            session
-                .train
+            obs.train
                 .iter()
-                .map(|&i| session.data.poses[i].temp_c.unwrap_or(0.0))
+                .map(|&i| obs.data.poses[i].temp_c.unwrap_or(0.0))
                 .collect(),
         ));
     }
@@ -142,7 +130,7 @@ pub(super) fn unexplained(
         .collect();
     pairings.push((
         "the joint configuration (nearest pose in joint space)".into(),
-        nearest_in_joint_space(ctx, &session.train),
+        nearest_in_joint_space(ctx, &obs.train),
     ));
     // The same joint orderings once more, on the part of each residual
     // along the direction that joint moves T: an error of the joint's own
@@ -150,7 +138,7 @@ pub(super) fn unexplained(
     // ratio, a local bump), moves T in opposite directions on the two sides
     // of the axis, so raw residuals of neighbours in that angle need not
     // agree while these components do.
-    let along = joint_components(session, ctx, p, &res, rpp);
+    let along = joint_components(obs, ctx, p, &res, rpp);
     let n_plain = pairings.len();
     let n_tests = n_plain + along.as_ref().map_or(0, |_| n);
     let alpha = 1e-3 / n_tests as f64;
@@ -195,17 +183,17 @@ pub(super) fn unexplained(
         }
     }
     let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
-    let excess = robot_side_excess(session, ctx, &res, rpp, n_params);
+    let excess = robot_side_excess(obs, ctx, &res, rpp, n_params);
     let confined = if best.is_none() {
         let train: Vec<f64> = res
             .chunks(rpp)
             .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
             .collect();
-        let test: Vec<f64> = reading_errors(session, ctx, p, effects)
+        let test: Vec<f64> = reading_errors(obs, ctx, p, effects)
             .iter()
             .map(|&(ss, n)| (ss / n.max(1) as f64).sqrt())
             .collect();
-        concentrated(session, ctx, &train, &test, 1e-3)
+        concentrated(obs, ctx, &train, &test, 1e-3)
     } else {
         None
     };
@@ -263,32 +251,23 @@ pub(super) fn unexplained(
     let region = if confined.is_some() {
         String::new()
     } else {
-        worst_region(ctx, &session.train, &res, rpp)
+        worst_region(ctx, &obs.train, &res, rpp)
     };
     let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
-    let test = rms(&errors_with_effects(
-        session,
-        ctx,
-        p,
-        effects,
-        &session.test,
-    ));
-    let mut parameters = serde_json::json!({
-        "ordering": pairings[winner].0,
-        "along_joint_motion": winner_at.is_some_and(|(_, projected)| projected),
-        "z": zs[winner],
-    });
-    if let Some(c) = &confined {
-        parameters["confined_joint"] = (c.joint + 1).into();
-        parameters["confined_deg"] =
-            serde_json::json!([c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]);
-        parameters["confined_train_poses"] = serde_json::json!(c.train_poses);
-        parameters["confined_p"] = c.p.into();
-    }
-    if let Some(x) = excess {
-        parameters["robot_side_variance_ratio"] = x.f.into();
-        parameters["variance_ratio_threshold"] = x.threshold.into();
-    }
+    let test = rms(&errors_with_effects(obs, ctx, p, effects, &obs.test));
+    let parameters = UnexplainedLocation {
+        ordering: pairings[winner].0.clone(),
+        along_joint_motion: winner_at.is_some_and(|(_, projected)| projected),
+        z: zs[winner],
+        confined_joint: confined.as_ref().map(|c| c.joint + 1),
+        confined_deg: confined
+            .as_ref()
+            .map(|c| [c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]),
+        confined_train_poses: confined.as_ref().map(|c| c.train_poses.clone()),
+        confined_p: confined.as_ref().map(|c| c.p),
+        robot_side_variance_ratio: excess.as_ref().map(|x| x.f),
+        variance_ratio_threshold: excess.as_ref().map(|x| x.threshold),
+    };
     Some(Finding {
         effect: "unexplained".into(),
         joint: None,
@@ -300,8 +279,8 @@ pub(super) fn unexplained(
         evidence: format!("{located}{region}"),
         test_rms_before_mm: test,
         test_rms_after_mm: test,
-        parameters,
-        evidence_plot: super::evidence::unexplained_plot(session, ctx, p, effects, winner, &zs),
+        parameters: Some(FindingModel::Unexplained(parameters)),
+        evidence_plot: super::evidence::unexplained_plot(obs, ctx, p, effects, winner, &zs),
     })
 }
 
@@ -349,7 +328,7 @@ const FAR_OFF_MEDIANS: f64 = 4.0;
 /// every pose, not 3-D errors, whose noise grows where the rig's geometry
 /// is poor.
 fn concentrated(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     misfit_train: &[f64],
     misfit_test: &[f64],
@@ -359,7 +338,7 @@ fn concentrated(
     if n_tr < 8 || n_te < 4 {
         return None;
     }
-    let median = crate::identify::stats::median(misfit_train);
+    let median = crate::stats::median(misfit_train);
     let far: Vec<usize> = (0..n_tr)
         .filter(|&k| misfit_train[k] > FAR_OFF_MEDIANS * median)
         .collect();
@@ -377,7 +356,7 @@ fn concentrated(
     let mut best: Option<Concentrated> = None;
     for j in 0..ctx.n_joints {
         let q = |i: usize| ctx.poses[i].q_rad[j];
-        let (lo_all, hi_all) = session
+        let (lo_all, hi_all) = obs
             .train
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &i| {
@@ -387,7 +366,7 @@ fn concentrated(
         if range.to_degrees() < 5.0 {
             continue;
         }
-        let mut qf: Vec<(f64, usize)> = far.iter().map(|&k| (q(session.train[k]), k)).collect();
+        let mut qf: Vec<(f64, usize)> = far.iter().map(|&k| (q(obs.train[k]), k)).collect();
         qf.sort_by(|a, b| a.0.total_cmp(&b.0));
         let need = if qf.len() <= 2 {
             qf.len()
@@ -402,7 +381,7 @@ fn concentrated(
         }
         let pad = (width / 2.0).max(range / 20.0);
         let (lo, hi) = (qf[start].0 - pad, qf[start + need - 1].0 + pad);
-        let inside: Vec<bool> = session
+        let inside: Vec<bool> = obs
             .test
             .iter()
             .map(|&i| (lo..=hi).contains(&q(i)))
@@ -430,7 +409,7 @@ fn concentrated(
                 train_poses: qf
                     .iter()
                     .filter(|(a, _)| (lo..=hi).contains(a))
-                    .map(|&(_, k)| session.data.poses[session.train[k]].id.clone())
+                    .map(|&(_, k)| obs.data.poses[obs.train[k]].id.clone())
                     .collect(),
                 n_test_in: m,
                 test_rms_in: rms_where(true),
@@ -522,21 +501,21 @@ const EXCESS_MIN_RATIO: f64 = 2.0;
 /// their variances per degree of freedom (the robot side less the `n_params`
 /// fitted) have an F distribution.
 fn robot_side_excess(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     res: &[f64],
     rpp: usize,
     n_params: usize,
 ) -> Option<Excess> {
-    let m = session.anchors.len();
+    let m = obs.anchors.len();
     if m <= 3 || rpp != m {
         return None;
     }
     let (mut robot, mut total, mut n) = (0.0, 0.0, 0usize);
-    for (pos, &i) in session.train.iter().enumerate() {
+    for (pos, &i) in obs.train.iter().enumerate() {
         let r = &res[pos * rpp..(pos + 1) * rpp];
         // A pose whose anchors do not fix a point tells nothing here.
-        let Some((_, energy)) = common_displacement(&session.anchors, &ctx.poses[i].point_rig, r)
+        let Some((_, energy)) = common_displacement(&obs.anchors, &ctx.poses[i].point_rig, r)
         else {
             continue;
         };
@@ -565,29 +544,29 @@ fn robot_side_excess(
 /// anchors' unit vectors (their robot-side part). `None` with fewer than
 /// three strings.
 fn joint_components(
-    session: &Session,
+    obs: &Observations,
     ctx: &Context,
     p: &[f64],
     res: &[f64],
     rpp: usize,
 ) -> Option<Vec<Vec<f64>>> {
-    let m = session.anchors.len();
+    let m = obs.anchors.len();
     if m > 0 && (m < 3 || rpp != m) {
         return None;
     }
     let n = ctx.n_joints;
-    let l = session.chain.layout;
-    let mut jac = session.chain.new_jacobian();
-    let mut out = vec![Vec::with_capacity(session.train.len()); n];
-    for (pos, &i) in session.train.iter().enumerate() {
+    let l = obs.chain.layout;
+    let mut jac = obs.chain.new_jacobian();
+    let mut out = vec![Vec::with_capacity(obs.train.len()); n];
+    for (pos, &i) in obs.train.iter().enumerate() {
         let r = &res[pos * rpp..(pos + 1) * rpp];
         let disp = if m == 0 {
             Vector3::new(r[0], r[1], r[2])
         } else {
-            common_displacement(&session.anchors, &ctx.poses[i].point_rig, r)
+            common_displacement(&obs.anchors, &ctx.poses[i].point_rig, r)
                 .map_or(Vector3::zeros(), |(d, _)| d)
         };
-        session.chain.point_jacobian(
+        obs.chain.point_jacobian(
             p,
             &ctx.poses[i].q_rad,
             crate::kinematics::chain::OutputFrame::Rig,

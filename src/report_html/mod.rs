@@ -13,9 +13,8 @@ pub mod svg;
 use std::collections::HashMap;
 use std::fmt::Write;
 
-use crate::identify::PHYSICS_NOT_RUN;
-use crate::identify::report::{ErrorStats, Finding, Report, SplitStats, Stats};
 use crate::model::Split;
+use crate::report::{ErrorStats, Finding, Report, SplitStats, Stats};
 use svg::{Series, esc};
 
 /// Colours: before, after (train), after (test).
@@ -389,10 +388,9 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
     }
     // The physics analysis's note when it did not run (physics off, or a
     // geometric model too far off the data to fit effects on).
-    let not_run = r
-        .physics_notes
-        .iter()
-        .find(|n| n.starts_with(PHYSICS_NOT_RUN));
+    let not_run = (!r.physics.ran())
+        .then(|| r.physics_notes.first())
+        .flatten();
 
     // Summary.
     o.push_str(r#"<h2 id="summary">Summary</h2><table id="summary-table">"#);

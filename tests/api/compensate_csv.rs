@@ -3,8 +3,8 @@
 //! and to the engine's own writer.
 
 use drawcal::compensate::{Compensator, compensate_all, write_csv};
-use drawcal::identify::report::Report;
 use drawcal::model::targets::targets_from_csv;
+use drawcal::report::Report;
 use serde_json::{Value, json};
 
 use crate::helpers::{TestApp, err_json, ok_json, read};

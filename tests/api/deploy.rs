@@ -389,12 +389,12 @@ async fn sigkill_during_a_job_then_restart_completes_it() {
     assert!(child2.wait().unwrap().success());
 }
 
-/// The README's service walkthrough, run as written against the built
-/// binary on an empty database (only the port is changed).
+/// The service walkthrough of docs/SERVICE.md, run as written against the
+/// built binary on an empty database (only the port is changed).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn readme_walkthrough_works_as_written() {
     let readme =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/SERVICE.md")).unwrap();
     let start = readme
         .find("<!-- SERVICE SECTION START")
         .expect("service section");

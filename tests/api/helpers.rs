@@ -279,7 +279,7 @@ impl TestApp {
         let spec: drawcal::physics::simulate::Spec = serde_json::from_value(spec).unwrap();
         let sim = drawcal::physics::simulate::generate(&spec).unwrap();
         let dir = fresh_dir("simulated-data");
-        drawcal::physics::simulate::write(&sim, &dir).unwrap();
+        drawcal::cli::simulate::write(&sim, &dir).unwrap();
         let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
         let model = ok_json(
             self.post_raw("/models", Some("application/json"), read("robot.json"))

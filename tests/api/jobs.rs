@@ -335,7 +335,7 @@ async fn a_cancel_as_the_job_finishes_stores_nothing_and_says_so() {
         while !progress.cancelled() {
             std::thread::sleep(Duration::from_millis(10));
         }
-        drawcal::identify::identify(
+        drawcal::pipeline::calibrate(
             &input.robot,
             &input.rig,
             &input.data,

@@ -2,6 +2,12 @@
 //! module per concern. Every test starts the real service on port 0 over a
 //! fresh SQLite file (the store conformance suite also runs on PostgreSQL).
 
+// The engine tests' dataset helpers (the browser test reads a radians
+// variant of a dataset through them).
+#[allow(dead_code)]
+#[path = "../engine/common.rs"]
+mod common;
+
 mod bad_requests;
 mod compensate_backlash;
 mod compensate_csv;
@@ -15,3 +21,5 @@ mod logs;
 mod openapi;
 mod slow_clients;
 mod store;
+mod ui;
+mod ui_browser;

@@ -1,0 +1,287 @@
+//! The catalogue of effects as data: which effect ([`Kind`]) with its
+//! fitted coefficients ([`EffectModel`]), as a report stores it in a
+//! finding. What each effect does to a pose is [`crate::physics::effects`].
+
+use serde::{Deserialize, Serialize};
+
+/// What drives thermal expansion.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ThermalDriver {
+    /// Ambient temperature minus the first pose's (K).
+    Temperature,
+    /// Hours since the session began (no usable temperature).
+    Time,
+    /// Thousands of rows since the first (neither temperature nor time
+    /// recorded: the visiting order stands in for the clock).
+    Order,
+}
+
+/// One effect of the catalogue. Joint and sensor indices are 0-based here
+/// (reports and files use 1-based numbers).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Kind {
+    /// Joint `joint_index` deflects in proportion to the gravity torque on
+    /// it, the payload hanging at T included (`payload_kg`). With link
+    /// masses: one coefficient (rad/(N·m)). Without: one coefficient per
+    /// regressor, a unit mass at the origin of link frame `regressors[r]`
+    /// (index n = the tool point, n + 1 = the payload at the tool point:
+    /// the tool's lever times `payload_kg`), coefficient in rad/m.
+    JointCompliance {
+        /// 0-based joint.
+        joint_index: usize,
+        /// Empty when the robot's link masses are used; else the link
+        /// frames (0-based, n = tool point, n + 1 = payload) carrying the
+        /// unit masses.
+        #[serde(default)]
+        regressors: Vec<usize>,
+    },
+    /// Half the dead band of joint `joint_index`: `dq = b · sign(last move)`
+    /// (coefficient 0). The recording does not say how the joint arrived
+    /// at the poses before its first move: there `dq` is a free offset
+    /// (coefficient 1), so that an unknown approach neither biases `b` nor
+    /// leaves a residual for another effect to explain. Compensation knows
+    /// the approach and uses `b` alone.
+    Backlash {
+        /// 0-based joint.
+        joint_index: usize,
+    },
+    /// `dq = s sin(h q) + c cos(h q)` of joint `joint_index`.
+    JointPeriodic {
+        /// 0-based joint.
+        joint_index: usize,
+        /// Harmonic h (1 = once per revolution).
+        harmonic: u32,
+    },
+    /// `dq = s · q` of joint `joint_index`: the joint turns by a slightly
+    /// different angle than commanded, in proportion to the angle from its
+    /// zero (a gear-ratio or encoder-scale error).
+    JointScale {
+        /// 0-based joint.
+        joint_index: usize,
+    },
+    /// Every nominal a and d scales by `1 + k · driver`. Driven by time or
+    /// row order with `tau_h`, by the warm-up curve `tau_h · (1 - exp(-h /
+    /// tau_h))` of the driver `h` (hours, or thousands of rows, since the
+    /// first pose) instead: settling towards a steady temperature with that
+    /// time constant, in the driver's unit; `k` is then the initial rate.
+    ThermalExpansion {
+        /// Temperature, time or row order.
+        driver: ThermalDriver,
+        /// Time constant of a warm-up that settles (h, or thousands of rows
+        /// with [`ThermalDriver::Order`]); none: linear.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        tau_h: Option<f64>,
+    },
+    /// String `sensor_index` reads `s · l` too long.
+    SensorScale {
+        /// 0-based sensor.
+        sensor_index: usize,
+    },
+    /// String `sensor_index` reads `o` too long.
+    SensorOffset {
+        /// 0-based sensor.
+        sensor_index: usize,
+    },
+    /// String `sensor_index` reads `v · h` too long, `h` the hours since
+    /// the first pose (thousands of rows without a recorded clock): its
+    /// zero creeps during the session.
+    SensorDrift {
+        /// 0-based sensor.
+        sensor_index: usize,
+    },
+    /// Every string hangs under its own weight and reads longer than the
+    /// chord by `c · h² · d` (h horizontal span, d length, in m; c in mm/m³).
+    CableSag,
+    /// Anchor `sensor_index` moved by a vector (mm, rig frame) at `t0_s`.
+    AnchorStep {
+        /// 0-based sensor.
+        sensor_index: usize,
+        /// Time of the move (s); poses with `time_s > t0_s` see it.
+        t0_s: f64,
+    },
+    /// The whole rig (every anchor, or the tracker) moved rigidly relative
+    /// to the robot base at `t0_s`: a translation (mm, 3 coefficients) and
+    /// a small rotation (mrad, 3) about the centre of the measured points.
+    RigStep {
+        /// Time of the move (s); poses with `time_s > t0_s` see it.
+        t0_s: f64,
+    },
+    /// The rig creeps steadily relative to the robot base: a translation
+    /// rate (mm/h, 3 coefficients) and a rotation rate (mrad/h, 3) about the
+    /// centre of the measured points, times the hours since the first pose.
+    RigDrift,
+}
+
+impl Kind {
+    /// Catalogue name as in reports and truth.json.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Kind::JointCompliance { .. } => "joint_compliance",
+            Kind::Backlash { .. } => "backlash",
+            Kind::JointPeriodic { .. } => "joint_periodic",
+            Kind::JointScale { .. } => "joint_scale",
+            Kind::ThermalExpansion { .. } => "thermal_expansion",
+            Kind::SensorScale { .. } => "sensor_scale",
+            Kind::SensorOffset { .. } => "sensor_offset",
+            Kind::SensorDrift { .. } => "sensor_drift",
+            Kind::CableSag => "cable_sag",
+            Kind::AnchorStep { .. } => "anchor_step",
+            Kind::RigStep { .. } => "rig_step",
+            Kind::RigDrift => "rig_drift",
+        }
+    }
+
+    /// 0-based joint, where it applies.
+    pub fn joint(&self) -> Option<usize> {
+        match self {
+            Kind::JointCompliance { joint_index, .. }
+            | Kind::Backlash { joint_index }
+            | Kind::JointPeriodic { joint_index, .. }
+            | Kind::JointScale { joint_index } => Some(*joint_index),
+            _ => None,
+        }
+    }
+
+    /// 0-based sensor, where it applies.
+    pub fn sensor(&self) -> Option<usize> {
+        match self {
+            Kind::SensorScale { sensor_index }
+            | Kind::SensorOffset { sensor_index }
+            | Kind::SensorDrift { sensor_index }
+            | Kind::AnchorStep { sensor_index, .. } => Some(*sensor_index),
+            _ => None,
+        }
+    }
+
+    /// True when the effect moves T relative to the rig (the robot, or
+    /// the whole rig relative to the robot), false when it changes what one
+    /// string reads.
+    pub fn robot_side(&self) -> bool {
+        matches!(
+            self,
+            Kind::JointCompliance { .. }
+                | Kind::Backlash { .. }
+                | Kind::JointPeriodic { .. }
+                | Kind::JointScale { .. }
+                | Kind::ThermalExpansion { .. }
+                | Kind::RigStep { .. }
+                | Kind::RigDrift
+        )
+    }
+
+    /// Time of a change point, for effects that have one.
+    pub fn change_time_s(&self) -> Option<f64> {
+        match self {
+            Kind::AnchorStep { t0_s, .. } | Kind::RigStep { t0_s } => Some(*t0_s),
+            _ => None,
+        }
+    }
+
+    /// The same effect with its change point moved to `t0_s` (unchanged
+    /// for effects without one).
+    pub fn with_change_time(&self, t0_s: f64) -> Kind {
+        match self {
+            Kind::AnchorStep { sensor_index, .. } => Kind::AnchorStep {
+                sensor_index: *sensor_index,
+                t0_s,
+            },
+            Kind::RigStep { .. } => Kind::RigStep { t0_s },
+            other => other.clone(),
+        }
+    }
+
+    /// Number of coefficients.
+    pub fn n_coef(&self) -> usize {
+        match self {
+            Kind::JointCompliance { regressors, .. } => regressors.len().max(1),
+            Kind::JointPeriodic { .. } | Kind::Backlash { .. } => 2,
+            Kind::AnchorStep { .. } => 3,
+            Kind::RigStep { .. } | Kind::RigDrift => 6,
+            _ => 1,
+        }
+    }
+}
+
+/// An effect with its coefficients (internal units: rad, mm, dimensionless).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EffectModel {
+    /// Which effect.
+    #[serde(flatten)]
+    pub kind: Kind,
+    /// Coefficients, `kind.n_coef()` of them.
+    pub coef: Vec<f64>,
+}
+
+impl EffectModel {
+    /// True when a payload at T changes this effect's offsets on a robot of
+    /// `n_joints` joints: a compliance with link masses (the payload adds
+    /// its torque), or without masses one whose session varied the payload
+    /// (so that its lever was fitted).
+    pub fn payload_matters(&self, n_joints: usize) -> bool {
+        let payload_regressor = n_joints + 1;
+        match &self.kind {
+            Kind::JointCompliance { regressors, .. } => {
+                regressors.is_empty()
+                    || regressors
+                        .iter()
+                        .zip(&self.coef)
+                        .any(|(&r, &c)| r == payload_regressor && c != 0.0)
+            }
+            _ => false,
+        }
+    }
+
+    /// Check an effect read from a report against the robot it belongs to
+    /// (`n_joints` joints, link masses or not): its joint among them, a
+    /// compliance in the form the robot's masses give (one coefficient with
+    /// masses, unit-mass regressors among the link frames, the tool and the
+    /// payload without), as many finite coefficients as the effect has.
+    /// What is wrong, for a human.
+    pub fn check(&self, n_joints: usize, has_masses: bool) -> std::result::Result<(), String> {
+        if let Some(j) = self.kind.joint() {
+            if j >= n_joints {
+                return Err(format!(
+                    "joint_index {j} (0-based) but the robot has {n_joints} joints"
+                ));
+            }
+        }
+        if let Kind::JointCompliance { regressors, .. } = &self.kind {
+            if regressors.is_empty() != has_masses {
+                return Err(if has_masses {
+                    "a compliance fitted with unit-mass regressors, but the robot has link masses"
+                        .into()
+                } else {
+                    "a compliance fitted with link masses, but the robot has none".into()
+                });
+            }
+            if let Some(r) = regressors.iter().find(|&&r| r > n_joints + 1) {
+                return Err(format!(
+                    "regressor {r}: link frames are 0..{n_joints}, the tool {n_joints}, the payload {}",
+                    n_joints + 1
+                ));
+            }
+        }
+        if self.coef.len() != self.kind.n_coef() {
+            return Err(format!(
+                "{} coefficients for {}, which has {}",
+                self.coef.len(),
+                self.kind.name(),
+                self.kind.n_coef()
+            ));
+        }
+        if self.coef.iter().any(|c| !c.is_finite()) {
+            return Err("a coefficient is not a finite number".into());
+        }
+        Ok(())
+    }
+
+    /// The effect with every coefficient zero (a candidate before its fit).
+    pub fn zero(kind: Kind) -> Self {
+        EffectModel {
+            coef: vec![0.0; kind.n_coef()],
+            kind,
+        }
+    }
+}

@@ -1,0 +1,168 @@
+//! Shared helpers for the integration tests: load a dataset copied under
+//! tests/data.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+use drawcal::model::{Dataset, Rig, Robot};
+
+/// `drawcal identify` with the default options on a loaded dataset.
+pub fn identify_default(robot: &Robot, rig: &Rig, data: &Dataset) -> drawcal::report::Report {
+    use drawcal::identify::NoProgress;
+    drawcal::pipeline::calibrate(robot, rig, data, &Default::default(), &NoProgress).unwrap()
+}
+
+/// The geometric fit and the physics analysis with the default options, as
+/// `drawcal identify` runs them: the analysis and the held-out 3-D RMS of
+/// its final model (mm).
+pub fn analyse_blind(
+    robot: &Robot,
+    rig: &Rig,
+    data: &Dataset,
+) -> (drawcal::physics::Analysis, f64) {
+    use drawcal::identify::NoProgress;
+    let run = drawcal::pipeline::run(robot, rig, data, &Default::default(), &NoProgress).unwrap();
+    let a = run.physics.analysis.expect("the physics analysis ran");
+    let rms = drawcal::stats::rms_norm(&a.test_errors);
+    (a, rms)
+}
+
+pub fn dir(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+pub fn load(name: &str) -> (Robot, Rig, Dataset) {
+    let d = dir(name);
+    let robot = Robot::from_json(&std::fs::read_to_string(d.join("robot.json")).unwrap()).unwrap();
+    let rig = Rig::from_json(&std::fs::read_to_string(d.join("rig.json")).unwrap()).unwrap();
+    let data = Dataset::from_csv(
+        std::fs::File::open(d.join("poses.csv")).unwrap(),
+        &robot,
+        &rig,
+    )
+    .unwrap();
+    (robot, rig, data)
+}
+
+pub fn truth(name: &str) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir(name).join("truth.json")).unwrap()).unwrap()
+}
+
+/// truth.json's `true_points_mm`, in pose order.
+pub fn true_points(truth: &serde_json::Value) -> Vec<nalgebra::Vector3<f64>> {
+    truth["true_points_mm"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| nalgebra::Vector3::from_iterator((0..3).map(|c| p[c].as_f64().unwrap())))
+        .collect()
+}
+
+/// The truth expressed in the parametrisation `rep` identified: the
+/// geometric model fitted to exact, noise-free string readings of the true
+/// points at the same poses, with the parameters `rep` held at nominal
+/// held too. This maps the aliased parameters (d2+d3 along parallel axes,
+/// joint 6 and the tool point, joint 1 and the base, the wrist pairs the
+/// data did not separate) the way the calibration does.
+pub fn mapped_truth(
+    robot: &Robot,
+    rig: &Rig,
+    data: &Dataset,
+    true_points: &[nalgebra::Vector3<f64>],
+    rep: &drawcal::report::Report,
+) -> drawcal::report::Report {
+    use drawcal::identify::{IdentifyOptions, NoProgress};
+    use drawcal::model::Measurement;
+    use drawcal::pipeline;
+    let mut exact = data.clone();
+    for (pose, t) in exact.poses.iter_mut().zip(true_points) {
+        pose.measurement = Measurement::Strings(
+            (0..rig.n_strings())
+                .map(|k| (t - rig.anchor(k)).norm() - rig.r_mm)
+                .collect(),
+        );
+    }
+    let opts = pipeline::Options {
+        identify: IdentifyOptions {
+            hold: rep.fixed.clone(),
+            ..IdentifyOptions::default()
+        },
+        physics: false,
+    };
+    pipeline::calibrate(robot, rig, &exact, &opts, &NoProgress).unwrap()
+}
+
+/// Proptest settings for the fuzz tests: `n` cases (a few seconds in CI),
+/// or `PROPTEST_CASES` for a long campaign; no failure files written.
+pub fn proptest_cases(n: u32) -> proptest::prelude::ProptestConfig {
+    let cases = std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(n);
+    proptest::prelude::ProptestConfig {
+        cases,
+        failure_persistence: None,
+        ..proptest::prelude::ProptestConfig::default()
+    }
+}
+
+/// A CSV text with the named columns removed (a recording made without
+/// them), every other column and row unchanged.
+pub fn drop_columns(csv: &str, names: &[&str]) -> String {
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
+    let keep: Vec<usize> = (0..header.len())
+        .filter(|&i| !names.contains(&header[i]))
+        .collect();
+    let pick = |l: &str| {
+        let cells: Vec<&str> = l.split(',').collect();
+        keep.iter()
+            .map(|&i| cells.get(i).copied().unwrap_or(""))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    std::iter::once(pick(&header.join(",")))
+        .chain(lines.map(pick))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// A poses.csv text with the joint angles (`q*_deg`) of the given data
+/// rows (0-based; every row when `None`) rewritten in radians: input that
+/// parses but looks wrong.
+pub fn q_columns_in_radians(csv: &str, rows: Option<&[usize]>) -> String {
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap_or("");
+    let q: Vec<bool> = header
+        .split(',')
+        .map(|h| h.starts_with('q') && h.ends_with("_deg"))
+        .collect();
+    let mut out = vec![header.to_string()];
+    for (r, line) in lines.enumerate() {
+        if rows.is_some_and(|rows| !rows.contains(&r)) {
+            out.push(line.to_string());
+            continue;
+        }
+        let cells: Vec<String> = line
+            .split(',')
+            .zip(&q)
+            .map(|(c, &q)| {
+                if q {
+                    format!("{:.6}", c.parse::<f64>().unwrap().to_radians())
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect();
+        out.push(cells.join(","));
+    }
+    out.join("\n") + "\n"
+}
+
+/// A finding's `parameters` as the report's JSON has them (what clients
+/// read).
+pub fn params(f: &drawcal::report::Finding) -> serde_json::Value {
+    serde_json::to_value(&f.parameters).unwrap()
+}

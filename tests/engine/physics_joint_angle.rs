@@ -1,0 +1,100 @@
+//! Errors of a joint's own angle, concealed in simulated recordings and
+//! analysed blind: a scale error (`joint_scale`: a gear-ratio or
+//! encoder-scale error) and a third harmonic, each named alone on the
+//! right joint. Before they were in the catalogue both were reported
+//! `unexplained` or approximated by the first two harmonics of the joint.
+
+use crate::common;
+
+use drawcal::physics::{self, simulate};
+
+/// Simulate one effect and analyse the recording blind: the recording, the
+/// analysis, its final held-out 3-D RMS (mm).
+fn run(
+    robot: &str,
+    seed: u64,
+    n_poses: usize,
+    effect: serde_json::Value,
+) -> (simulate::Simulated, physics::Analysis, f64) {
+    let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
+        "robot": robot, "n_poses": n_poses, "seed": seed, "effects": [effect]
+    }))
+    .unwrap();
+    let sim = simulate::generate(&spec).unwrap();
+    let (a, rms) = common::analyse_blind(&sim.robot, &sim.rig, &sim.dataset);
+    (sim, a, rms)
+}
+
+fn named(a: &physics::Analysis) -> Vec<(&str, Option<usize>)> {
+    a.findings
+        .iter()
+        .map(|f| (f.effect.as_str(), f.joint))
+        .collect()
+}
+
+#[test]
+fn a_joint_scale_error_is_named_alone_with_its_size() {
+    for (robot, joint, seed) in [("er3a", 1, 11), ("ur5", 3, 12), ("arm4_mdh", 2, 13)] {
+        let effect =
+            serde_json::json!({"effect": "joint_scale", "joint": joint, "size_x_noise": 5});
+        let (sim, a, final_rms) = run(robot, seed, 100, effect);
+        assert_eq!(
+            named(&a),
+            [("joint_scale", Some(joint))],
+            "{robot}: {:#?}",
+            a.findings
+        );
+        let f = &a.findings[0];
+        let (truth, unit) = simulate::report_magnitude(&sim.effects[0], &a.context);
+        assert_eq!(f.unit, unit);
+        assert!(
+            (f.magnitude - truth).abs() < 3.0 * f.sigma,
+            "{robot}: {} ± {} {unit}, truth {truth}",
+            f.magnitude,
+            f.sigma
+        );
+        assert!(
+            final_rms < 0.7 * f.test_rms_before_mm,
+            "{robot}: held-out {} -> {final_rms}",
+            f.test_rms_before_mm
+        );
+        assert!(
+            final_rms < 1.3 * sim.point_noise_mm,
+            "{robot}: held-out {final_rms} vs point noise {}",
+            sim.point_noise_mm
+        );
+    }
+}
+
+/// A third harmonic of joint 1 (a three-lobed gear): one finding, harmonic
+/// 3, no `unexplained` left.
+#[test]
+fn a_third_harmonic_is_named_with_its_harmonic() {
+    let effect = serde_json::json!({"effect": "joint_periodic", "joint": 1, "harmonic": 3, "size_x_noise": 8});
+    let (_, a, _) = run("er3a", 41, 120, effect);
+    assert_eq!(
+        named(&a),
+        [("joint_periodic", Some(1))],
+        "{:#?}",
+        a.findings
+    );
+    assert_eq!(
+        common::params(&a.findings[0])["harmonic"],
+        3,
+        "{:#?}",
+        a.findings
+    );
+}
+
+/// Over joint 2's range a scale error is nearly a once- plus a
+/// twice-per-revolution error. Ranked each on its own residual variance,
+/// that pair (four coefficients, fitting some noise too) outranked the one
+/// coefficient that is the truth on this dataset (held-out 0.0421 mm
+/// against 0.0404); ranked on one scale it must explain more than its
+/// extra coefficients charge, and does not.
+#[test]
+fn one_effect_beats_two_that_approximate_it() {
+    let effect = serde_json::json!({"effect": "joint_scale", "joint": 2, "size_x_noise": 5});
+    let (_, a, _) = run("er3a", 195668, 80, effect);
+    assert_eq!(named(&a), [("joint_scale", Some(2))], "{:#?}", a.findings);
+}
