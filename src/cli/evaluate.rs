@@ -1,6 +1,7 @@
 //! `drawcal evaluate`: the blind sweep of simulated datasets with concealed
 //! effects, printing the confusion table recorded in EVAL.md.
 
+use super::{CliError, core, read};
 use crate::pipeline::evaluate::{self, Sweep};
 
 /// Arguments of `drawcal evaluate`.
@@ -12,7 +13,7 @@ pub struct EvaluateArgs {
     /// rig.json to simulate every robot with (default: each preset's own
     /// 4-string rig); e.g. a 3- or 5-string rig.
     #[arg(long)]
-    pub rig: Option<String>,
+    pub rig: Option<std::path::PathBuf>,
     /// Effect sizes in multiples of the point noise (0 = effect-free).
     #[arg(long, default_value = "0,1,2,3,5,10", value_delimiter = ',')]
     pub sizes: Vec<f64>,
@@ -34,14 +35,11 @@ pub struct EvaluateArgs {
 }
 
 /// Run the sweep and print the table.
-pub fn run(args: EvaluateArgs) -> Result<(), Box<dyn std::error::Error>> {
+pub fn run(args: EvaluateArgs) -> Result<(), CliError> {
     let cfg = Sweep {
         robots: args.robots,
         rig: match &args.rig {
-            Some(path) => Some(crate::model::Rig::from_json(
-                &std::fs::read_to_string(path)
-                    .map_err(|e| crate::Error::field(path, e.to_string()))?,
-            )?),
+            Some(path) => Some(core(path, crate::model::Rig::from_json(&read(path)?))?),
             None => None,
         },
         sizes: args.sizes,

@@ -1,6 +1,7 @@
 //! The `drawcal` command line: a thin layer over the core that reads files,
 //! prints summaries and writes results.
 
+mod error;
 pub mod evaluate;
 pub mod report;
 pub mod serve;
@@ -19,34 +20,11 @@ use crate::measure;
 use crate::model::{Dataset, Rig, Robot, targets::targets_from_csv};
 use crate::pipeline;
 use crate::report::{ClosedFormComparison, Report};
-
-/// The CLI layer's error: what went wrong and with which file.
-#[derive(Debug, thiserror::Error)]
-pub enum CliError {
-    /// A file could not be read or written.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        source: std::io::Error,
-    },
-    /// The core refused the input or failed.
-    #[error("{path}: {source}")]
-    Core {
-        /// The file being processed.
-        path: PathBuf,
-        /// The cause.
-        source: crate::Error,
-    },
-    /// Anything else (e.g. a subcommand of another layer).
-    #[error("{0}")]
-    Other(String),
-}
+pub use error::CliError;
 
 /// A text file, without the byte-order mark some Windows editors put at
 /// the start (JSON parsers refuse it; the CSV reader skips it anyway).
-fn read(path: &Path) -> Result<String, CliError> {
+pub(crate) fn read(path: &Path) -> Result<String, CliError> {
     std::fs::read_to_string(path)
         .map(|t| match t.strip_prefix('\u{feff}') {
             Some(rest) => rest.to_string(),
@@ -65,7 +43,8 @@ fn to_stdout(text: &str) {
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }
 
-fn core<T>(path: &Path, r: crate::Result<T>) -> Result<T, CliError> {
+/// A core result, its error blamed on the file `path`.
+pub(crate) fn core<T>(path: &Path, r: crate::Result<T>) -> Result<T, CliError> {
     r.map_err(|source| CliError::Core {
         path: path.into(),
         source,
@@ -250,10 +229,10 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Identify(a) => run_identify(a),
         Command::Compensate(a) => run_compensate(a),
         Command::Locate(a) => run_locate(a),
-        Command::Serve(a) => serve::run(a).map_err(|e| CliError::Other(e.to_string())),
-        Command::Simulate(a) => simulate::run(a).map_err(|e| CliError::Other(e.to_string())),
-        Command::Evaluate(a) => evaluate::run(a).map_err(|e| CliError::Other(e.to_string())),
-        Command::Report(a) => report::run(a).map_err(|e| CliError::Other(e.to_string())),
+        Command::Serve(a) => serve::run(a),
+        Command::Simulate(a) => simulate::run(a),
+        Command::Evaluate(a) => evaluate::run(a),
+        Command::Report(a) => report::run(a),
     }
 }
 
@@ -314,8 +293,7 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
         data.n_strings,
     ));
     if let Some(out) = &a.out {
-        let text =
-            serde_json::to_string_pretty(&report).map_err(|e| CliError::Other(e.to_string()))?;
+        let text = serde_json::to_string_pretty(&report).map_err(CliError::Json)?;
         std::fs::write(out, text).map_err(|source| CliError::Io {
             path: out.clone(),
             source,

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
+use super::{CliError, core, read};
 use crate::report::Report;
 use crate::report_html::{self, PoseColumns};
 
@@ -27,15 +28,19 @@ pub struct ReportArgs {
 }
 
 /// Write the HTML report.
-pub fn run(args: ReportArgs) -> Result<(), Box<dyn std::error::Error>> {
-    let text = std::fs::read_to_string(&args.report)
-        .map_err(|e| format!("{}: {e}", args.report.display()))?;
-    let report = Report::from_json(&text).map_err(|e| format!("{}: {e}", args.report.display()))?;
+pub fn run(args: ReportArgs) -> Result<(), CliError> {
+    let report = core(&args.report, Report::from_json(&read(&args.report)?))?;
     let poses = match &args.poses {
         None => None,
         Some(p) => {
-            let f = std::fs::File::open(p).map_err(|e| format!("{}: {e}", p.display()))?;
-            Some(PoseColumns::from_csv(f).map_err(|e| format!("{}: {e}", p.display()))?)
+            let f = std::fs::File::open(p).map_err(|source| CliError::Io {
+                path: p.clone(),
+                source,
+            })?;
+            Some(
+                PoseColumns::from_csv(f)
+                    .map_err(|m| CliError::Other(format!("{}: {m}", p.display())))?,
+            )
         }
     };
     let title = args.title.clone().unwrap_or_else(|| {
@@ -48,7 +53,10 @@ pub fn run(args: ReportArgs) -> Result<(), Box<dyn std::error::Error>> {
         )
     });
     let html = report_html::render(&report, &title, poses.as_ref());
-    std::fs::write(&args.html, html).map_err(|e| format!("{}: {e}", args.html.display()))?;
+    std::fs::write(&args.html, html).map_err(|source| CliError::Io {
+        path: args.html.clone(),
+        source,
+    })?;
     eprintln!("HTML report written to {}", args.html.display());
     Ok(())
 }

@@ -3,6 +3,7 @@
 use std::net::SocketAddr;
 use std::time::Duration;
 
+use super::CliError;
 use crate::http::{Service, ServiceConfig, shutdown_signal};
 use crate::jobs::{JobConfig, engine_job_fn};
 
@@ -97,22 +98,23 @@ fn redact(url: &str) -> String {
 }
 
 /// Run the service until Ctrl-C or SIGTERM.
-pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
+pub fn run(args: ServeArgs) -> Result<(), CliError> {
+    let usage = |m: String| Err(CliError::Usage(m));
     if args.workers == 0 {
-        return Err("--workers must be at least 1".into());
+        return usage("--workers must be at least 1".into());
     }
     if args.runtime_threads == 0 {
-        return Err("--runtime-threads must be at least 1".into());
+        return usage("--runtime-threads must be at least 1".into());
     }
     let max = crate::http::MAX_TIMEOUT.as_secs();
     if !(1..=max).contains(&args.client_timeout_secs) {
-        return Err(format!("--client-timeout-secs must be from 1 to {max}").into());
+        return usage(format!("--client-timeout-secs must be from 1 to {max}"));
     }
     if !(1..=max).contains(&args.idle_timeout_secs) {
-        return Err(format!("--idle-timeout-secs must be from 1 to {max}").into());
+        return usage(format!("--idle-timeout-secs must be from 1 to {max}"));
     }
     if args.job_lease_secs == 0 {
-        return Err("--job-lease-secs must be at least 1".into());
+        return usage("--job-lease-secs must be at least 1".into());
     }
     init_tracing(args.log_format);
     let cfg = ServiceConfig {
@@ -132,7 +134,8 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
         .enable_all()
         .worker_threads(args.runtime_threads)
         .thread_name("drawcal-http")
-        .build()?;
+        .build()
+        .map_err(|e| CliError::Service(e.into()))?;
     // Through the log (not eprintln) so that JSON logs are JSON throughout;
     // the runtime's own count of its worker threads.
     tracing::info!(
@@ -151,13 +154,12 @@ pub fn run(args: ServeArgs) -> Result<(), Box<dyn std::error::Error>> {
     rt.block_on(async move {
         let service = Service::start(&cfg, engine_job_fn())
             .await
-            .map_err(|e| e.to_string())?;
+            .map_err(CliError::Service)?;
         service
             .run(shutdown_signal())
             .await
-            .map_err(|e| e.to_string())
-    })?;
-    Ok(())
+            .map_err(|e| CliError::Service(e.into()))
+    })
 }
 
 /// Structured logs (key=value text or JSON lines, with request and job

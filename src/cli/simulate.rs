@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::{CliError, core, read};
 use crate::model::{Rig, Robot};
 use crate::physics::simulate::{self, Simulated};
 
@@ -18,18 +19,31 @@ pub struct SimulateArgs {
 }
 
 /// Generate a dataset.
-pub fn run(args: SimulateArgs) -> Result<(), Box<dyn std::error::Error>> {
-    let text =
-        std::fs::read_to_string(&args.spec).map_err(|e| format!("{}: {e}", args.spec.display()))?;
+pub fn run(args: SimulateArgs) -> Result<(), CliError> {
     let spec: simulate::Spec =
-        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", args.spec.display()))?;
+        serde_json::from_str(&read(&args.spec)?).map_err(|source| CliError::Parse {
+            path: args.spec.clone(),
+            source,
+        })?;
+    // The files the spec names, read here: the engine reads none.
+    let named = |path: &str| -> Result<(PathBuf, String), CliError> {
+        let path = PathBuf::from(path);
+        let text = read(&path)?;
+        Ok((path, text))
+    };
     let files = simulate::SpecFiles {
         robot: match simulate::preset(&spec.robot) {
             Some(_) => None,
-            None => Some(Robot::from_json(&read_named(&spec.robot)?)?),
+            None => {
+                let (path, text) = named(&spec.robot)?;
+                Some(core(&path, Robot::from_json(&text))?)
+            }
         },
         rig: match &spec.rig {
-            Some(path) => Some(Rig::from_json(&read_named(path)?)?),
+            Some(rig) => {
+                let (path, text) = named(rig)?;
+                Some(core(&path, Rig::from_json(&text))?)
+            }
             None => None,
         },
     };
@@ -58,20 +72,20 @@ pub fn run(args: SimulateArgs) -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-/// A file a spec names, its path in the error.
-fn read_named(path: &str) -> crate::Result<String> {
-    std::fs::read_to_string(path).map_err(|e| crate::Error::field(path, e.to_string()))
-}
-
 /// Write robot.json, rig.json, poses.csv and truth.json into `dir`.
-pub fn write(sim: &Simulated, dir: &Path) -> crate::Result<()> {
-    let io = |e: std::io::Error| crate::Error::field(dir.display().to_string(), e.to_string());
-    std::fs::create_dir_all(dir).map_err(io)?;
+pub fn write(sim: &Simulated, dir: &Path) -> Result<(), CliError> {
+    let io = |path: PathBuf| move |source| CliError::Io { path, source };
+    std::fs::create_dir_all(dir).map_err(io(dir.into()))?;
     let json = |v: &dyn erased::Ser| v.to_pretty();
-    std::fs::write(dir.join("robot.json"), json(&sim.robot)).map_err(io)?;
-    std::fs::write(dir.join("rig.json"), json(&sim.rig)).map_err(io)?;
-    std::fs::write(dir.join("poses.csv"), &sim.poses_csv).map_err(io)?;
-    std::fs::write(dir.join("truth.json"), json(&sim.truth)).map_err(io)?;
+    for (name, text) in [
+        ("robot.json", json(&sim.robot)),
+        ("rig.json", json(&sim.rig)),
+        ("poses.csv", sim.poses_csv.clone()),
+        ("truth.json", json(&sim.truth)),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, text).map_err(io(path.clone()))?;
+    }
     Ok(())
 }
 

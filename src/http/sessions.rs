@@ -347,6 +347,35 @@ pub async fn upload_poses(
     body: RawBody,
 ) -> ApiResult<Json<UploadResult>> {
     let session = app.store.get_session(id).await?;
+    let table = upload_table(&body)?;
+    // Columns: the first batch fixes them; later batches must match (in any order).
+    let (header, rows) = match &session.columns {
+        None => (table.header, table.rows),
+        Some(cols) => in_session_columns(cols, table)?,
+    };
+    let columns = csv_line(&header)?;
+    let body_csv = csv_body(&rows)?;
+    let n_new = rows.len() as i64;
+    validate_with_stored(&app, &session, &columns, &body_csv).await?;
+    let session = app
+        .store
+        .append_poses(id, session.n_batches, &columns, &body_csv, n_new)
+        .await?;
+    tracing::info!(
+        session_id = id,
+        added = n_new,
+        total = session.n_poses,
+        "poses stored"
+    );
+    Ok(Json(UploadResult {
+        added: n_new,
+        session,
+    }))
+}
+
+/// The uploaded table (CSV or JSON by content type), with rows and named,
+/// distinct columns.
+fn upload_table(body: &RawBody) -> ApiResult<Table> {
     let table = match body.content_type.as_deref() {
         Some("text/csv") => table_from_csv(&body.bytes)?,
         ct if is_json(ct) => table_from_json(&body.bytes)?,
@@ -373,102 +402,93 @@ pub async fn upload_poses(
             return Err(ApiError::invalid(h.clone(), "column appears twice"));
         }
     }
-    // Columns: the first batch fixes them; later batches must match (in any order).
-    let (header, rows) = match &session.columns {
-        None => (table.header, table.rows),
-        Some(cols) => {
-            let existing = table_from_csv(format!("{cols}\n").as_bytes())?.header;
-            let pos: HashMap<&str, usize> = table
-                .header
-                .iter()
-                .enumerate()
-                .map(|(i, h)| (h.as_str(), i))
-                .collect();
-            let missing: Vec<&str> = existing
-                .iter()
-                .map(String::as_str)
-                .filter(|c| !pos.contains_key(c))
-                .collect();
-            let extra: Vec<&str> = table
-                .header
-                .iter()
-                .map(String::as_str)
-                .filter(|c| !existing.iter().any(|e| e == c))
-                .collect();
-            if !missing.is_empty() || !extra.is_empty() {
-                return Err(ApiError::invalid(
-                    "header",
-                    format!(
-                        "a batch must have the session's columns ({cols}); missing: [{}], extra: [{}]",
-                        missing.join(", "),
-                        extra.join(", ")
-                    ),
-                ));
-            }
-            let order: Vec<usize> = existing.iter().map(|c| pos[c.as_str()]).collect();
-            let rows = table
-                .rows
-                .into_iter()
-                .map(|r| {
-                    order
-                        .iter()
-                        .map(|&i| r.get(i).cloned().unwrap_or_default())
-                        .collect()
-                })
-                .collect();
-            (existing, rows)
-        }
-    };
-    let columns = csv_line(&header)?;
-    let body_csv = csv_body(&rows)?;
-    let n_new = rows.len() as i64;
+    Ok(table)
+}
 
-    // Validate the stored poses and the new ones together, off the runtime.
-    let (robot, rig) = robot_and_rig(&app, &session).await?;
-    let mut batches = app.store.pose_batches(id).await?;
-    batches.push(body_csv.clone());
-    let full = session_csv(&columns, &batches);
+/// A later batch's rows in the session's column order (`cols`, fixed by
+/// the first batch); its columns must be the same set.
+#[allow(clippy::type_complexity)]
+fn in_session_columns(cols: &str, table: Table) -> ApiResult<(Vec<String>, Vec<Vec<String>>)> {
+    let existing = table_from_csv(format!("{cols}\n").as_bytes())?.header;
+    let pos: HashMap<&str, usize> = table
+        .header
+        .iter()
+        .enumerate()
+        .map(|(i, h)| (h.as_str(), i))
+        .collect();
+    let missing: Vec<&str> = existing
+        .iter()
+        .map(String::as_str)
+        .filter(|c| !pos.contains_key(c))
+        .collect();
+    let extra: Vec<&str> = table
+        .header
+        .iter()
+        .map(String::as_str)
+        .filter(|c| !existing.iter().any(|e| e == c))
+        .collect();
+    if !missing.is_empty() || !extra.is_empty() {
+        return Err(ApiError::invalid(
+            "header",
+            format!(
+                "a batch must have the session's columns ({cols}); missing: [{}], extra: [{}]",
+                missing.join(", "),
+                extra.join(", ")
+            ),
+        ));
+    }
+    let order: Vec<usize> = existing.iter().map(|c| pos[c.as_str()]).collect();
+    let rows = table
+        .rows
+        .into_iter()
+        .map(|r| {
+            order
+                .iter()
+                .map(|&i| r.get(i).cloned().unwrap_or_default())
+                .collect()
+        })
+        .collect();
+    Ok((existing, rows))
+}
+
+/// The stored poses and the new batch validated together, off the
+/// runtime: a bad new row is a 422 naming its row within the batch; stored
+/// rows that no longer validate (the robot or rig changed) are a 409.
+async fn validate_with_stored(
+    app: &AppState,
+    session: &SessionRec,
+    columns: &str,
+    body_csv: &str,
+) -> ApiResult<()> {
+    let (robot, rig) = robot_and_rig(app, session).await?;
+    let mut batches = app.store.pose_batches(session.id).await?;
+    batches.push(body_csv.to_string());
+    let full = session_csv(columns, &batches);
     let existing_rows = session.n_poses as usize;
     let checked = tokio::task::spawn_blocking(move || {
         Dataset::from_csv(full.as_bytes(), &robot, &rig).map(|_| ())
     })
     .await
     .map_err(|e| ApiError::Internal(format!("validation task: {e}")))?;
-    if let Err(e) = checked {
-        return Err(match e {
-            crate::Error::Input {
-                field,
-                row: Some(r),
-                message,
-            } if r > existing_rows => ApiError::Invalid {
-                message,
-                field,
-                row: Some(r - existing_rows),
-            },
-            crate::Error::Input {
-                row: Some(_),
-                message,
-                ..
-            } => ApiError::Conflict(format!(
-                "the poses already stored no longer validate with this robot and rig: {message}"
-            )),
-            other => other.into(),
-        });
-    }
-    let session = app
-        .store
-        .append_poses(id, session.n_batches, &columns, &body_csv, n_new)
-        .await?;
-    tracing::info!(
-        session_id = id,
-        added = n_new,
-        total = session.n_poses,
-        "poses stored"
-    );
-    Ok(Json(UploadResult {
-        added: n_new,
-        session,
-    }))
+    checked.map_err(|e| match e {
+        crate::Error::Input {
+            field,
+            row: Some(r),
+            message,
+        } if r > existing_rows => ApiError::Invalid {
+            message,
+            field,
+            row: Some(r - existing_rows),
+        },
+        crate::Error::Input {
+            row: Some(_),
+            message,
+            ..
+        } => ApiError::Conflict(format!(
+            "the poses already stored no longer validate with this robot and rig: {message}"
+        )),
+        other => other.into(),
+    })
 }
 
 /// The session's poses as one CSV (DATA_FORMAT.md poses.csv).

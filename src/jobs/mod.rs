@@ -216,22 +216,48 @@ impl Progress for JobProgress {
     }
 }
 
-/// Load a job's robot, rig and poses. `Err` is the reason the job fails.
-pub async fn load_input(store: &Store, job: &JobRec) -> Result<JobInput, String> {
-    let fail = |e: crate::store::StoreError| format!("loading inputs: {e}");
-    let session = store.get_session(job.session_id).await.map_err(fail)?;
-    let robot_rec = store.get_robot(session.robot_id).await.map_err(fail)?;
-    let model = store.get_model(robot_rec.model_id).await.map_err(fail)?;
-    let rig_rec = store.get_rig(session.rig_id).await.map_err(fail)?;
-    let batches = store.pose_batches(session.id).await.map_err(fail)?;
-    let options: JobOptions =
-        serde_json::from_str(&job.options).map_err(|e| format!("bad job options: {e}"))?;
-    let robot = Robot::from_json(&model.robot_json).map_err(|e| format!("robot model: {e}"))?;
-    let rig = Rig::from_json(&rig_rec.rig_json).map_err(|e| format!("rig: {e}"))?;
+/// Why a job failed: its text is what the job's `error` records.
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    /// Its inputs could not be read from the store.
+    #[error("loading inputs: {0}")]
+    Store(#[from] crate::store::StoreError),
+    /// Its stored options do not parse.
+    #[error("bad job options: {0}")]
+    Options(serde_json::Error),
+    /// The session's robot model is not a valid robot.json.
+    #[error("robot model: {0}")]
+    Robot(crate::Error),
+    /// The session's rig is not a valid rig.json.
+    #[error("rig: {0}")]
+    Rig(crate::Error),
+    /// The session's poses are not valid for its robot and rig.
+    #[error("poses: {0}")]
+    Poses(crate::Error),
+    /// The engine refused the data or failed.
+    #[error("{0}")]
+    Engine(crate::Error),
+    /// The report could not be written as JSON.
+    #[error("report not serialisable: {0}")]
+    Report(serde_json::Error),
+    /// The engine panicked.
+    #[error("internal error: the engine panicked")]
+    Panicked,
+}
+
+/// Load a job's robot, rig and poses.
+pub async fn load_input(store: &Store, job: &JobRec) -> Result<JobInput, JobError> {
+    let session = store.get_session(job.session_id).await?;
+    let robot_rec = store.get_robot(session.robot_id).await?;
+    let model = store.get_model(robot_rec.model_id).await?;
+    let rig_rec = store.get_rig(session.rig_id).await?;
+    let batches = store.pose_batches(session.id).await?;
+    let options: JobOptions = serde_json::from_str(&job.options).map_err(JobError::Options)?;
+    let robot = Robot::from_json(&model.robot_json).map_err(JobError::Robot)?;
+    let rig = Rig::from_json(&rig_rec.rig_json).map_err(JobError::Rig)?;
     let columns = session.columns.unwrap_or_default();
     let csv = session_csv(&columns, &batches);
-    let data =
-        Dataset::from_csv(csv.as_bytes(), &robot, &rig).map_err(|e| format!("poses: {e}"))?;
+    let data = Dataset::from_csv(csv.as_bytes(), &robot, &rig).map_err(JobError::Poses)?;
     Ok(JobInput {
         robot,
         rig,
@@ -384,7 +410,7 @@ impl Worker {
         let input = match load_input(&self.store, &job).await {
             Ok(i) => i,
             Err(reason) => {
-                self.finish(id, "failed", Some(&reason)).await;
+                self.fail(id, reason).await;
                 return;
             }
         };
@@ -467,8 +493,7 @@ impl Worker {
                 let json = match serde_json::to_string(&report) {
                     Ok(j) => j,
                     Err(e) => {
-                        self.finish(id, "failed", Some(&format!("report not serialisable: {e}")))
-                            .await;
+                        self.fail(id, JobError::Report(e)).await;
                         return;
                     }
                 };
@@ -487,13 +512,17 @@ impl Worker {
                 }
             }
             Ok(Err(crate::Error::Cancelled)) => self.finish(id, "cancelled", None).await,
-            Ok(Err(e)) => self.finish(id, "failed", Some(&e.to_string())).await,
+            Ok(Err(e)) => self.fail(id, JobError::Engine(e)).await,
             Err(join) => {
                 tracing::error!(error = %join, "the engine panicked");
-                self.finish(id, "failed", Some("internal error: the engine panicked"))
-                    .await
+                self.fail(id, JobError::Panicked).await
             }
         }
+    }
+
+    /// End a job as failed, with why.
+    async fn fail(&self, id: i64, why: JobError) {
+        self.finish(id, "failed", Some(&why.to_string())).await
     }
 
     async fn finish(&self, id: i64, state: &str, error: Option<&str>) {

@@ -85,13 +85,67 @@ impl Dataset {
     /// (1-based, header excluded) and column.
     pub fn from_csv<R: Read>(input: R, robot: &Robot, rig: &Rig) -> Result<Self> {
         let (mut rdr, headers) = super::csv_with_header(input)?;
+        let cols = Columns::find(&headers, robot, rig)?;
+        let mut poses = Vec::new();
+        let mut seen = HashSet::new();
+        for (r, rec) in rdr.records().enumerate() {
+            let row = r + 1;
+            let rec = super::csv_record(row, rec, &headers)?;
+            let id = cols.id(row, &rec)?;
+            if !seen.insert(id.clone()) {
+                return Err(Error::cell(
+                    row,
+                    "pose",
+                    format!("duplicate pose id '{id}'"),
+                ));
+            }
+            poses.push(cols.pose(row, &rec, id, robot, rig)?);
+        }
+        if poses.is_empty() {
+            return Err(Error::InsufficientData("the file holds no poses".into()));
+        }
+        Ok(Dataset {
+            poses,
+            n_strings: if cols.strings.is_some() {
+                rig.n_strings()
+            } else {
+                0
+            },
+        })
+    }
+
+    /// True when the poses carry string readings (not points).
+    pub fn is_strings(&self) -> bool {
+        self.n_strings > 0
+    }
+}
+
+/// Where each column of a poses.csv is, checked against the robot and the
+/// rig once, before the rows are read.
+struct Columns {
+    pose: usize,
+    q: Vec<usize>,
+    /// The string columns, when the file has every one the rig needs.
+    strings: Option<Vec<usize>>,
+    /// x_mm, y_mm, z_mm (used without string columns).
+    xyz: [Option<usize>; 3],
+    time: Option<(usize, &'static str)>,
+    temp: Option<(usize, &'static str)>,
+    payload: Option<(usize, &'static str)>,
+    split: Option<usize>,
+}
+
+impl Columns {
+    /// The columns of `headers`: every joint of the robot, every string of
+    /// the rig or a measured point, no more joints or strings than those.
+    fn find(headers: &csv::StringRecord, robot: &Robot, rig: &Rig) -> Result<Columns> {
         let idx = |name: &str| headers.iter().position(|h| h == name);
         let n = robot.dof();
-        let pose_col = idx("pose").ok_or_else(|| Error::field("pose", "missing column 'pose'"))?;
-        let mut q_cols = Vec::with_capacity(n);
+        let pose = idx("pose").ok_or_else(|| Error::field("pose", "missing column 'pose'"))?;
+        let mut q = Vec::with_capacity(n);
         for j in 1..=n {
             let name = format!("q{j}_deg");
-            q_cols.push(idx(&name).ok_or_else(|| {
+            q.push(idx(&name).ok_or_else(|| {
                 Error::field(&name, format!("missing column (the robot has {n} joints)"))
             })?);
         }
@@ -118,8 +172,7 @@ impl Dataset {
             ));
         }
         let xyz = [idx("x_mm"), idx("y_mm"), idx("z_mm")];
-        let has_points = xyz.iter().all(|c| c.is_some());
-        if !has_strings && !has_points {
+        if !has_strings && !xyz.iter().all(|c| c.is_some()) {
             return Err(Error::field(
                 "header",
                 if m > 0 {
@@ -130,162 +183,192 @@ impl Dataset {
                 },
             ));
         }
-        let time_col = idx("time_s").map(|i| (i, "time_s"));
-        let temp_col = idx("temp_c").map(|i| (i, "temp_c"));
-        let payload_col = idx("payload_kg").map(|i| (i, "payload_kg"));
-        let split_col = idx("split");
-        let range = rig.sensor.and_then(|s| s.range_mm);
-
-        let mut poses = Vec::new();
-        let mut seen = HashSet::new();
-        for (r, rec) in rdr.records().enumerate() {
-            let row = r + 1;
-            let rec = super::csv_record(row, rec, &headers)?;
-            let id = rec.get(pose_col).unwrap_or("").trim().to_string();
-            if id.is_empty() {
-                return Err(Error::cell(row, "pose", "empty pose id"));
-            }
-            if !seen.insert(id.clone()) {
-                return Err(Error::cell(
-                    row,
-                    "pose",
-                    format!("duplicate pose id '{id}'"),
-                ));
-            }
-            let mut q_rad = Vec::with_capacity(n);
-            for (j, &c) in q_cols.iter().enumerate() {
-                let name = format!("q{}_deg", j + 1);
-                let v = super::parse_cell(row, &name, rec.get(c).unwrap_or(""))?;
-                let js = &robot.joints[j];
-                if v < js.q_min_deg - 1e-6 || v > js.q_max_deg + 1e-6 {
-                    return Err(Error::cell(
-                        row,
-                        &name,
-                        format!(
-                            "{} deg is outside the joint limits [{}, {}]",
-                            super::shown(v),
-                            js.q_min_deg,
-                            js.q_max_deg
-                        ),
-                    ));
-                }
-                q_rad.push(v.to_radians());
-            }
-            let measurement = if has_strings {
-                let mut ls = Vec::with_capacity(m);
-                for (k, c) in l_cols.iter().enumerate() {
-                    let name = format!("l{}_mm", k + 1);
-                    let v = super::parse_cell(row, &name, rec.get(c.unwrap()).unwrap_or(""))?;
-                    if v < 0.0 {
-                        return Err(Error::cell(
-                            row,
-                            &name,
-                            format!(
-                                "{} mm: a string reading cannot be negative",
-                                super::shown(v)
-                            ),
-                        ));
-                    }
-                    if let Some(rg) = range {
-                        if v > rg {
-                            return Err(Error::cell(
-                                row,
-                                &name,
-                                format!(
-                                    "{} mm is past the sensor's range of {rg} mm",
-                                    super::shown(v)
-                                ),
-                            ));
-                        }
-                    }
-                    ls.push(v);
-                }
-                Measurement::Strings(ls)
-            } else {
-                let mut p = [0.0; 3];
-                for (c, name) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
-                    p[c] = super::parse_cell(row, name, rec.get(xyz[c].unwrap()).unwrap_or(""))?;
-                    if p[c].abs() > MAX_COORD_MM {
-                        return Err(Error::cell(
-                            row,
-                            *name,
-                            format!(
-                                "{} mm: a measured point more than 10 km away",
-                                super::shown(p[c])
-                            ),
-                        ));
-                    }
-                }
-                Measurement::Point(Vector3::from(p))
-            };
-            let split = match split_col.map(|c| rec.get(c).unwrap_or("").trim()) {
-                None | Some("") => None,
-                Some(s) if s.eq_ignore_ascii_case("train") => Some(Split::Train),
-                Some(s) if s.eq_ignore_ascii_case("test") => Some(Split::Test),
-                Some(s) => {
-                    return Err(Error::cell(
-                        row,
-                        "split",
-                        format!("'{s}': expected train or test"),
-                    ));
-                }
-            };
-            let time_s = parse_opt(row, time_col, &rec)?;
-            if let Some(t) = time_s.filter(|t| t.abs() > MAX_TIME_S) {
-                // Differences of times must stay finite (drifts are per hour
-                // since the first pose); epoch seconds are far inside this.
-                return Err(Error::cell(
-                    row,
-                    "time_s",
-                    format!(
-                        "{} s is not a plausible time (more than 10^12 s)",
-                        super::shown(t)
-                    ),
-                ));
-            }
-            let temp_c = parse_opt(row, temp_col, &rec)?;
-            if let Some(t) = temp_c.filter(|t| !(-100.0..=300.0).contains(t)) {
-                return Err(Error::cell(
-                    row,
-                    "temp_c",
-                    format!("{} °C is outside -100..300 °C", super::shown(t)),
-                ));
-            }
-            let payload_kg = parse_opt(row, payload_col, &rec)?;
-            if let Some(p) = payload_kg.filter(|p| !(0.0..=super::MAX_PAYLOAD_KG).contains(p)) {
-                return Err(Error::cell(
-                    row,
-                    "payload_kg",
-                    format!(
-                        "{} kg is outside 0..{} kg",
-                        super::shown(p),
-                        super::MAX_PAYLOAD_KG
-                    ),
-                ));
-            }
-            poses.push(PoseRecord {
-                id,
-                q_rad,
-                measurement,
-                time_s,
-                temp_c,
-                payload_kg,
-                split,
-            });
-        }
-        if poses.is_empty() {
-            return Err(Error::InsufficientData("the file holds no poses".into()));
-        }
-        Ok(Dataset {
-            poses,
-            n_strings: if has_strings { m } else { 0 },
+        Ok(Columns {
+            pose,
+            q,
+            strings: has_strings.then(|| l_cols.into_iter().flatten().collect()),
+            xyz,
+            time: idx("time_s").map(|i| (i, "time_s")),
+            temp: idx("temp_c").map(|i| (i, "temp_c")),
+            payload: idx("payload_kg").map(|i| (i, "payload_kg")),
+            split: idx("split"),
         })
     }
 
-    /// True when the poses carry string readings (not points).
-    pub fn is_strings(&self) -> bool {
-        self.n_strings > 0
+    /// A row's pose id, not empty.
+    fn id(&self, row: usize, rec: &csv::StringRecord) -> Result<String> {
+        let id = rec.get(self.pose).unwrap_or("").trim().to_string();
+        if id.is_empty() {
+            return Err(Error::cell(row, "pose", "empty pose id"));
+        }
+        Ok(id)
     }
+
+    /// One row as the pose `id`, every cell checked.
+    fn pose(
+        &self,
+        row: usize,
+        rec: &csv::StringRecord,
+        id: String,
+        robot: &Robot,
+        rig: &Rig,
+    ) -> Result<PoseRecord> {
+        let q_rad = self.joint_angles(row, rec, robot)?;
+        let measurement = match &self.strings {
+            Some(cols) => Measurement::Strings(string_readings(row, rec, cols, rig)?),
+            None => Measurement::Point(self.point(row, rec)?),
+        };
+        let split = self.split(row, rec)?;
+        let (time_s, temp_c, payload_kg) = self.conditions(row, rec)?;
+        Ok(PoseRecord {
+            id,
+            q_rad,
+            measurement,
+            time_s,
+            temp_c,
+            payload_kg,
+            split,
+        })
+    }
+
+    /// The joint angles (rad), each within the robot's limits.
+    fn joint_angles(&self, row: usize, rec: &csv::StringRecord, robot: &Robot) -> Result<Vec<f64>> {
+        let mut q_rad = Vec::with_capacity(self.q.len());
+        for (j, &c) in self.q.iter().enumerate() {
+            let name = format!("q{}_deg", j + 1);
+            let v = super::parse_cell(row, &name, rec.get(c).unwrap_or(""))?;
+            let js = &robot.joints[j];
+            if v < js.q_min_deg - 1e-6 || v > js.q_max_deg + 1e-6 {
+                return Err(Error::cell(
+                    row,
+                    &name,
+                    format!(
+                        "{} deg is outside the joint limits [{}, {}]",
+                        super::shown(v),
+                        js.q_min_deg,
+                        js.q_max_deg
+                    ),
+                ));
+            }
+            q_rad.push(v.to_radians());
+        }
+        Ok(q_rad)
+    }
+
+    /// A measured point (mm), within 10 km.
+    fn point(&self, row: usize, rec: &csv::StringRecord) -> Result<Vector3<f64>> {
+        let mut p = [0.0; 3];
+        for (c, name) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
+            let col = self.xyz[c].expect("checked by Columns::find");
+            p[c] = super::parse_cell(row, name, rec.get(col).unwrap_or(""))?;
+            if p[c].abs() > MAX_COORD_MM {
+                return Err(Error::cell(
+                    row,
+                    *name,
+                    format!(
+                        "{} mm: a measured point more than 10 km away",
+                        super::shown(p[c])
+                    ),
+                ));
+            }
+        }
+        Ok(Vector3::from(p))
+    }
+
+    /// The `split` cell: train, test or empty.
+    fn split(&self, row: usize, rec: &csv::StringRecord) -> Result<Option<Split>> {
+        match self.split.map(|c| rec.get(c).unwrap_or("").trim()) {
+            None | Some("") => Ok(None),
+            Some(s) if s.eq_ignore_ascii_case("train") => Ok(Some(Split::Train)),
+            Some(s) if s.eq_ignore_ascii_case("test") => Ok(Some(Split::Test)),
+            Some(s) => Err(Error::cell(
+                row,
+                "split",
+                format!("'{s}': expected train or test"),
+            )),
+        }
+    }
+
+    /// Time (s), temperature (°C) and payload (kg), each plausible.
+    #[allow(clippy::type_complexity)]
+    fn conditions(
+        &self,
+        row: usize,
+        rec: &csv::StringRecord,
+    ) -> Result<(Option<f64>, Option<f64>, Option<f64>)> {
+        let time_s = parse_opt(row, self.time, rec)?;
+        if let Some(t) = time_s.filter(|t| t.abs() > MAX_TIME_S) {
+            // Differences of times must stay finite (drifts are per hour
+            // since the first pose); epoch seconds are far inside this.
+            return Err(Error::cell(
+                row,
+                "time_s",
+                format!(
+                    "{} s is not a plausible time (more than 10^12 s)",
+                    super::shown(t)
+                ),
+            ));
+        }
+        let temp_c = parse_opt(row, self.temp, rec)?;
+        if let Some(t) = temp_c.filter(|t| !(-100.0..=300.0).contains(t)) {
+            return Err(Error::cell(
+                row,
+                "temp_c",
+                format!("{} °C is outside -100..300 °C", super::shown(t)),
+            ));
+        }
+        let payload_kg = parse_opt(row, self.payload, rec)?;
+        if let Some(p) = payload_kg.filter(|p| !(0.0..=super::MAX_PAYLOAD_KG).contains(p)) {
+            return Err(Error::cell(
+                row,
+                "payload_kg",
+                format!(
+                    "{} kg is outside 0..{} kg",
+                    super::shown(p),
+                    super::MAX_PAYLOAD_KG
+                ),
+            ));
+        }
+        Ok((time_s, temp_c, payload_kg))
+    }
+}
+
+/// The string readings (mm) of a row, none negative or past the sensor's
+/// range.
+fn string_readings(
+    row: usize,
+    rec: &csv::StringRecord,
+    cols: &[usize],
+    rig: &Rig,
+) -> Result<Vec<f64>> {
+    let range = rig.sensor.and_then(|s| s.range_mm);
+    let mut ls = Vec::with_capacity(cols.len());
+    for (k, &c) in cols.iter().enumerate() {
+        let name = format!("l{}_mm", k + 1);
+        let v = super::parse_cell(row, &name, rec.get(c).unwrap_or(""))?;
+        if v < 0.0 {
+            return Err(Error::cell(
+                row,
+                &name,
+                format!(
+                    "{} mm: a string reading cannot be negative",
+                    super::shown(v)
+                ),
+            ));
+        }
+        if let Some(rg) = range.filter(|&rg| v > rg) {
+            return Err(Error::cell(
+                row,
+                &name,
+                format!(
+                    "{} mm is past the sensor's range of {rg} mm",
+                    super::shown(v)
+                ),
+            ));
+        }
+        ls.push(v);
+    }
+    Ok(ls)
 }
 
 #[cfg(test)]

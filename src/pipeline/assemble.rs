@@ -12,21 +12,88 @@ use crate::identify::{
 };
 use crate::kinematics::{JointParam, Params};
 use crate::model::{Measurement, Split};
-use crate::physics::{self, Context, EffectModel};
+use crate::physics::{self, Analysis, Context, EffectModel};
 use crate::report::{
-    Convergence, Identifiability, JointDeviation, Outlier, ParamEstimate, PoseResidual,
+    Convergence, Finding, Identifiability, JointDeviation, Outlier, ParamEstimate, PoseResidual,
     REPORT_FORMAT, Report,
 };
 use crate::stats;
 
 /// The final model: the parameters, their 1-sigma (over the free ones of
-/// `selection`), and the accepted effects with their context.
+/// `selection`), the accepted effects with their context, and its errors
+/// at every pose.
 struct FinalModel<'g> {
+    /// `lm` or `paper`.
+    method: &'static str,
     params: Params,
     sigmas: Vec<f64>,
     /// The free parameters and those held (none with the paper's method).
     selection: Option<&'g identifiability::Selection>,
     effects: Option<(Context, Vec<EffectModel>)>,
+    /// Model minus measured T at every pose (base frame, mm).
+    errors: Vec<Vector3<f64>>,
+}
+
+/// The model the report describes: the geometric fit (or the paper's
+/// one-step solution), refitted with the effects the physics analysis
+/// accepted; and the analysis's findings.
+fn final_model<'g>(
+    obs: &Observations,
+    geo: &'g Geometric,
+    opts: &IdentifyOptions,
+    paper: &Result<Params>,
+    analysis: Option<Analysis>,
+) -> Result<(FinalModel<'g>, Vec<Finding>)> {
+    let l = obs.chain.layout;
+    let all: Vec<usize> = (0..obs.data.poses.len()).collect();
+    let mut model = match opts.method {
+        Method::Lm => FinalModel {
+            method: "lm",
+            params: geo.after.clone(),
+            sigmas: identify::sigmas(&geo.result.jtj, geo.sigma),
+            selection: Some(&geo.selection),
+            effects: None,
+            errors: obs.errors(&geo.after.values, &all),
+        },
+        Method::Paper => {
+            let p = paper
+                .as_ref()
+                .map_err(|e| Error::Numerical(format!("paper method: {e}")))?;
+            FinalModel {
+                method: "paper",
+                params: Params {
+                    layout: l,
+                    values: p.values.clone(),
+                },
+                sigmas: vec![],
+                selection: None,
+                effects: None,
+                errors: obs.errors(&p.values, &all),
+            }
+        }
+    };
+    let Some(an) = analysis else {
+        return Ok((model, vec![]));
+    };
+    if !an.effects.is_empty() {
+        // The final model is the geometry refitted with the accepted
+        // effects; its errors are what stats.*.after and per_pose report.
+        model.errors = physics::errors_with_effects(
+            obs,
+            &an.context,
+            &an.final_params.values,
+            &an.effects,
+            &all,
+        );
+        model.params.values = an.final_params.values.clone();
+        // Uncertainties of the final model, not of the geometric fit it
+        // started from.
+        if let Some(s) = an.final_sigmas {
+            model.sigmas = s;
+        }
+        model.effects = Some((an.context, an.effects));
+    }
+    Ok((model, an.findings))
 }
 
 /// Build the report of a calibration.
@@ -43,59 +110,9 @@ pub fn report(
         .string_sigma()
         .or_else(|| (l.n_strings > 0).then_some(geo.sigma));
     let paper = paper::one_step(obs, &geo.before);
-    let (mut model, method) = match opts.method {
-        Method::Lm => (
-            FinalModel {
-                params: geo.after.clone(),
-                sigmas: identify::sigmas(&geo.result.jtj, geo.sigma),
-                selection: Some(&geo.selection),
-                effects: None,
-            },
-            "lm",
-        ),
-        Method::Paper => {
-            let p = paper
-                .as_ref()
-                .map_err(|e| Error::Numerical(format!("paper method: {e}")))?;
-            (
-                FinalModel {
-                    params: Params {
-                        layout: l,
-                        values: p.values.clone(),
-                    },
-                    sigmas: vec![],
-                    selection: None,
-                    effects: None,
-                },
-                "paper",
-            )
-        }
-    };
+    let (model, findings) = final_model(obs, geo, opts, &paper, physics.analysis)?;
     let all: Vec<usize> = (0..data.poses.len()).collect();
     let eb = obs.errors(&geo.before.values, &all);
-    let mut ea = obs.errors(&model.params.values, &all);
-    let mut findings = vec![];
-    if let Some(an) = physics.analysis {
-        if !an.effects.is_empty() {
-            // The final model is the geometry refitted with the accepted
-            // effects; its errors are what stats.*.after and per_pose report.
-            ea = physics::errors_with_effects(
-                obs,
-                &an.context,
-                &an.final_params.values,
-                &an.effects,
-                &all,
-            );
-            model.params.values = an.final_params.values.clone();
-            // Uncertainties of the final model, not of the geometric fit
-            // it started from.
-            if let Some(s) = an.final_sigmas {
-                model.sigmas = s;
-            }
-            model.effects = Some((an.context, an.effects));
-        }
-        findings = an.findings;
-    }
     let paper_stats = match (&paper, opts.method) {
         (Ok(p), Method::Lm) => Some(obs.stats_of(&eb, &obs.errors(&p.values, &all))),
         _ => None,
@@ -122,7 +139,7 @@ pub fn report(
     let (deviations, parameters) = deviations_and_estimates(obs, geo, &model);
     Ok(Report {
         format: REPORT_FORMAT.into(),
-        method: method.into(),
+        method: model.method.into(),
         robust: opts.robust,
         nominal_robot: robot.clone(),
         calibrated_robot: after.to_robot(robot, &format!("{} (calibrated)", robot.name)),
@@ -136,7 +153,7 @@ pub fn report(
             .map(|f| f.name.clone())
             .collect(),
         identifiability,
-        stats: obs.stats_of(&eb, &ea),
+        stats: obs.stats_of(&eb, &model.errors),
         paper_stats,
         noise_floor_mm: obs.noise_floor(string_sigma),
         expected_test_rms_mm: obs.expected_test_rms(
@@ -161,7 +178,7 @@ pub fn report(
                 .sqrt(),
         },
         closed_form_vs_lsq: identify::closed_form_comparison(obs),
-        per_pose: per_pose(obs, &train_problem, &model, &eb, &ea),
+        per_pose: per_pose(obs, &train_problem, &model, &eb),
         findings,
         physics: physics.run,
         physics_notes: physics.notes,
@@ -269,8 +286,8 @@ fn per_pose(
     train_problem: &CalibrationProblem,
     model: &FinalModel,
     eb: &[Vector3<f64>],
-    ea: &[Vector3<f64>],
 ) -> Vec<PoseResidual> {
+    let ea = &model.errors;
     let data = obs.data;
     let l = obs.chain.layout;
     let after = &model.params.values;
