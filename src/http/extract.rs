@@ -219,7 +219,7 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
                     row: None,
                 }),
                 Category::Data => Err(ApiError::Invalid {
-                    message: inner.to_string(),
+                    message: crate::model::with_key_hint(&inner.to_string()),
                     field,
                     row: None,
                 }),

@@ -14,6 +14,70 @@ pub use targets::{Target, TargetKind};
 
 use crate::error::{Error, Result};
 
+/// Parse a robot.json or rig.json text (`file`) strictly: a key the format
+/// does not have is an error naming it, where it is (`joints[2]`), and the
+/// nearest key the format has (a typo such as `conventon` is never silently
+/// ignored).
+pub(crate) fn parse_strict<T: serde::de::DeserializeOwned>(file: &str, text: &str) -> Result<T> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let message = with_key_hint(&e.into_inner().to_string());
+        match path.as_str() {
+            "." | "" => Error::field(file, message),
+            // The path of the value at fault (an unknown key: the key).
+            _ => Error::field(format!("{file}: {path}"), message),
+        }
+    })
+}
+
+/// serde's "unknown field `x`, expected one of `a`, `b`" (or "expected
+/// `a`") as "unknown key `x` (did you mean `a`?); the keys here are a, b",
+/// the nearest known key by edit distance; any other message unchanged.
+pub fn with_key_hint(message: &str) -> String {
+    let Some(rest) = message.strip_prefix("unknown field `") else {
+        return message.to_string();
+    };
+    let Some(end) = rest.find('`') else {
+        return message.to_string();
+    };
+    let key = &rest[..end];
+    let after = &rest[end + 1..];
+    // The known keys are the back-quoted words after "expected".
+    let expected = after.split_once("expected").map_or("", |(_, e)| e);
+    let tail_at = expected.rfind('`').map_or(0, |i| i + 1);
+    let (list, tail) = expected.split_at(tail_at);
+    let known: Vec<&str> = list.split('`').skip(1).step_by(2).collect();
+    let nearest = known
+        .iter()
+        .map(|k| (edit_distance(key, k), *k))
+        .filter(|(d, k)| *d <= (k.len().max(key.len()) / 2).max(2))
+        .min();
+    let hint = nearest.map_or(String::new(), |(_, k)| format!(" (did you mean `{k}`?)"));
+    let keys = if known.is_empty() {
+        "none".to_string()
+    } else {
+        known.join(", ")
+    };
+    format!("unknown key `{key}`{hint}; the keys here are {keys}{tail}")
+}
+
+/// Levenshtein distance between two keys (bytes; keys are ASCII).
+fn edit_distance(a: &str, b: &str) -> usize {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for (i, &ca) in a.iter().enumerate() {
+        let mut cur = vec![i + 1; b.len() + 1];
+        for (j, &cb) in b.iter().enumerate() {
+            cur[j + 1] = (prev[j] + usize::from(ca != cb))
+                .min(prev[j + 1] + 1)
+                .min(cur[j] + 1);
+        }
+        prev = cur;
+    }
+    prev[b.len()]
+}
+
 /// Reject NaN and infinities with an error naming the field.
 pub(crate) fn finite(field: &str, v: f64) -> Result<f64> {
     if v.is_finite() {
@@ -173,4 +237,30 @@ pub(crate) fn parse_cell(row: usize, col: &str, raw: &str) -> Result<f64> {
         ));
     }
     Ok(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_unknown_key_names_the_nearest_known_one() {
+        let m = with_key_hint(
+            "unknown field `conventon`, expected one of `name`, `convention`, `joints` at line 1 column 12",
+        );
+        assert_eq!(
+            m,
+            "unknown key `conventon` (did you mean `convention`?); the keys here are name, convention, joints at line 1 column 12"
+        );
+        // Nothing near: no guess.
+        let m = with_key_hint("unknown field `zzzzzzzz`, expected `a_mm` or `d_mm`");
+        assert!(!m.contains("did you mean"), "{m}");
+        assert!(m.contains("a_mm, d_mm"), "{m}");
+        // Other messages pass through.
+        assert_eq!(
+            with_key_hint("missing field `joints`"),
+            "missing field `joints`"
+        );
+        assert_eq!(edit_distance("r_m", "r_mm"), 1);
+    }
 }

@@ -9,6 +9,7 @@ use crate::error::{Error, Result};
 /// A rigid pose given as translation and roll-pitch-yaw, applied as
 /// `Rz(yaw) Ry(pitch) Rx(roll)` (DATA_FORMAT.md).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct BasePose {
     /// Translation (mm).
     pub xyz_mm: [f64; 3],
@@ -18,6 +19,7 @@ pub struct BasePose {
 
 /// Sensor data sheet values.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SensorSpec {
     /// Measuring range (mm): a reading beyond it is refused.
     #[serde(default)]
@@ -57,6 +59,7 @@ pub struct Rig {
 /// rig.json as written: `r_mm` may be left out only by a rig without
 /// strings (a tracker or camera), where it means nothing.
 #[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct RigFile {
     #[serde(default)]
     anchors_mm: Vec<[f64; 3]>,
@@ -100,8 +103,7 @@ impl TryFrom<RigFile> for Rig {
 impl Rig {
     /// Parse and validate rig.json text.
     pub fn from_json(text: &str) -> Result<Self> {
-        let rig: Rig =
-            serde_json::from_str(text).map_err(|e| Error::field("rig.json", e.to_string()))?;
+        let rig: Rig = super::parse_strict("rig.json", text)?;
         rig.validate()?;
         Ok(rig)
     }

@@ -18,6 +18,7 @@ pub enum Convention {
 
 /// One joint's nominal geometry and limits, units as in the file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct JointSpec {
     /// Link length a (mm).
     pub a_mm: f64,
@@ -48,6 +49,7 @@ fn default_qmax() -> f64 {
 
 /// Mass and centre of mass of a link in its own DH frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct LinkMass {
     /// Mass (kg).
     pub mass_kg: f64,
@@ -55,8 +57,10 @@ pub struct LinkMass {
     pub com_mm: [f64; 3],
 }
 
-/// A robot model as in robot.json.
+/// A robot model as in robot.json. Every key is one DATA_FORMAT.md lists:
+/// an unknown one (a typo) is refused, never ignored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Robot {
     /// Human-readable name.
     #[serde(default)]
@@ -79,8 +83,7 @@ pub struct Robot {
 impl Robot {
     /// Parse and validate robot.json text.
     pub fn from_json(text: &str) -> Result<Self> {
-        let robot: Robot =
-            serde_json::from_str(text).map_err(|e| Error::field("robot.json", e.to_string()))?;
+        let robot: Robot = super::parse_strict("robot.json", text)?;
         robot.validate()?;
         Ok(robot)
     }

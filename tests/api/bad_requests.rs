@@ -65,6 +65,45 @@ async fn bad_requests_are_refused_and_change_nothing() {
     // Store half the poses so later bad uploads have something to leave alone.
     ok_json(upload(lines[..26].join("\n")).send().await.unwrap(), 200).await;
 
+    // A typo in robot.json or rig.json is refused, naming the key and the
+    // nearest one the format has; nothing is stored.
+    let mut robot: Value = serde_json::from_str(&read(DS, "robot.json")).unwrap();
+    robot["conventon"] = "mdh".into();
+    let e = refused(
+        &app,
+        c.post(app.url("/models")).json(&robot),
+        422,
+        "invalid_input",
+        Some("conventon"),
+        None,
+    )
+    .await;
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("unknown key `conventon` (did you mean `convention`?)"),
+        "{e}"
+    );
+    let mut rig: Value = serde_json::from_str(&read(DS, "rig.json")).unwrap();
+    rig["sensor"] = json!({"rang_mm": 2000});
+    let e = refused(
+        &app,
+        c.post(app.url("/rigs")).json(&rig),
+        422,
+        "invalid_input",
+        Some("sensor.rang_mm"),
+        None,
+    )
+    .await;
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("did you mean `range_mm`?"),
+        "{e}"
+    );
+
     // Malformed JSON, wrong types, unknown fields, missing fields.
     refused(
         &app,

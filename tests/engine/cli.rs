@@ -659,3 +659,56 @@ fn serve_refuses_timeouts_it_cannot_keep() {
         }
     }
 }
+
+/// A typo in robot.json or rig.json stops `identify` with the key, the
+/// file and the nearest known key; nothing is written.
+#[test]
+fn a_typo_in_robot_or_rig_json_is_refused_by_name() {
+    let dir = scratch("typo");
+    let data = common::dir("er3a_paper_like");
+    let text = std::fs::read_to_string(data.join("robot.json")).unwrap();
+    let robot = dir.join("robot.json");
+    std::fs::write(&robot, text.replacen("\"convention\"", "\"conventon\"", 1)).unwrap();
+    assert!(
+        text.contains("\"convention\""),
+        "the dataset names its convention"
+    );
+    let out_json = dir.join("report.json");
+    let out = bin()
+        .args(["identify", "--robot"])
+        .arg(&robot)
+        .arg("--rig")
+        .arg(data.join("rig.json"))
+        .arg("--poses")
+        .arg(data.join("poses.csv"))
+        .arg("--out")
+        .arg(&out_json)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("robot.json")
+            && err.contains("unknown key `conventon` (did you mean `convention`?)"),
+        "{err}"
+    );
+    assert!(!out_json.exists());
+    let rig_text = std::fs::read_to_string(data.join("rig.json")).unwrap();
+    let rig = dir.join("rig.json");
+    std::fs::write(&rig, rig_text.replacen("\"r_mm\"", "\"r_m\"", 1)).unwrap();
+    let out = bin()
+        .args(["identify", "--robot"])
+        .arg(data.join("robot.json"))
+        .arg("--rig")
+        .arg(&rig)
+        .arg("--poses")
+        .arg(data.join("poses.csv"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("unknown key `r_m` (did you mean `r_mm`?)"),
+        "{err}"
+    );
+}
