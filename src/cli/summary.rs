@@ -10,6 +10,19 @@ use crate::report::{ErrorStats, FixedReason, Report};
 /// after the first line, each as `WARNING: ...`.
 pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> String {
     let mut s = String::new();
+    header(&mut s, r, robot, n_poses, n_strings);
+    method(&mut s, r);
+    fixed(&mut s, r);
+    precision(&mut s, r);
+    error_table(&mut s, r);
+    outliers(&mut s, r);
+    physics(&mut s, r);
+    s
+}
+
+/// The first line (robot, poses, what measured them), the warnings, and
+/// the split.
+fn header(s: &mut String, r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) {
     let source = if n_strings > 0 {
         format!("{n_strings} strings")
     } else {
@@ -31,6 +44,10 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
         "split: {} train, {} test ({})",
         r.stats.train.n, r.stats.test.n, r.split_source
     );
+}
+
+/// The method line: the solver's figures, or the paper's one step.
+fn method(s: &mut String, r: &Report) {
     let id = &r.identifiability;
     if r.method == "paper" {
         // The solver figures in the report are those of the base-and-tool
@@ -52,6 +69,11 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
             id.condition_number
         );
     }
+}
+
+/// The parameters held at nominal, grouped by why.
+fn fixed(s: &mut String, r: &Report) {
+    let id = &r.identifiability;
     for reason in [
         FixedReason::Aliased,
         FixedReason::Undetermined,
@@ -75,6 +97,12 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
             }
         }
     }
+}
+
+/// What the data allow: string noise and the noise floor, the held-out RMS
+/// an exact model would show, the flange orientation's sigma, and the
+/// paper's closed form against least squares.
+fn precision(s: &mut String, r: &Report) {
     if let Some(sig) = r.string_sigma_mm {
         let _ = writeln!(
             s,
@@ -108,6 +136,11 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
             c.mirrored_note()
         );
     }
+}
+
+/// The paper's Tables 3 and 4 as one table: max, mean and RMS errors per
+/// column (train and test, before and after, the paper's method on test).
+fn error_table(s: &mut String, r: &Report) {
     let _ = writeln!(s);
     let cols: Vec<(&str, &ErrorStats)> = vec![
         ("train before", &r.stats.train.before),
@@ -147,6 +180,10 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
         }
         let _ = writeln!(s);
     }
+}
+
+/// The outlier poses, if any.
+fn outliers(s: &mut String, r: &Report) {
     if !r.outliers.is_empty() {
         let ids: Vec<String> = r
             .outliers
@@ -160,6 +197,11 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
             ids.join(", ")
         );
     }
+}
+
+/// The physics analysis: its notes, then what it found (or that it found
+/// nothing).
+fn physics(s: &mut String, r: &Report) {
     let _ = writeln!(s);
     for note in &r.physics_notes {
         let _ = writeln!(s, "physics: {note}");
@@ -193,7 +235,6 @@ pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> St
             );
         }
     }
-    s
 }
 
 /// `value ± sigma` to two significant digits of the sigma, whatever the
