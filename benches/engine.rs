@@ -100,6 +100,7 @@ fn benches(c: &mut Criterion) {
             ..IdentifyOptions::default()
         },
         physics: false,
+        ..Default::default()
     };
     c.bench_function("identify_50_string_poses", |b| {
         b.iter(|| calibrate(&robot, &rig, black_box(&data50), &opts, &NoProgress).unwrap())

@@ -143,6 +143,10 @@ pub struct IdentifyArgs {
     /// Also identify each string's zero offset.
     #[arg(long)]
     pub string_offsets: bool,
+    /// Calibrate even when every joint angle looks like radians (refused
+    /// otherwise: poses.csv holds degrees).
+    #[arg(long)]
+    pub force: bool,
     /// Identifiability tolerance: a parameter whose scaled Jacobian column
     /// lies within this sine of the span of those kept is held at nominal
     /// (from 1e-9 to 0.5).
@@ -277,6 +281,7 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
             &pipeline::Options {
                 identify: opts,
                 physics: a.physics == Switch::On,
+                force: a.force,
             },
             &Bar(bar.clone()),
         ),

@@ -56,9 +56,31 @@ fn within_two_pi(q_rad: &[f64]) -> bool {
 
 /// Joint angles that look like radians: the whole file, or single poses.
 pub fn radians_in_degree_columns(obs: &Observations) -> Vec<String> {
+    radians_check(obs, |file, single| match file {
+        Some(evidence) => vec![format!(
+            "{evidence}; poses.csv holds degrees (deg = rad × 180/π): convert the angles and identify again, this calibration is not to be trusted"
+        )],
+        None => single(),
+    })
+}
+
+/// Why the whole file's joint angles look like radians (the evidence),
+/// if they do: a calibration from them is refused unless forced
+/// (`pipeline::Options::force`).
+pub fn file_in_radians(obs: &Observations) -> Option<String> {
+    radians_check(obs, |file, _| file)
+}
+
+/// The radians test, its answer given to `answer`: the whole file's
+/// evidence (when every pose is within ±2π and the measurements say
+/// radians), and a way to ask about single poses otherwise.
+fn radians_check<T: Default>(
+    obs: &Observations,
+    answer: impl FnOnce(Option<String>, &dyn Fn() -> Vec<String>) -> T,
+) -> T {
     let poses = &obs.data.poses;
     if poses.len() < 3 || obs.measured.len() != poses.len() {
-        return vec![];
+        return T::default();
     }
     let nominal = Params::nominal(
         obs.robot,
@@ -82,9 +104,9 @@ pub fn radians_in_degree_columns(obs: &Observations) -> Vec<String> {
     };
     let within: Vec<bool> = poses.iter().map(|p| within_two_pi(&p.q_rad)).collect();
     if within.iter().all(|&w| w) {
-        whole_file(obs, &point).into_iter().collect()
+        answer(whole_file(obs, &point), &Vec::new)
     } else {
-        single_poses(obs, &point, &within)
+        answer(None, &|| single_poses(obs, &point, &within))
     }
 }
 
@@ -112,7 +134,7 @@ fn whole_file(obs: &Observations, point: &dyn Fn(usize, bool) -> Vector3<f64>) -
         m.max(j.q_min_deg.abs()).max(j.q_max_deg.abs())
     });
     Some(format!(
-        "the joint angles look like radians, not degrees: every q*_deg value is within ±2π (largest |q| {largest:.3}) although the joint limits reach ±{limit_deg:.0} deg, and read as radians the nominal model follows the measured points to {rms_rad_mm:.2} mm RMS against {rms_deg_mm:.2} mm read as degrees; poses.csv holds degrees (deg = rad × 180/π): convert the angles and identify again, this calibration is not to be trusted"
+        "the joint angles look like radians, not degrees: every q*_deg value is within ±2π (largest |q| {largest:.3}) although the joint limits reach ±{limit_deg:.0} deg, and read as radians the nominal model follows the measured points to {rms_rad_mm:.2} mm RMS against {rms_deg_mm:.2} mm read as degrees"
     ))
 }
 

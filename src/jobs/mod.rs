@@ -55,6 +55,10 @@ pub struct JobOptions {
     /// `j2.theta`...); not with the paper's method.
     #[serde(default)]
     pub hold: Option<Vec<String>>,
+    /// Calibrate even when every joint angle looks like radians (default
+    /// false: such a job fails, saying why).
+    #[serde(default)]
+    pub force: Option<bool>,
 }
 
 /// Identification method.
@@ -94,6 +98,7 @@ impl JobOptions {
         pipeline::Options {
             identify: self.to_identify(),
             physics: self.physics.unwrap_or(true),
+            force: self.force.unwrap_or(false),
         }
     }
 

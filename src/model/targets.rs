@@ -118,10 +118,12 @@ pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
 }
 
 /// A warning when joint targets look like radians: a robot with three or
-/// more joints, at least three joint targets, not all at zero, and every
-/// angle within ±2π. The numbers alone cannot be sure (a program may
-/// really move only a few degrees), so they are compensated as degrees and
-/// the warning says so; these joints go to the robot.
+/// more joints, at least one joint target, not all at zero, and every angle
+/// of every joint target within ±2π (a single target too: one taught pose
+/// sent in radians is as dangerous as a file of them). The numbers alone
+/// cannot be sure (a program may really move only a few degrees), so they
+/// are compensated as degrees and the warning says so; these joints go to
+/// the robot.
 pub fn radians_warning(targets: &[Target], dof: usize) -> Option<String> {
     let bound = super::RADIANS_BOUND;
     let joints: Vec<&Vec<f64>> = targets
@@ -133,13 +135,16 @@ pub fn radians_warning(targets: &[Target], dof: usize) -> Option<String> {
         .collect();
     let all = joints.iter().flat_map(|q| q.iter());
     let suspect = dof >= 3
-        && joints.len() >= 3
+        && !joints.is_empty()
         && all.clone().all(|v| v.abs() <= bound)
         && all.clone().any(|v| v.abs() > 1e-9);
     suspect.then(|| {
+        let these = match joints.len() {
+            1 => "this joint target".to_string(),
+            n => format!("these {n} joint targets"),
+        };
         format!(
-            "every joint angle of these {} joint targets lies between -6.28 and 6.28: if they are radians, convert them to degrees (the q*_deg columns hold degrees); they were compensated as degrees",
-            joints.len()
+            "every joint angle of {these} lies between -6.28 and 6.28: if they are radians, convert them to degrees (the q*_deg columns hold degrees); they were compensated as degrees"
         )
     })
 }
@@ -196,8 +201,10 @@ mod tests {
             t(&[0.3, 0.4, 1.3]),
         ];
         assert!(radians_warning(&rad, 3).unwrap().contains("radians"));
-        // Two targets, a two-joint positioner, all at zero, one real angle: no.
-        assert!(radians_warning(&rad[..2], 3).is_none());
+        // One target alone is warned about too.
+        let one = radians_warning(&rad[..1], 3).unwrap();
+        assert!(one.contains("of this joint target"), "{one}");
+        // A two-joint positioner, all at zero, one real angle: no.
         assert!(radians_warning(&rad, 2).is_none());
         let zeros = [t(&[0.0; 3]), t(&[0.0; 3]), t(&[0.0; 3])];
         assert!(radians_warning(&zeros, 3).is_none());

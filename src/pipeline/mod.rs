@@ -19,7 +19,7 @@
 pub mod assemble;
 pub mod evaluate;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::identify::{self, Geometric, IdentifyOptions, Method, Observations, Progress, warnings};
 use crate::model::{Dataset, Rig, Robot};
 use crate::physics::{self, Analysis};
@@ -32,6 +32,9 @@ pub struct Options {
     pub identify: IdentifyOptions,
     /// Run the physics analysis after the geometric identification.
     pub physics: bool,
+    /// Calibrate even from poses whose joint angles look like radians
+    /// (refused otherwise: [`warnings::file_in_radians`]).
+    pub force: bool,
 }
 
 impl Default for Options {
@@ -39,6 +42,7 @@ impl Default for Options {
         Options {
             identify: IdentifyOptions::default(),
             physics: true,
+            force: false,
         }
     }
 }
@@ -48,7 +52,7 @@ impl From<IdentifyOptions> for Options {
     fn from(identify: IdentifyOptions) -> Self {
         Options {
             identify,
-            physics: true,
+            ..Options::default()
         }
     }
 }
@@ -99,6 +103,7 @@ pub fn run<'a>(
     progress: &dyn Progress,
 ) -> Result<Run<'a>> {
     let obs = Observations::new(robot, rig, data, &opts.identify)?;
+    refuse_radians(&obs, opts)?;
     let mut warnings = warnings::input_warnings(&obs);
     let geo = identify::geometric(&obs, &opts.identify, progress)?;
     warnings.extend(identify::few_poses_warning(&obs, &geo, &opts.identify));
@@ -109,6 +114,21 @@ pub fn run<'a>(
         physics,
         warnings,
     })
+}
+
+/// Poses whose joint angles look like radians are not calibrated (the
+/// result would move a robot by a model fitted to the wrong angles) unless
+/// the caller insists.
+fn refuse_radians(obs: &Observations, opts: &Options) -> Result<()> {
+    match warnings::file_in_radians(obs) {
+        Some(evidence) if !opts.force => Err(Error::field(
+            "poses",
+            format!(
+                "not calibrated: {evidence}; poses.csv holds degrees (deg = rad × 180/π): convert the angles and identify again (--force, or the job option \"force\": true, calibrates them as degrees anyway)"
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// What the physics step did: whether it ran, its analysis when it did,

@@ -801,59 +801,6 @@ impl UrlReplace for reqwest::RequestBuilder {
     }
 }
 
-/// Poses whose joint angles are in radians are not refused (they parse),
-/// but the calibration the service stores carries the engine's warning in
-/// its report.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn poses_in_radians_are_calibrated_with_a_warning() {
-    let app = TestApp::spawn("radians").await;
-    let (_, _, _, sid) = app.setup(DS, "RAD-1").await;
-    let poses = read(DS, "poses.csv");
-    let mut lines = poses.lines();
-    let mut rad = vec![lines.next().unwrap().to_string()];
-    for line in lines {
-        let cells: Vec<String> = line
-            .split(',')
-            .enumerate()
-            .map(|(i, c)| match i {
-                1..=6 => format!("{:.6}", c.parse::<f64>().unwrap().to_radians()),
-                _ => c.to_string(),
-            })
-            .collect();
-        rad.push(cells.join(","));
-    }
-    app.upload_poses(sid, rad.join("\n")).await;
-    let job = ok_json(
-        app.post_json(&format!("/sessions/{sid}/jobs"), &json!({"physics": false}))
-            .await,
-        202,
-    )
-    .await;
-    let done = app
-        .wait_job(
-            job["id"].as_i64().unwrap(),
-            std::time::Duration::from_secs(600),
-        )
-        .await;
-    assert_eq!(done["state"], "succeeded", "{done}");
-    let cal = ok_json(
-        app.get(&format!("/calibrations/{}", done["calibration_id"]))
-            .await,
-        200,
-    )
-    .await;
-    let warnings = cal["report"]["warnings"].as_array().unwrap();
-    assert_eq!(warnings.len(), 1, "{warnings:?}");
-    assert!(
-        warnings[0]
-            .as_str()
-            .unwrap()
-            .starts_with("the joint angles look like radians"),
-        "{warnings:?}"
-    );
-    app.stop().await;
-}
-
 /// A JSON file saved with a byte-order mark (Windows editors add one) is
 /// read as the document it is, not refused as malformed.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

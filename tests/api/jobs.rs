@@ -455,3 +455,58 @@ async fn no_held_out_poses_no_held_out_accuracy() {
     assert_eq!(best["total"], 0, "{best}");
     app.stop().await;
 }
+
+/// Poses whose joint angles all look like radians: the job fails with the
+/// reason and how to insist, and no calibration is stored; with
+/// `"force": true` it calibrates, the warning in the report.
+#[tokio::test]
+async fn a_session_in_radians_fails_unless_forced() {
+    let app = TestApp::spawn("radians").await;
+    let ds = "er3a_paper_like";
+    let (_, _, _, session) = app.setup(ds, "ER3A-RAD").await;
+    let rad = crate::common::q_columns_in_radians(&read(ds, "poses.csv"), None);
+    ok_json(
+        app.post_raw(&format!("/sessions/{session}/poses"), Some("text/csv"), rad)
+            .await,
+        200,
+    )
+    .await;
+    let run = |body: &'static str| {
+        let app = &app;
+        async move {
+            let job = ok_json(
+                app.post_raw(
+                    &format!("/sessions/{session}/jobs"),
+                    Some("application/json"),
+                    body,
+                )
+                .await,
+                202,
+            )
+            .await;
+            app.wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(120))
+                .await
+        }
+    };
+    let refused = run("{}").await;
+    assert_eq!(refused["state"], "failed", "{refused}");
+    let why = refused["error"].as_str().unwrap();
+    assert!(
+        why.contains("not calibrated: the joint angles look like radians")
+            && why.contains("\"force\": true"),
+        "{why}"
+    );
+    assert!(refused["calibration_id"].is_null(), "{refused}");
+    let forced = run(r#"{"force": true}"#).await;
+    assert_eq!(forced["state"], "succeeded", "{forced}");
+    let cal = forced["calibration_id"].as_i64().unwrap();
+    let rep = ok_json(app.get(&format!("/calibrations/{cal}")).await, 200).await;
+    assert!(
+        rep["report"]["warnings"][0]
+            .as_str()
+            .unwrap()
+            .starts_with("the joint angles look like radians"),
+        "{}",
+        rep["report"]["warnings"]
+    );
+}

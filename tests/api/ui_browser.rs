@@ -760,9 +760,31 @@ async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
         200,
     )
     .await;
+    // Refused without "force" (the job fails, saying why), calibrated with it.
     let job = ok_json(
         app.post_raw(&format!("/sessions/{rs}/jobs"), None, "")
             .await,
+        202,
+    )
+    .await;
+    let done = app
+        .wait_job(job["id"].as_i64().unwrap(), Duration::from_secs(180))
+        .await;
+    assert_eq!(done["state"], "failed", "{done}");
+    assert!(
+        done["error"]
+            .as_str()
+            .unwrap()
+            .contains("look like radians"),
+        "{done}"
+    );
+    let job = ok_json(
+        app.post_raw(
+            &format!("/sessions/{rs}/jobs"),
+            Some("application/json"),
+            r#"{"force": true}"#,
+        )
+        .await,
         202,
     )
     .await;

@@ -547,33 +547,52 @@ fn options_and_files_are_checked_as_given() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// poses.csv written in radians: identified (exit 0) with the warning on
-/// stderr, in the summary and in the report; the physics analysis is not
-/// run on a model that misses by hundreds of millimetres (before that
-/// rule it named a cable sag and a sensor offset that fitted the garbage).
+/// poses.csv written in radians: refused (exit 1, nothing written, the
+/// reason and `--force` named); with `--force`, identified with the warning
+/// on stderr, in the summary and in the report, and the physics analysis
+/// is not run on a model that misses by hundreds of millimetres (before
+/// that rule it named a cable sag and a sensor offset that fitted the
+/// garbage).
 #[test]
-fn radians_in_degree_columns_are_warned_about() {
+fn radians_in_degree_columns_are_refused_unless_forced() {
     let dir = scratch("rad");
     let poses = std::fs::read_to_string(data("poses.csv")).unwrap();
     let rad = dir.join("radians.csv");
     std::fs::write(&rad, common::q_columns_in_radians(&poses, None)).unwrap();
     let report = dir.join("report.json");
-    let run = bin()
-        .args(["identify", "--robot"])
-        .arg(data("robot.json"))
-        .arg("--rig")
-        .arg(data("rig.json"))
-        .arg("--poses")
-        .arg(&rad)
-        .arg("--out")
-        .arg(&report)
-        .output()
-        .unwrap();
+    let identify = |force: bool| {
+        let mut c = bin();
+        c.args(["identify", "--robot"])
+            .arg(data("robot.json"))
+            .arg("--rig")
+            .arg(data("rig.json"))
+            .arg("--poses")
+            .arg(&rad)
+            .arg("--out")
+            .arg(&report);
+        if force {
+            c.arg("--force");
+        }
+        c.output().unwrap()
+    };
+    let refused = identify(false);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("not calibrated: the joint angles look like radians")
+            && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert!(!report.exists(), "no calibration written");
+    let run = identify(true);
     let (stdout, stderr) = (
         String::from_utf8_lossy(&run.stdout),
         String::from_utf8_lossy(&run.stderr),
     );
-    assert!(run.status.success(), "warned, not refused: {stderr}");
+    assert!(
+        run.status.success(),
+        "forced: warned, not refused: {stderr}"
+    );
     assert!(
         stderr.contains("warning: the joint angles look like radians"),
         "{stderr}"

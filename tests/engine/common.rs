@@ -90,6 +90,7 @@ pub fn mapped_truth(
             ..IdentifyOptions::default()
         },
         physics: false,
+        ..Default::default()
     };
     pipeline::calibrate(robot, rig, &exact, &opts, &NoProgress).unwrap()
 }

@@ -122,6 +122,7 @@ fn run_engine(robot: &Robot, rig: &Rig, data: &Dataset) {
             ..IdentifyOptions::default()
         },
         physics: false,
+        ..Default::default()
     };
     if Observations::new(robot, rig, data, &opts.identify).is_ok() {
         if let Ok(report) = calibrate(robot, rig, data, &opts, &NoProgress) {
@@ -156,6 +157,7 @@ fn er3a_compensator() -> &'static Compensator {
                 ..IdentifyOptions::default()
             },
             physics: false,
+            ..Default::default()
         };
         let report = calibrate(&robot, &rig, &data, &opts, &NoProgress).unwrap();
         Compensator::from_report(&report).unwrap()

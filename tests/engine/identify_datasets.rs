@@ -27,6 +27,7 @@ fn calibrate_geometric(
     let opts = pipeline::Options {
         identify: opts.clone(),
         physics: false,
+        ..Default::default()
     };
     pipeline::calibrate(robot, rig, data, &opts, progress)
 }

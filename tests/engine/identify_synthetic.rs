@@ -112,6 +112,7 @@ fn mdh_robot_calibrates_to_the_noise() {
                 ..IdentifyOptions::default()
             },
             physics: false,
+            ..Default::default()
         },
         &NoProgress,
     )
@@ -157,6 +158,7 @@ fn three_strings_and_robust_outliers() {
                 ..IdentifyOptions::default()
             },
             physics: false,
+            ..Default::default()
         },
         &NoProgress,
     )
@@ -186,6 +188,7 @@ fn three_strings_and_robust_outliers() {
                 ..IdentifyOptions::default()
             },
             physics: false,
+            ..Default::default()
         },
         &NoProgress,
     )
@@ -203,6 +206,7 @@ fn three_strings_and_robust_outliers() {
                 ..IdentifyOptions::default()
             },
             physics: false,
+            ..Default::default()
         },
         &NoProgress,
     )
@@ -247,6 +251,7 @@ fn expected_test_rms_matches_repeated_sessions() {
                     ..IdentifyOptions::default()
                 },
                 physics: false,
+                ..Default::default()
             },
             &NoProgress,
         )
@@ -302,6 +307,7 @@ fn reported_sigmas_cover_the_truth_over_repeated_sessions() {
                     ..IdentifyOptions::default()
                 },
                 physics: false,
+                ..Default::default()
             };
             let rep = calibrate(&sim.robot, &sim.rig, &sim.dataset, &opts, &NoProgress).unwrap();
             // The truth in the parametrisation the noisy session chose.
@@ -378,6 +384,7 @@ fn undetermined_wrist_pairs_are_held_for_the_flange_orientation() {
                         ..IdentifyOptions::default()
                     },
                     physics: false,
+                    ..Default::default()
                 };
                 let rep =
                     calibrate(&sim.robot, &sim.rig, &sim.dataset, &opts, &NoProgress).unwrap();

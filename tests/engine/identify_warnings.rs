@@ -30,6 +30,7 @@ fn calibrate_geometric(
     let opts = pipeline::Options {
         identify: opts.clone(),
         physics: false,
+        ..Default::default()
     };
     pipeline::calibrate(robot, rig, data, &opts, progress)
 }
@@ -46,12 +47,26 @@ fn in_radians(name: &str, rows: Option<&[usize]>) -> String {
     common::q_columns_in_radians(&text, rows)
 }
 
+/// A file in radians is not calibrated unless forced: the error says why
+/// and how to insist; forced, the report carries the warning.
 #[test]
-fn a_file_in_radians_is_identified_with_a_warning() {
+fn a_file_in_radians_is_refused_and_forced_with_a_warning() {
     let (robot, rig, _) = common::load("er3a_paper_like");
     let csv = in_radians("er3a_paper_like", None);
     let data = Dataset::from_csv(csv.as_bytes(), &robot, &rig).unwrap();
-    let report = calibrate_geometric(&robot, &rig, &data, &no_physics(), &NoProgress).unwrap();
+    let e = pipeline::calibrate(&robot, &rig, &data, &Default::default(), &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("not calibrated: the joint angles look like radians") && e.contains("--force"),
+        "{e}"
+    );
+    let forced = pipeline::Options {
+        physics: false,
+        force: true,
+        ..Default::default()
+    };
+    let report = pipeline::calibrate(&robot, &rig, &data, &forced, &NoProgress).unwrap();
     assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
     let w = &report.warnings[0];
     assert!(

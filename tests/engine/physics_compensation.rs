@@ -141,6 +141,7 @@ fn check_joint_effect_compensation(robot: &str, seed: u64, effect: &str, joint: 
                 ..IdentifyOptions::default()
             },
             physics: false,
+            ..Default::default()
         },
         &NoProgress,
     )

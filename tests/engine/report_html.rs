@@ -409,6 +409,8 @@ fn warnings_and_a_physics_note_not_run_are_shown() {
         .arg(&poses)
         .arg("--out")
         .arg(&report_path)
+        // Refused without it.
+        .arg("--force")
         .output()
         .unwrap();
     assert!(
