@@ -21,6 +21,8 @@
 //! points per pose))`),
 //! so the choice is deterministic and spread over the whole session.
 
+use std::collections::HashSet;
+
 use nalgebra::{Matrix3, Vector3};
 
 use super::analyse::errors_with_effects;
@@ -251,29 +253,86 @@ pub fn evidence_plot(
         .div_ceil((EvidencePlot::MAX_POINTS / per_pose.max(1)).max(1))
         .max(1);
     let idx: Vec<usize> = (0..n).step_by(stride).collect();
-    let test: std::collections::HashSet<usize> = obs.test.iter().copied().collect();
-    let split = |i: usize| {
-        if test.contains(&i) {
-            Split::Test
-        } else {
-            Split::Train
-        }
+    let test: HashSet<usize> = obs.test.iter().copied().collect();
+    let model = Fitted {
+        obs,
+        ctx,
+        p,
+        effects,
+        without,
+        k,
     };
-    let mut buf = Basis::default();
-    let mut points = Vec::with_capacity(idx.len() * per_pose);
-    if robot {
+    let points = if robot {
+        model.robot_points(&idx, &test)
+    } else {
+        model.reading_points(&idx, &strings, &test)
+    };
+    let ys: Vec<f64> = points.iter().map(|q| q.y).collect();
+    let ms: Vec<f64> = points.iter().map(|q| q.model).collect();
+    Some(EvidencePlot {
+        x_label: drv.label,
+        x_unit: drv.unit,
+        y_label: if robot {
+            "error along the displacement the effect causes (measured minus the model without the effect)".into()
+        } else {
+            "string reading minus the model's reading without the effect".into()
+        },
+        y_unit: "mm".into(),
+        correlation: pearson(&ys, &ms),
+        n_total,
+        stride,
+        points,
+    })
+}
+
+/// Train or test, as the session split pose `i`.
+fn split_of(test: &HashSet<usize>, i: usize) -> Split {
+    if test.contains(&i) {
+        Split::Test
+    } else {
+        Split::Train
+    }
+}
+
+/// The model an evidence plot is drawn from: effect `k` of `effects`, and
+/// the same model `without` it (the partial residual's reference).
+struct Fitted<'a> {
+    obs: &'a Observations<'a>,
+    ctx: &'a Context,
+    p: &'a [f64],
+    effects: &'a [EffectModel],
+    without: Vec<EffectModel>,
+    k: usize,
+}
+
+impl Fitted<'_> {
+    /// A robot-side effect's points at poses `idx`: the error without the
+    /// effect and the effect's own displacement, both along the unit
+    /// displacement of a positive change of what the effect moves, so
+    /// that the two are compared in one direction per pose.
+    fn robot_points(&self, idx: &[usize], test: &HashSet<usize>) -> Vec<EvidencePoint> {
+        let Fitted {
+            obs,
+            ctx,
+            p,
+            effects,
+            ..
+        } = *self;
+        let (e, without) = (&effects[self.k], &self.without);
+        let mut buf = Basis::default();
+        let mut points = Vec::with_capacity(idx.len());
         let b = obs.chain.layout.base();
         let rb: Matrix3<f64> = crate::kinematics::rpy_matrix(p[b + 3], p[b + 4], p[b + 5]);
         // Model minus measured (base frame) without the effect; measured
         // points re-located with the other sensor-side effects applied.
-        let errs = errors_with_effects(obs, ctx, p, &without, &idx);
+        let errs = errors_with_effects(obs, ctx, p, without, idx);
         // The displacement the effect causes at every pose (rig frame).
         let disp: Vec<Vector3<f64>> = idx
             .iter()
             .map(|&i| {
                 let q = &obs.data.poses[i].q_rad;
                 EffectProblem::model_point(&obs.chain, ctx, p, effects, i, q).0
-                    - EffectProblem::model_point(&obs.chain, ctx, p, &without, i, q).0
+                    - EffectProblem::model_point(&obs.chain, ctx, p, without, i, q).0
             })
             .collect();
         // For effects without a joint angle or thermal multiplier to
@@ -319,16 +378,33 @@ pub fn evidence_plot(
             }
             points.push(EvidencePoint {
                 pose: obs.data.poses[i].id.clone(),
-                split: split(i),
+                split: split_of(test, i),
                 sensor: None,
                 x: driver_value(ctx, &e.kind, i, 0, &mut buf),
                 y,
                 model,
             });
         }
-    } else {
+        points
+    }
+
+    /// A sensor-side effect's points at poses `idx`, one per reading of
+    /// `strings`: the reading residual without the effect beside the
+    /// correction the effect makes to that reading.
+    fn reading_points(
+        &self,
+        idx: &[usize],
+        strings: &[usize],
+        test: &HashSet<usize>,
+    ) -> Vec<EvidencePoint> {
+        let Fitted { obs, ctx, p, k, .. } = *self;
+        let e = &self.effects[k];
+        let m = ctx.anchors.len();
+        let mut buf = Basis::default();
+        let mut points = Vec::with_capacity(idx.len() * strings.len());
         // Reading residuals (predicted minus read) without the effect.
-        let problem = EffectProblem::of_observations(obs, ctx, idx.clone(), p, vec![], without);
+        let problem =
+            EffectProblem::of_observations(obs, ctx, idx.to_vec(), p, vec![], self.without.clone());
         let mut res = vec![0.0; idx.len() * m];
         let mut seen = vec![0usize; idx.len()];
         problem.rows(&problem.x0(), |pos, r, _| {
@@ -340,14 +416,14 @@ pub fn evidence_plot(
         let only = std::slice::from_ref(e);
         for (pos, &i) in idx.iter().enumerate() {
             let dl = ctx.apply(only, i, &mut buf).dl;
-            for &s in &strings {
+            for &s in strings {
                 let (y, model) = (-res[pos * m + s], dl[s]);
                 if !(y.is_finite() && model.is_finite()) {
                     continue;
                 }
                 points.push(EvidencePoint {
                     pose: obs.data.poses[i].id.clone(),
-                    split: split(i),
+                    split: split_of(test, i),
                     sensor: Some(s + 1),
                     x: driver_value(ctx, &e.kind, i, s, &mut buf),
                     y,
@@ -355,30 +431,154 @@ pub fn evidence_plot(
                 });
             }
         }
+        points
     }
-    let ys: Vec<f64> = points.iter().map(|q| q.y).collect();
-    let ms: Vec<f64> = points.iter().map(|q| q.model).collect();
-    Some(EvidencePlot {
-        x_label: drv.label,
-        x_unit: drv.unit,
-        y_label: if robot {
-            "error along the displacement the effect causes (measured minus the model without the effect)".into()
-        } else {
-            "string reading minus the model's reading without the effect".into()
-        },
-        y_unit: "mm".into(),
-        correlation: pearson(&ys, &ms),
-        n_total,
-        stride,
-        points,
-    })
 }
 
 /// What the `unexplained` plot puts on x.
+#[derive(Clone, Copy)]
 enum OrderKey {
     Joint(usize),
     Time,
     Temperature,
+}
+
+/// The x axis of the `unexplained` plot: the key, and the clock's origin
+/// when the session has one (else time is the visiting order).
+struct Axis {
+    key: OrderKey,
+    has_time: bool,
+    t0: f64,
+}
+
+impl Axis {
+    /// The key's value at pose `i`, in the unit the label gives.
+    fn value(&self, obs: &Observations, ctx: &Context, i: usize) -> f64 {
+        match self.key {
+            OrderKey::Joint(j) => ctx.poses[i].q_rad[j].to_degrees(),
+            OrderKey::Time if self.has_time => (ctx.poses[i].time_s - self.t0) / 3600.0,
+            OrderKey::Time => i as f64,
+            OrderKey::Temperature => obs.data.poses[i].temp_c.unwrap_or(f64::NAN),
+        }
+    }
+}
+
+/// The axis of the winning ordering (see [`unexplained_plot`]), its label
+/// and unit: joint-space neighbours have no single axis, so the joint
+/// whose own ordering agreed most stands in and the label says so.
+fn unexplained_axis(
+    obs: &Observations,
+    ctx: &Context,
+    winner: usize,
+    z: &[f64],
+) -> (Axis, String, &'static str) {
+    let nj = ctx.n_joints;
+    let with_temp = z.len() == nj + 3;
+    let (key, located_by) = match winner {
+        j if j < nj => (OrderKey::Joint(j), None),
+        j if j == nj => (OrderKey::Time, None),
+        j if with_temp && j == nj + 1 => (OrderKey::Temperature, None),
+        _ => {
+            let best = (0..nj)
+                .filter(|&j| z[j].is_finite())
+                .max_by(|a, b| z[*a].total_cmp(&z[*b]));
+            (
+                best.map_or(OrderKey::Time, OrderKey::Joint),
+                Some(
+                    best.map_or("no joint ordering had a z, time shown".to_string(), |j| {
+                        format!("the joint whose own ordering agreed most, z = {:.1}", z[j])
+                    }),
+                ),
+            )
+        }
+    };
+    let has_time = obs.data.poses.iter().all(|p| p.time_s.is_some());
+    let t0 = ctx.poses.first().map_or(0.0, |p| p.time_s);
+    let (mut x_label, x_unit) = match key {
+        OrderKey::Joint(j) => (format!("joint {} angle", j + 1), "deg"),
+        OrderKey::Time if has_time => ("hours since the session began".to_string(), "h"),
+        OrderKey::Time => ("visiting order (no time column)".to_string(), "pose"),
+        OrderKey::Temperature => ("temperature".to_string(), "°C"),
+    };
+    if let Some(why) = located_by {
+        x_label = format!("{x_label} (located by nearest neighbours in joint space; {why})");
+    }
+    (Axis { key, has_time, t0 }, x_label, x_unit)
+}
+
+/// The residuals' dominant direction: the largest eigenvector of `Σ e eᵀ`
+/// over the train poses that are `ok`, its largest component positive;
+/// `None` when there is none.
+fn dominant_direction(
+    err: &[Vector3<f64>],
+    train: &[usize],
+    ok: impl Fn(usize) -> bool,
+) -> Option<Vector3<f64>> {
+    let mut m2 = Matrix3::zeros();
+    for &i in train.iter().filter(|&&i| ok(i)) {
+        m2 += err[i] * err[i].transpose();
+    }
+    let eig = nalgebra::SymmetricEigen::new(m2);
+    let top = (0..3).max_by(|a, b| eig.eigenvalues[*a].total_cmp(&eig.eigenvalues[*b]))?;
+    let mut u: Vector3<f64> = eig.eigenvectors.column(top).into_owned();
+    let big = (0..3).max_by(|a, b| u[*a].abs().total_cmp(&u[*b].abs()))?;
+    if u[big] < 0.0 {
+        u = -u;
+    }
+    (u.norm() > 0.5).then_some(u)
+}
+
+/// Leave-one-out running mean of the `k` train poses nearest in x: the
+/// plot's model, which on pure noise does not predict y.
+struct RunningMean {
+    /// Train poses as (x, pose, y), sorted by (x, pose).
+    sorted: Vec<(f64, usize, f64)>,
+    k: usize,
+}
+
+impl RunningMean {
+    /// Over the train poses `(x, pose, y)` (any order), with `k` the
+    /// rounded square root of their number.
+    fn new(mut sorted: Vec<(f64, usize, f64)>) -> Self {
+        sorted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let len = sorted.len();
+        let k = ((len as f64).sqrt().round() as usize).clamp(1, len.saturating_sub(1).max(1));
+        RunningMean { sorted, k }
+    }
+
+    /// The mean of y over the `k` train poses nearest `x`, pose `i` itself
+    /// left out (NaN without any).
+    fn at(&self, x: f64, i: usize) -> f64 {
+        let (sorted, k) = (&self.sorted, self.k);
+        let len = sorted.len();
+        let pos = sorted.partition_point(|s| s.0.total_cmp(&x).then(s.1.cmp(&i)).is_lt());
+        let (mut lo, mut hi) = (pos, pos);
+        if hi < len && sorted[hi].1 == i {
+            hi += 1;
+        }
+        let (mut sum, mut count) = (0.0, 0usize);
+        while count < k && (lo > 0 || hi < len) {
+            let take = if lo == 0 {
+                hi
+            } else if hi == len || x - sorted[lo - 1].0 <= sorted[hi].0 - x {
+                lo - 1
+            } else {
+                hi
+            };
+            if take == hi {
+                hi += 1;
+            } else {
+                lo -= 1;
+            }
+            sum += sorted[take].2;
+            count += 1;
+        }
+        if count == 0 {
+            f64::NAN
+        } else {
+            sum / count as f64
+        }
+    }
 }
 
 /// The evidence plot of the `unexplained` finding: the structure the
@@ -427,42 +627,8 @@ pub fn unexplained_plot(
     if winner >= z.len() || z.len() < nj + 2 || obs.train.is_empty() {
         return None;
     }
-    let with_temp = z.len() == nj + 3;
-    let (key, located_by) = match winner {
-        j if j < nj => (OrderKey::Joint(j), None),
-        j if j == nj => (OrderKey::Time, None),
-        j if with_temp && j == nj + 1 => (OrderKey::Temperature, None),
-        _ => {
-            let best = (0..nj)
-                .filter(|&j| z[j].is_finite())
-                .max_by(|a, b| z[*a].total_cmp(&z[*b]));
-            (
-                best.map_or(OrderKey::Time, OrderKey::Joint),
-                Some(
-                    best.map_or("no joint ordering had a z, time shown".to_string(), |j| {
-                        format!("the joint whose own ordering agreed most, z = {:.1}", z[j])
-                    }),
-                ),
-            )
-        }
-    };
-    let has_time = obs.data.poses.iter().all(|p| p.time_s.is_some());
-    let t0 = ctx.poses.first().map_or(0.0, |p| p.time_s);
-    let key_value = |i: usize| match key {
-        OrderKey::Joint(j) => ctx.poses[i].q_rad[j].to_degrees(),
-        OrderKey::Time if has_time => (ctx.poses[i].time_s - t0) / 3600.0,
-        OrderKey::Time => i as f64,
-        OrderKey::Temperature => obs.data.poses[i].temp_c.unwrap_or(f64::NAN),
-    };
-    let (mut x_label, x_unit) = match key {
-        OrderKey::Joint(j) => (format!("joint {} angle", j + 1), "deg"),
-        OrderKey::Time if has_time => ("hours since the session began".to_string(), "h"),
-        OrderKey::Time => ("visiting order (no time column)".to_string(), "pose"),
-        OrderKey::Temperature => ("temperature".to_string(), "°C"),
-    };
-    if let Some(why) = located_by {
-        x_label = format!("{x_label} (located by nearest neighbours in joint space; {why})");
-    }
+    let (axis, x_label, x_unit) = unexplained_axis(obs, ctx, winner, z);
+    let key_value = |i: usize| axis.value(obs, ctx, i);
 
     // Errors of the final model at every pose, measured minus model.
     let all: Vec<usize> = (0..n).collect();
@@ -471,81 +637,33 @@ pub fn unexplained_plot(
         .map(|e| -e)
         .collect();
     let ok = |i: usize| err[i].iter().all(|v| v.is_finite()) && key_value(i).is_finite();
-    let mut m2 = Matrix3::zeros();
-    for &i in obs.train.iter().filter(|&&i| ok(i)) {
-        m2 += err[i] * err[i].transpose();
-    }
-    let eig = nalgebra::SymmetricEigen::new(m2);
-    let top = (0..3).max_by(|a, b| eig.eigenvalues[*a].total_cmp(&eig.eigenvalues[*b]))?;
-    let mut u: Vector3<f64> = eig.eigenvectors.column(top).into_owned();
-    let big = (0..3).max_by(|a, b| u[*a].abs().total_cmp(&u[*b].abs()))?;
-    if u[big] < 0.0 {
-        u = -u;
-    }
-    if !(u.norm() > 0.5) {
-        return None;
-    }
+    let u = dominant_direction(&err, &obs.train, ok)?;
     let y = |i: usize| err[i].dot(&u);
 
     // Train poses sorted by (x, pose): the running mean's neighbours.
-    let mut sorted: Vec<(f64, usize, f64)> = obs
-        .train
-        .iter()
-        .filter(|&&i| ok(i))
-        .map(|&i| (key_value(i), i, y(i)))
-        .collect();
-    sorted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    let len = sorted.len();
-    let k = ((len as f64).sqrt().round() as usize).clamp(1, len.saturating_sub(1).max(1));
-    let smooth = |x: f64, i: usize| -> f64 {
-        let pos = sorted.partition_point(|s| s.0.total_cmp(&x).then(s.1.cmp(&i)).is_lt());
-        let (mut lo, mut hi) = (pos, pos);
-        if hi < len && sorted[hi].1 == i {
-            hi += 1;
-        }
-        let (mut sum, mut count) = (0.0, 0usize);
-        while count < k && (lo > 0 || hi < len) {
-            let take = if lo == 0 {
-                hi
-            } else if hi == len || x - sorted[lo - 1].0 <= sorted[hi].0 - x {
-                lo - 1
-            } else {
-                hi
-            };
-            if take == hi {
-                hi += 1;
-            } else {
-                lo -= 1;
-            }
-            sum += sorted[take].2;
-            count += 1;
-        }
-        if count == 0 {
-            f64::NAN
-        } else {
-            sum / count as f64
-        }
-    };
+    let smooth = RunningMean::new(
+        obs.train
+            .iter()
+            .filter(|&&i| ok(i))
+            .map(|&i| (key_value(i), i, y(i)))
+            .collect(),
+    );
 
     let stride = n.div_ceil(EvidencePlot::MAX_POINTS).max(1);
-    let test: std::collections::HashSet<usize> = obs.test.iter().copied().collect();
+    let test: HashSet<usize> = obs.test.iter().copied().collect();
     let mut points = Vec::new();
     for i in (0..n).step_by(stride) {
         if !ok(i) {
             continue;
         }
         let (x, yi) = (key_value(i), y(i));
-        let model = smooth(x, i);
+        let model = smooth.at(x, i);
         if !(yi.is_finite() && model.is_finite()) {
             continue;
         }
         points.push(EvidencePoint {
             pose: obs.data.poses[i].id.clone(),
-            split: if test.contains(&i) {
-                Split::Test
-            } else {
-                Split::Train
-            },
+            split: split_of(&test, i),
             sensor: None,
             x,
             y: yi,
@@ -558,8 +676,8 @@ pub fn unexplained_plot(
         x_label,
         x_unit: x_unit.into(),
         y_label: format!(
-            "error (measured minus the final model) along the residuals' dominant direction ({:.3}, {:.3}, {:.3}) in the base frame; model: running mean of the {k} train poses nearest in x, the pose itself left out",
-            u[0], u[1], u[2]
+            "error (measured minus the final model) along the residuals' dominant direction ({:.3}, {:.3}, {:.3}) in the base frame; model: running mean of the {} train poses nearest in x, the pose itself left out",
+            u[0], u[1], u[2], smooth.k
         ),
         y_unit: "mm".into(),
         correlation: pearson(&ys, &ms),

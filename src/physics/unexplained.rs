@@ -81,6 +81,78 @@ pub(super) fn unexplained(
     effects: &[EffectModel],
     n_free: usize,
 ) -> Option<Finding> {
+    let (res, rpp) = train_residuals(obs, ctx, p, effects);
+    let pairings = orderings(obs, ctx);
+    // The same joint orderings once more, on the part of each residual
+    // along the direction that joint moves T: an error of the joint's own
+    // angle, smooth in the angle (a harmonic the catalogue lacks, a gear
+    // ratio, a local bump), moves T in opposite directions on the two sides
+    // of the axis, so raw residuals of neighbours in that angle need not
+    // agree while these components do.
+    let along = joint_components(obs, ctx, p, &res, rpp);
+    let nb = neighbours(ctx.n_joints, &pairings, along.as_deref(), &res, rpp);
+    let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
+    let excess = robot_side_excess(obs, ctx, &res, rpp, n_params);
+    let confined = if nb.best.is_none() {
+        let train: Vec<f64> = res
+            .chunks(rpp)
+            .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
+            .collect();
+        let test: Vec<f64> = reading_errors(obs, ctx, p, effects)
+            .iter()
+            .map(|&(ss, n)| (ss / n.max(1) as f64).sqrt())
+            .collect();
+        concentrated(obs, ctx, &train, &test, 1e-3)
+    } else {
+        None
+    };
+    let (winner, located) = located(&nb, excess, confined.as_ref(), &pairings)?;
+    // A confined mismatch already says where it lives.
+    let region = if confined.is_some() {
+        String::new()
+    } else {
+        worst_region(ctx, &obs.train, &res, rpp)
+    };
+    let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
+    let test = rms(&errors_with_effects(obs, ctx, p, effects, &obs.test));
+    let parameters = UnexplainedLocation {
+        ordering: pairings[winner].0.clone(),
+        along_joint_motion: nb.winner_at.is_some_and(|(_, projected)| projected),
+        z: nb.zs[winner],
+        confined_joint: confined.as_ref().map(|c| c.joint + 1),
+        confined_deg: confined
+            .as_ref()
+            .map(|c| [c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]),
+        confined_train_poses: confined.as_ref().map(|c| c.train_poses.clone()),
+        confined_p: confined.as_ref().map(|c| c.p),
+        robot_side_variance_ratio: excess.as_ref().map(|x| x.f),
+        variance_ratio_threshold: excess.as_ref().map(|x| x.threshold),
+    };
+    Some(Finding {
+        effect: "unexplained".into(),
+        joint: None,
+        sensor: None,
+        magnitude: rms_res,
+        sigma: f64::NAN, // no fitted parameter: no uncertainty (null)
+        unit: "mm (train residual RMS per reading)".into(),
+        explanation: "structure remains that no effect of the catalogue explains; it is reported rather than forced onto a wrong name".into(),
+        evidence: format!("{located}{region}"),
+        test_rms_before_mm: test,
+        test_rms_after_mm: test,
+        parameters: Some(FindingModel::Unexplained(parameters)),
+        evidence_plot: super::evidence::unexplained_plot(obs, ctx, p, effects, winner, &nb.zs),
+    })
+}
+
+/// The train poses' residuals with the accepted effects, pose after pose,
+/// and the rows per pose (one per string, or a point's three coordinates):
+/// every test of [`unexplained`] reads them a pose at a time.
+fn train_residuals(
+    obs: &Observations,
+    ctx: &Context,
+    p: &[f64],
+    effects: &[EffectModel],
+) -> (Vec<f64>, usize) {
     let problem =
         EffectProblem::of_observations(obs, ctx, obs.train.clone(), p, vec![], effects.to_vec());
     let x = problem.x0();
@@ -91,6 +163,17 @@ pub(super) fn unexplained(
         res[at] = r;
         at += 1;
     });
+    (res, rpp)
+}
+
+/// The orderings whose neighbours are compared, each a name and its pairs
+/// of train poses (positions in `obs.train`): by each joint angle, by time,
+/// by temperature when every pose has one, and last each pose with its
+/// nearest neighbour in joint space (the layout [`unexplained_plot`]
+/// reads).
+///
+/// [`unexplained_plot`]: super::evidence::unexplained_plot
+fn orderings(obs: &Observations, ctx: &Context) -> Vec<(String, Vec<(usize, usize)>)> {
     let n = ctx.n_joints;
     let mut keys: Vec<(String, Vec<f64>)> = (0..n)
         .map(|j| {
@@ -132,13 +215,35 @@ pub(super) fn unexplained(
         "the joint configuration (nearest pose in joint space)".into(),
         nearest_in_joint_space(ctx, &obs.train),
     ));
-    // The same joint orderings once more, on the part of each residual
-    // along the direction that joint moves T: an error of the joint's own
-    // angle, smooth in the angle (a harmonic the catalogue lacks, a gear
-    // ratio, a local bump), moves T in opposite directions on the two sides
-    // of the axis, so raw residuals of neighbours in that angle need not
-    // agree while these components do.
-    let along = joint_components(obs, ctx, p, &res, rpp);
+    pairings
+}
+
+/// What the neighbour test found over every ordering (see [`neighbours`]).
+struct Neighbours {
+    /// The z the agreement of neighbours must pass (Bonferroni over the
+    /// orderings tested).
+    zcrit: f64,
+    /// The strongest agreement past `zcrit`: its z and what it ran along.
+    best: Option<(f64, String)>,
+    /// Per ordering of the pairings (the plot's layout), the larger of the
+    /// raw and the along-the-joint z for the joints (NaN: none).
+    zs: Vec<f64>,
+    /// The winning ordering, and whether it was the along-the-joint one.
+    winner_at: Option<(usize, bool)>,
+}
+
+/// Do neighbours agree more than independent noise allows? Per ordering,
+/// the z of the summed products of neighbouring residuals `res` (`rpp`
+/// per pose), and for the first `n` orderings (the joints) also of their
+/// components `along` the direction the joint moves T. Every z is kept
+/// for the plot; the largest past the threshold locates the mismatch.
+fn neighbours(
+    n: usize,
+    pairings: &[(String, Vec<(usize, usize)>)],
+    along: Option<&[Vec<f64>]>,
+    res: &[f64],
+    rpp: usize,
+) -> Neighbours {
     let n_plain = pairings.len();
     let n_tests = n_plain + along.as_ref().map_or(0, |_| n);
     let alpha = 1e-3 / n_tests as f64;
@@ -153,15 +258,12 @@ pub(super) fn unexplained(
         (v > 0.0).then(|| s / v.sqrt())
     };
     let mut best: Option<(f64, String)> = None;
-    // Per ordering of `pairings` (the plot's layout), the larger of the raw
-    // and the along-the-joint z for the joints.
     let mut zs = vec![f64::NAN; n_plain];
-    // The winning ordering, and whether it was the along-the-joint one.
     let mut winner_at: Option<(usize, bool)> = None;
     for (pk, (name, pairs)) in pairings.iter().enumerate() {
         let raw = |i: usize, k: usize| (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
         let mut tries: Vec<(Option<f64>, bool)> = vec![(z_of(pairs, &raw), false)];
-        if let (Some(a), true) = (&along, pk < n) {
+        if let (Some(a), true) = (along, pk < n) {
             let proj = |i: usize, k: usize| a[pk][i] * a[pk][k];
             tries.push((z_of(pairs, &proj), true));
         }
@@ -182,22 +284,26 @@ pub(super) fn unexplained(
             }
         }
     }
-    let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
-    let excess = robot_side_excess(obs, ctx, &res, rpp, n_params);
-    let confined = if best.is_none() {
-        let train: Vec<f64> = res
-            .chunks(rpp)
-            .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
-            .collect();
-        let test: Vec<f64> = reading_errors(obs, ctx, p, effects)
-            .iter()
-            .map(|&(ss, n)| (ss / n.max(1) as f64).sqrt())
-            .collect();
-        concentrated(obs, ctx, &train, &test, 1e-3)
-    } else {
-        None
-    };
-    let (winner, located) = match (&best, excess, winner_at) {
+    Neighbours {
+        zcrit,
+        best,
+        zs,
+        winner_at,
+    }
+}
+
+/// Which test located the remainder, first that holds of: neighbours that
+/// agree (raw, then along a joint's motion), a confined mismatch, a
+/// robot-side excess; the ordering its plot runs along and the sentence
+/// saying where it lives. `None`: no structure is left.
+fn located(
+    nb: &Neighbours,
+    excess: Option<Excess>,
+    confined: Option<&Concentrated>,
+    pairings: &[(String, Vec<(usize, usize)>)],
+) -> Option<(usize, String)> {
+    let zcrit = nb.zcrit;
+    Some(match (&nb.best, excess, nb.winner_at) {
         (Some((z, name)), _, Some((pk, false))) => (
             pk,
             format!(
@@ -212,7 +318,7 @@ pub(super) fn unexplained(
             ),
         ),
         (None, _, _) if confined.is_some() => {
-            let c = confined.as_ref().expect("checked");
+            let c = confined.expect("checked");
             (
                 c.joint,
                 format!(
@@ -231,7 +337,8 @@ pub(super) fn unexplained(
         }
         (None, Some(x), _) if x.f > x.threshold => {
             // The ordering that comes nearest, for the plot.
-            let (w, z) = zs
+            let (w, z) = nb
+                .zs
                 .iter()
                 .enumerate()
                 .filter(|(_, z)| z.is_finite())
@@ -246,41 +353,6 @@ pub(super) fn unexplained(
             )
         }
         _ => return None,
-    };
-    // A confined mismatch already says where it lives.
-    let region = if confined.is_some() {
-        String::new()
-    } else {
-        worst_region(ctx, &obs.train, &res, rpp)
-    };
-    let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
-    let test = rms(&errors_with_effects(obs, ctx, p, effects, &obs.test));
-    let parameters = UnexplainedLocation {
-        ordering: pairings[winner].0.clone(),
-        along_joint_motion: winner_at.is_some_and(|(_, projected)| projected),
-        z: zs[winner],
-        confined_joint: confined.as_ref().map(|c| c.joint + 1),
-        confined_deg: confined
-            .as_ref()
-            .map(|c| [c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]),
-        confined_train_poses: confined.as_ref().map(|c| c.train_poses.clone()),
-        confined_p: confined.as_ref().map(|c| c.p),
-        robot_side_variance_ratio: excess.as_ref().map(|x| x.f),
-        variance_ratio_threshold: excess.as_ref().map(|x| x.threshold),
-    };
-    Some(Finding {
-        effect: "unexplained".into(),
-        joint: None,
-        sensor: None,
-        magnitude: rms_res,
-        sigma: f64::NAN, // no fitted parameter: no uncertainty (null)
-        unit: "mm (train residual RMS per reading)".into(),
-        explanation: "structure remains that no effect of the catalogue explains; it is reported rather than forced onto a wrong name".into(),
-        evidence: format!("{located}{region}"),
-        test_rms_before_mm: test,
-        test_rms_after_mm: test,
-        parameters: Some(FindingModel::Unexplained(parameters)),
-        evidence_plot: super::evidence::unexplained_plot(obs, ctx, p, effects, winner, &zs),
     })
 }
 

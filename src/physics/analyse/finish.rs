@@ -1,0 +1,167 @@
+//! Finishing the analysis once no round keeps anything more: the earlier
+//! findings restated as the final refit has their effects, a doubt on
+//! terms of one joint that cancel each other, and the remainder no effect
+//! explains.
+
+use super::magnitude::magnitude;
+use super::refit::FitInfo;
+use super::{Analysis, Inputs, State, errors_with_effects};
+use crate::identify::{Observations, Progress};
+use crate::kinematics::Params;
+use crate::physics::effects::{Basis, Context, EffectModel};
+use crate::physics::evidence::evidence_plot;
+use crate::physics::unexplained::unexplained;
+use crate::report::{Finding, FindingModel};
+
+/// The effects of one joint cancel each other when the largest one's
+/// spread of angle change over the train poses is this many times their
+/// sum's.
+const CANCEL_RATIO: f64 = 3.0;
+
+/// The analysis as the last round left it. `share` is the robot-side share
+/// of the geometric fit's residual and the share noise alone gives.
+pub(super) fn finish(
+    inputs: Inputs,
+    mut state: State,
+    share: (Option<f64>, Option<f64>),
+    progress: &dyn Progress,
+) -> Analysis {
+    let Inputs { obs, ctx, free, .. } = inputs;
+    if let Some(fit) = &state.final_fit {
+        restate(
+            obs,
+            &ctx,
+            &state.p,
+            &state.accepted,
+            fit,
+            &mut state.findings,
+        );
+    }
+    doubt_cancelling_terms(obs, &ctx, &state.accepted, &mut state.findings);
+    // Anything left that varies smoothly?
+    if let Some(f) = unexplained(obs, &ctx, &state.p, &state.accepted, free.len()) {
+        state.findings.push(f);
+    }
+    progress.update("physics analysis", 1.0);
+    let test_errors = errors_with_effects(obs, &ctx, &state.p, &state.accepted, &obs.test);
+    Analysis {
+        findings: state.findings,
+        final_params: Params {
+            layout: obs.chain.layout,
+            values: state.p,
+        },
+        effects: state.accepted,
+        context: ctx,
+        test_errors,
+        robot_side_share: share.0,
+        robot_side_share_noise: share.1,
+        notes: state.notes,
+        final_sigmas: state.final_fit.map(|f| f.sigma_free),
+    }
+}
+
+/// Later rounds refit the earlier effects: every finding reports its
+/// effect as the final model (`p`, `accepted`, `fit`) has it (coefficients
+/// for compensation, magnitude and sigma, evidence plot), not as the round
+/// that kept it.
+fn restate(
+    obs: &Observations,
+    ctx: &Context,
+    p: &[f64],
+    accepted: &[EffectModel],
+    fit: &FitInfo,
+    findings: &mut [Finding],
+) {
+    for f in findings.iter_mut() {
+        let Some(k) = f
+            .effect_model()
+            .and_then(|em| accepted.iter().position(|e| e.kind == em.kind))
+        else {
+            continue;
+        };
+        let e = &accepted[k];
+        let at: usize = accepted[..k].iter().map(|e| e.kind.n_coef()).sum();
+        let (mag, sig, _) = magnitude(ctx, obs, e, &fit.block(at, e.kind.n_coef()));
+        f.magnitude = mag;
+        f.sigma = sig;
+        if let Some(FindingModel::Effect(fp)) = &mut f.parameters {
+            fp.model.coef = e.coef.clone();
+        }
+        f.evidence_plot = evidence_plot(obs, ctx, p, accepted, k);
+    }
+}
+
+/// Terms of one joint that cancel each other are a series fitted to an
+/// angle error of another shape, not separate physics: say so in each of
+/// that joint's findings.
+fn doubt_cancelling_terms(
+    obs: &Observations,
+    ctx: &Context,
+    accepted: &[EffectModel],
+    findings: &mut [Finding],
+) {
+    for (j, largest_deg, net_deg, k) in cancelling_terms(obs, ctx, accepted) {
+        let doubt = format!(
+            "doubt: the {k} effects kept on joint {} largely cancel each other (each spreads the angle by up to {largest_deg:.4} deg over the train poses, together by {net_deg:.4} deg): together they describe an error of joint {}'s angle that none of them is alone; read them as one angle error of that joint, not as separate physics",
+            j + 1,
+            j + 1
+        );
+        for f in findings.iter_mut().filter(|f| f.joint == Some(j + 1)) {
+            f.evidence = format!("{}; {doubt}", f.evidence);
+        }
+    }
+}
+
+/// Joints whose accepted effects (two or more) largely cancel each other
+/// over the train poses: `(joint, largest effect's spread of dq, their
+/// sum's spread (standard deviations, deg), number of effects)`.
+fn cancelling_terms(
+    obs: &Observations,
+    ctx: &Context,
+    accepted: &[EffectModel],
+) -> Vec<(usize, f64, f64, usize)> {
+    let n = ctx.n_joints;
+    let mut buf = Basis::default();
+    let mut out = Vec::new();
+    for j in 0..n {
+        let on_j: Vec<&EffectModel> = accepted
+            .iter()
+            .filter(|e| e.kind.joint() == Some(j))
+            .collect();
+        if on_j.len() < 2 {
+            continue;
+        }
+        // Per train pose, each effect's angle change and their sum; the
+        // constant part of each is the joint's zero offset (the geometry
+        // takes it), so spreads are compared about the mean.
+        let rows: Vec<Vec<f64>> = obs
+            .train
+            .iter()
+            .map(|&i| {
+                on_j.iter()
+                    .map(|e| {
+                        ctx.basis(&e.kind, i, &mut buf);
+                        e.coef
+                            .iter()
+                            .enumerate()
+                            .map(|(c, v)| v * buf.dq[c * n + j])
+                            .sum()
+                    })
+                    .collect()
+            })
+            .collect();
+        let spread = |f: &dyn Fn(&[f64]) -> f64| {
+            let v: Vec<f64> = rows.iter().map(|r| f(r)).collect();
+            let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+            (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+        };
+        let largest = (0..on_j.len())
+            .map(|k| spread(&|r: &[f64]| r[k]))
+            .fold(0.0, f64::max);
+        let net = spread(&|r: &[f64]| r.iter().sum());
+        if largest > CANCEL_RATIO * net {
+            out.push((j, largest.to_degrees(), net.to_degrees(), on_j.len()));
+        }
+    }
+    out
+}

@@ -1,0 +1,150 @@
+//! The size a finding reports for its effect, in a unit a reader knows
+//! (degrees, ppm, mm), with its 1-sigma by the delta method from the
+//! refit's covariance of the effect's coefficients.
+
+use super::refit::FitInfo;
+use crate::identify::Observations;
+use crate::physics::effects::{self, Context, EffectModel, Kind, ThermalDriver};
+
+/// Reported magnitude, 1-sigma and unit of an effect.
+pub(super) fn magnitude(
+    ctx: &Context,
+    obs: &Observations,
+    e: &EffectModel,
+    fit: &FitInfo,
+) -> (f64, f64, String) {
+    let f = size_of(ctx, obs, e);
+    let unit = unit_of(ctx, &e.kind);
+    let c = &e.coef;
+    let v = f(c);
+    // Delta method with a numerical gradient of the magnitude.
+    let mut grad = vec![0.0; c.len()];
+    for i in 0..c.len() {
+        let h = 1e-6 * c.iter().map(|x| x.abs()).fold(0.0, f64::max).max(1e-12);
+        let mut cp = c.clone();
+        cp[i] += h;
+        let mut cm = c.clone();
+        cm[i] -= h;
+        grad[i] = (f(&cp) - f(&cm)) / (2.0 * h);
+    }
+    let mut var = 0.0;
+    for i in 0..c.len() {
+        for j in 0..c.len() {
+            if i < fit.cov_last.nrows() && j < fit.cov_last.ncols() {
+                var += grad[i] * fit.cov_last[(i, j)] * grad[j];
+            }
+        }
+    }
+    (v, var.max(0.0).sqrt(), unit)
+}
+
+/// The magnitude as a function of the effect's coefficients, so that the
+/// delta method can differentiate it.
+fn size_of<'a>(
+    ctx: &'a Context,
+    obs: &Observations,
+    e: &EffectModel,
+) -> Box<dyn Fn(&[f64]) -> f64 + 'a> {
+    let deg = 180.0 / std::f64::consts::PI;
+    match &e.kind {
+        Kind::JointCompliance {
+            regressors,
+            joint_index,
+        } => {
+            if regressors.is_empty() {
+                Box::new(move |c: &[f64]| c[0] * deg)
+            } else {
+                // Lumped coefficients: report the RMS deflection.
+                let j = *joint_index;
+                let kind = e.kind.clone();
+                let train = obs.train.clone();
+                Box::new(move |c: &[f64]| {
+                    let mut buf = effects::Basis::default();
+                    let mut s = 0.0;
+                    for &i in &train {
+                        ctx.basis(&kind, i, &mut buf);
+                        let n = ctx.n_joints;
+                        let d: f64 = (0..c.len()).map(|k| c[k] * buf.dq[k * n + j]).sum();
+                        s += d * d;
+                    }
+                    (s / train.len().max(1) as f64).sqrt() * deg
+                })
+            }
+        }
+        Kind::Backlash { .. } => Box::new(move |c: &[f64]| c[0] * deg),
+        Kind::JointPeriodic { .. } => Box::new(move |c: &[f64]| c[0].hypot(c[1]) * deg),
+        Kind::JointScale { .. } => Box::new(|c: &[f64]| c[0] * 1e6),
+        // A settling warm-up: its initial rate per hour says little at a
+        // glance; the growth it reached over the session does.
+        Kind::ThermalExpansion {
+            tau_h: Some(tau), ..
+        } => {
+            let growth = warm_up_growth(ctx, *tau);
+            Box::new(move |c: &[f64]| c[0] * growth * 1e6)
+        }
+        Kind::ThermalExpansion { .. } => Box::new(|c: &[f64]| c[0] * 1e6),
+        Kind::SensorScale { .. } => Box::new(|c: &[f64]| c[0] * 1e6),
+        Kind::SensorOffset { .. } | Kind::SensorDrift { .. } | Kind::CableSag => {
+            Box::new(|c: &[f64]| c[0])
+        }
+        Kind::AnchorStep { .. } => {
+            Box::new(|c: &[f64]| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
+        }
+        Kind::RigStep { .. } | Kind::RigDrift => {
+            let kind = e.kind.clone();
+            let train = obs.train.clone();
+            Box::new(move |c: &[f64]| ctx.rigid_rms_mm(&kind, c, &train))
+        }
+    }
+}
+
+/// The unit of an effect's magnitude, naming a warm-up's time constant
+/// and a creep's clock where the session sets them.
+fn unit_of(ctx: &Context, kind: &Kind) -> String {
+    match kind {
+        Kind::ThermalExpansion {
+            tau_h: Some(tau),
+            driver,
+        } => match driver {
+            ThermalDriver::Order => format!(
+                "ppm (growth over the session, a warm-up settling over about {:.0} rows)",
+                tau * 1000.0
+            ),
+            _ => format!(
+                "ppm (growth over the session, a warm-up settling with a time constant of {tau:.2} h)"
+            ),
+        },
+        Kind::SensorDrift { .. } if !ctx.timed => "mm per 1000 rows".into(),
+        other => fixed_unit(other).into(),
+    }
+}
+
+/// How far a warm-up with time constant `tau_h` settled over the session:
+/// its driver at the last hour recorded (h).
+pub(super) fn warm_up_growth(ctx: &Context, tau_h: f64) -> f64 {
+    let hours = ctx.poses.iter().map(|p| p.thermal).fold(0.0, f64::max);
+    effects::warm_up(hours, tau_h)
+}
+
+/// Unit of an effect's magnitude (see [`magnitude`]).
+fn fixed_unit(kind: &Kind) -> &'static str {
+    match kind {
+        Kind::JointCompliance { regressors, .. } if regressors.is_empty() => "deg/(N*m)",
+        Kind::JointCompliance { .. } => "deg (RMS deflection)",
+        Kind::Backlash { .. } => "deg (half dead band)",
+        Kind::JointPeriodic { .. } => "deg (amplitude)",
+        Kind::JointScale { .. } => "ppm (of the joint angle)",
+        Kind::ThermalExpansion { driver, .. } => match driver {
+            ThermalDriver::Temperature => "ppm/K",
+            ThermalDriver::Time => "ppm/h",
+            ThermalDriver::Order => "ppm per 1000 rows",
+        },
+        Kind::SensorScale { .. } => "ppm",
+        Kind::SensorOffset { .. } => "mm",
+        Kind::SensorDrift { .. } => "mm/h",
+        Kind::CableSag => "mm/m^3",
+        Kind::AnchorStep { .. } => "mm",
+        Kind::RigStep { .. } => "mm (RMS displacement of T after the move)",
+        Kind::RigDrift => "mm (RMS displacement of T over the session)",
+    }
+}
