@@ -11,12 +11,14 @@ pub mod summary;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
+use clap::builder::PossibleValue;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::compensate::{self, Compensator};
+use crate::compensate::{Applied, Approach, Compensator, ConditionNames, Note, NoteKind};
 use crate::identify::{self, IdentifyOptions, Method, Progress};
 use crate::measure;
+use crate::model::compensated::{Compensated, CompensationStatus, write_csv};
 use crate::model::{Dataset, Rig, Robot, targets::targets_from_csv};
 use crate::pipeline;
 use crate::report::{ClosedFormComparison, Report};
@@ -87,17 +89,25 @@ pub enum MethodArg {
     Paper,
 }
 
-/// The direction the joints arrive at the targets from, for a calibration
-/// with a backlash.
-#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
-pub enum ApproachArg {
-    /// Every joint moving in +q (most teach programs finish so).
-    Positive,
-    /// Every joint moving in -q.
-    Negative,
-    /// The robot visits the targets in file order: each joint arrives from
-    /// the previous target's compensated joints.
-    InOrder,
+/// `--approach`: the core's [`Approach`], spelt on the command line in
+/// kebab case (`in-order`), with the help said in the command line's terms
+/// (the targets' file order).
+impl ValueEnum for Approach {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Approach::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        Some(match self {
+            Approach::Positive => PossibleValue::new("positive")
+                .help("Every joint moving in +q (most teach programs finish so)"),
+            Approach::Negative => PossibleValue::new("negative").help("Every joint moving in -q"),
+            Approach::InOrder => PossibleValue::new("in-order").help(
+                "The robot visits the targets in file order: each joint arrives from the \
+                 previous target's compensated joints",
+            ),
+        })
+    }
 }
 
 /// On or off.
@@ -193,7 +203,7 @@ pub struct CompensateArgs {
     /// How the joints arrive at the targets, for a calibration whose
     /// physics analysis accepted a backlash (ignored otherwise).
     #[arg(long, value_enum, default_value = "positive")]
-    pub approach: ApproachArg,
+    pub approach: Approach,
 }
 
 /// `drawcal locate`.
@@ -308,11 +318,24 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// How the command line names the compensation conditions in its errors
+/// and notes: by its options.
+const CONDITION_NAMES: ConditionNames = ConditionNames {
+    temp_c: "--temp-c",
+    payload_kg: "--payload-kg",
+    approach: "--approach",
+};
+
 fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
     let report = core(&a.calibration, Report::from_json(&read(&a.calibration)?))?;
     let comp = core(&a.calibration, Compensator::from_report(&report))?;
-    let comp = at_temperature(comp, &report, a.temp_c)?;
-    let comp = with_payload(comp, a.payload_kg)?;
+    // One condition at a time, each said as it is taken: what was made of
+    // the temperature is said before a bad --payload-kg is refused, and the
+    // approach after what is said of the targets.
+    let bad = |e: crate::Error| CliError::Other(e.to_string());
+    let mut applied = Applied::new(&comp, CONDITION_NAMES);
+    say(applied.temperature(a.temp_c).map_err(bad)?);
+    say(applied.payload(a.payload_kg).map_err(bad)?);
     let file = File::open(&a.targets).map_err(|source| CliError::Io {
         path: a.targets.clone(),
         source,
@@ -329,30 +352,36 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
              (among them those position data never see) taken as exact"
         );
     }
-    if !comp.has_backlash() && a.approach != ApproachArg::Positive {
-        eprintln!("note: --approach is not used: the calibration has no backlash");
+    say(applied.approach(Some(a.approach)));
+    let rows = applied.compensate(&targets, a.orientation);
+    write_compensated(a.out.as_deref(), comp.dof(), &rows)
+}
+
+/// The notes on the compensation conditions, on stderr: what was applied
+/// as it is, anything else as a note.
+fn say(notes: &[Note]) {
+    for n in notes {
+        match n.kind {
+            NoteKind::Applied => eprintln!("{}", n.text),
+            _ => eprintln!("note: {}", n.text),
+        }
     }
-    let rows = match a.approach {
-        ApproachArg::Positive => compensate::compensate_all(&comp, &targets, a.orientation),
-        ApproachArg::Negative => compensate::compensate_all(
-            &comp.with_approach(&vec![-1.0; comp.dof()]),
-            &targets,
-            a.orientation,
-        ),
-        ApproachArg::InOrder => compensate::compensate_in_order(&comp, &targets, a.orientation),
-    };
+}
+
+/// compensated.csv to `out` (with a count on stderr), or to stdout.
+fn write_compensated(out: Option<&Path>, dof: usize, rows: &[Compensated]) -> Result<(), CliError> {
     let failed = rows
         .iter()
-        .filter(|r| r.status != compensate::CompensationStatus::Ok)
+        .filter(|r| r.status != CompensationStatus::Ok)
         .count();
-    match &a.out {
+    match out {
         Some(out) => {
             let f = File::create(out).map_err(|source| CliError::Io {
-                path: out.clone(),
+                path: out.into(),
                 source,
             })?;
-            compensate::write_csv(f, comp.dof(), &rows).map_err(|source| CliError::Io {
-                path: out.clone(),
+            write_csv(f, dof, rows).map_err(|source| CliError::Io {
+                path: out.into(),
                 source,
             })?;
             eprintln!(
@@ -362,84 +391,12 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
                 out.display()
             );
         }
-        None => compensate::write_csv(std::io::stdout(), comp.dof(), &rows).map_err(|source| {
-            CliError::Io {
-                path: "stdout".into(),
-                source,
-            }
+        None => write_csv(std::io::stdout(), dof, rows).map_err(|source| CliError::Io {
+            path: "stdout".into(),
+            source,
         })?,
     }
     Ok(())
-}
-
-/// The compensator with `--payload-kg`, with a note on stderr when the
-/// payload matters but is not given, or is given but does not matter.
-fn with_payload(comp: Compensator, payload_kg: Option<f64>) -> Result<Compensator, CliError> {
-    if let Some(p) = payload_kg {
-        compensate::check_payload_kg("--payload-kg", p)
-            .map_err(|e| CliError::Other(e.to_string()))?;
-    }
-    match (comp.payload_kg(), payload_kg) {
-        (Some(reference), None) => {
-            eprintln!(
-                "note: the calibration models joint compliance; compensating with the calibration session's payload {reference} kg. Give --payload-kg with the payload the robot carries"
-            );
-            Ok(comp)
-        }
-        (Some(_), Some(p)) => {
-            eprintln!("compensating with a payload of {p} kg at T (joint compliance)");
-            Ok(comp.with_payload_kg(p))
-        }
-        (None, Some(_)) => {
-            eprintln!(
-                "note: --payload-kg is not used: the calibration has no joint compliance that depends on the payload"
-            );
-            Ok(comp)
-        }
-        (None, None) => Ok(comp),
-    }
-}
-
-/// The compensator at `--temp-c`, with a note on stderr when the
-/// temperature matters but is not given, or is given but does not matter.
-fn at_temperature(
-    comp: Compensator,
-    report: &Report,
-    temp_c: Option<f64>,
-) -> Result<Compensator, CliError> {
-    if let Some(t) = temp_c {
-        compensate::check_temp_c("--temp-c", t).map_err(|e| CliError::Other(e.to_string()))?;
-    }
-    if compensate::has_time_thermal(report) {
-        eprintln!(
-            "note: the calibration's thermal expansion is driven by time or row order (no temperature was recorded in its session); it cannot be compensated at run time and is left out"
-        );
-    }
-    match (comp.thermal(), temp_c) {
-        (Some(th), None) => {
-            eprintln!(
-                "note: the calibration models thermal expansion ({:.2} ppm/K); compensating at its reference temperature {:.2} C. Give --temp-c with the temperature the robot runs at",
-                th.coef_per_k * 1e6,
-                th.reference_temp_c
-            );
-            Ok(comp)
-        }
-        (Some(th), Some(t)) => {
-            eprintln!(
-                "compensating at {t:.2} C (thermal expansion {:.2} ppm/K from the reference {:.2} C)",
-                th.coef_per_k * 1e6,
-                th.reference_temp_c
-            );
-            Ok(comp.at_temperature(t))
-        }
-        (None, Some(_)) => {
-            eprintln!(
-                "note: --temp-c is not used: the calibration has no thermal expansion driven by the temperature"
-            );
-            Ok(comp)
-        }
-        (None, None) => Ok(comp),
-    }
 }
 
 fn run_locate(a: LocateArgs) -> Result<(), CliError> {

@@ -335,13 +335,10 @@ pub struct Rollback {
     pub reason: String,
 }
 
-/// Drop the cached active calibration of a robot (see `App::active`).
+/// Drop the cached active calibration of a robot (see
+/// [`super::cache::CompensationCache::forget_active`]).
 fn forget_active(app: &AppState, robot_id: i64) {
-    app.activations
-        .fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-    if let Ok(mut m) = app.active.write() {
-        m.remove(&robot_id);
-    }
+    app.cache.forget_active(robot_id);
 }
 
 fn check_actor(by: &str, reason: &str) -> ApiResult<()> {

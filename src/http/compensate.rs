@@ -1,11 +1,11 @@
 //! `POST /compensate`: corrected joint targets from a robot's calibration.
 //!
 //! Compensators are built once per calibration (calibrations are immutable)
-//! and cached. A request of a few joint targets is solved inline (see
-//! [`INLINE_MAX_JOINT_TARGETS`]); anything larger runs on the compute
-//! threads, a large batch split across the cores. Targets arrive as JSON or
+//! and cached ([`super::cache`]). A request of a few joint targets is
+//! solved inline (see [`INLINE_MAX_JOINT_TARGETS`]); anything larger runs
+//! on the compute threads, a large batch split across the cores. Targets arrive as JSON or
 //! targets.csv; the answer is JSON or compensated.csv (`Accept: text/csv`),
-//! written by the engine's own [`crate::compensate::write_csv`].
+//! written by the engine's own [`crate::model::compensated::write_csv`].
 //!
 //! A calibration that accepted thermal expansion driven by the temperature
 //! is compensated at `temp_c` when the request gives one (default: the
@@ -14,11 +14,12 @@
 //! temperature (a clone of a few parameter vectors). Likewise a calibration
 //! that accepted a joint compliance is compensated with `payload_kg` (the
 //! payload at T) when the request gives one (default: the calibration
-//! session's median payload).
+//! session's median payload). Both, and the approach for a backlash, go
+//! through the engine's [`crate::compensate::Conditions`], as on the
+//! command line.
 
 use std::collections::HashSet;
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
 
 use axum::Json;
 use axum::extract::State;
@@ -31,22 +32,15 @@ use utoipa::{IntoParams, ToSchema};
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiQuery, RawBody, is_json, parse_json};
 use super::{ApiError, ApiResult, AppState, ErrorBody, MAX_COMPENSATE_TARGETS};
-use crate::compensate::{Compensated, CompensationStatus, Compensator};
+use crate::compensate::{
+    Approach, Compensated, CompensationStatus, Compensator, ConditionNames, Conditions,
+    ConditionsUsed,
+};
+use crate::model::compensated::write_csv;
 use crate::model::targets::targets_from_csv;
 use crate::model::{Target, TargetKind};
-use crate::report::Report;
 
-/// A built compensator and what it came from.
-pub struct Cached {
-    /// The engine's compensator.
-    pub compensator: Compensator,
-    /// Calibration id.
-    pub calibration_id: i64,
-    /// Its version.
-    pub version: i64,
-    /// Its robot.
-    pub robot_id: i64,
-}
+pub use super::cache::Cached;
 
 /// One target: nominal joints (`q_deg`) or a point of T in the robot base
 /// frame (`xyz_mm`, optionally with the flange orientation `rpy_deg`).
@@ -66,19 +60,34 @@ pub struct TargetIn {
     pub rpy_deg: Option<[f64; 3]>,
 }
 
-/// How the joints arrive at the targets, for a calibration with a backlash.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum ApproachIn {
-    /// Every joint moving in +q (the default; most teach programs finish
-    /// so).
-    Positive,
-    /// Every joint moving in -q.
-    Negative,
-    /// The robot visits the targets in request order: each joint arrives
-    /// from the previous target's compensated joints (solved one after the
-    /// other, on one thread).
-    InOrder,
+/// The API's name of an approach: serde's, as the JSON answer has it (the
+/// `X-Approach-Used` header, the schema's values).
+fn approach_name(a: Approach) -> &'static str {
+    match a {
+        Approach::Positive => "positive",
+        Approach::Negative => "negative",
+        Approach::InOrder => "in_order",
+    }
+}
+
+// The API's schema of the engine's `Approach`, written here so that the
+// engine's type carries no API text; named `ApproachIn`, as it always was.
+impl utoipa::PartialSchema for Approach {
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        utoipa::openapi::ObjectBuilder::new()
+            .schema_type(utoipa::openapi::schema::Type::String)
+            .description(Some(
+                "How the joints arrive at the targets, for a calibration with a backlash.",
+            ))
+            .enum_values(Some(Approach::ALL.map(approach_name)))
+            .into()
+    }
+}
+
+impl ToSchema for Approach {
+    fn name() -> std::borrow::Cow<'static, str> {
+        "ApproachIn".into()
+    }
 }
 
 /// What to compensate, and with which calibration.
@@ -116,7 +125,7 @@ pub struct CompensateRequest {
     /// accepted a backlash (default `positive`); ignored otherwise
     /// (`approach_used` is then null).
     #[serde(default)]
-    pub approach: Option<ApproachIn>,
+    pub approach: Option<Approach>,
 }
 
 /// Outcome of one target.
@@ -186,7 +195,7 @@ pub struct CompensateResponse {
     pub payload_kg_used: Option<f64>,
     /// How the joints were taken to arrive: the request's `approach`, else
     /// `positive`, when the calibration has a backlash; null otherwise.
-    pub approach_used: Option<ApproachIn>,
+    pub approach_used: Option<Approach>,
     /// Targets with status `ok`.
     pub n_ok: usize,
     /// One per target, in order.
@@ -255,98 +264,6 @@ fn check_target(i: usize, t: TargetIn, dof: usize, batch: bool) -> ApiResult<Tar
     })
 }
 
-/// The robot's active calibration id; not found if the robot does not
-/// exist.
-///
-/// Cached per robot for [`super::ACTIVE_CACHE_TTL`] (dropped at once when
-/// this process activates or rolls back). When the entry has expired, the
-/// first request to see it re-reads the robot (one primary-key read) while
-/// concurrent requests keep using the old id until that read lands, so the
-/// database sees one read per robot per TTL, never a burst. An activation
-/// made through another replica on the same database is therefore seen
-/// within the TTL plus one read.
-async fn active_calibration(app: &AppState, robot_id: i64) -> ApiResult<Option<i64>> {
-    let now = std::time::Instant::now();
-    if let Some((active, at)) = app
-        .active
-        .read()
-        .ok()
-        .and_then(|m| m.get(&robot_id).copied())
-    {
-        if now.duration_since(at) < super::ACTIVE_CACHE_TTL {
-            return Ok(active);
-        }
-        // Expired: claim the refresh (the entry looks fresh to the others
-        // while this request reads the robot), unless another one has.
-        let claimed = match app.active.write() {
-            Ok(mut m) => match m.get_mut(&robot_id) {
-                Some(e) if now.duration_since(e.1) >= super::ACTIVE_CACHE_TTL => {
-                    e.1 = now;
-                    true
-                }
-                _ => false,
-            },
-            Err(_) => true,
-        };
-        if !claimed {
-            return Ok(active);
-        }
-    }
-    let read_at = std::time::Instant::now();
-    let epoch = app.activations.load(Ordering::SeqCst);
-    let robot = match app.store.get_robot(robot_id).await {
-        Ok(r) => r,
-        Err(e) => {
-            if let Ok(mut m) = app.active.write() {
-                m.remove(&robot_id);
-            }
-            return Err(e.into());
-        }
-    };
-    if let Ok(mut m) = app.active.write() {
-        // Not if an activation through this process may have raced the read.
-        if app.activations.load(Ordering::SeqCst) == epoch {
-            m.insert(robot_id, (robot.active_calibration_id, read_at));
-        } else {
-            m.remove(&robot_id);
-        }
-    }
-    Ok(robot.active_calibration_id)
-}
-
-/// The compensator of a calibration, from the cache or built (off the
-/// runtime) and cached.
-async fn compensator(app: &AppState, calibration_id: i64) -> ApiResult<Arc<Cached>> {
-    if let Some(c) = app
-        .compensators
-        .read()
-        .ok()
-        .and_then(|m| m.get(&calibration_id).cloned())
-    {
-        return Ok(c);
-    }
-    let cal = app.store.get_calibration(calibration_id).await?;
-    let text = app.store.calibration_report(calibration_id).await?;
-    let built = tokio::task::spawn_blocking(move || -> ApiResult<Compensator> {
-        let report = Report::from_json(&text)
-            .map_err(|e| ApiError::Internal(format!("stored report: {e}")))?;
-        Compensator::from_report(&report)
-            .map_err(|e| ApiError::Internal(format!("compensator: {e}")))
-    })
-    .await
-    .map_err(|e| ApiError::Internal(e.to_string()))??;
-    let cached = Arc::new(Cached {
-        compensator: built,
-        calibration_id,
-        version: cal.version,
-        robot_id: cal.robot_id,
-    });
-    if let Ok(mut m) = app.compensators.write() {
-        m.insert(calibration_id, cached.clone());
-    }
-    Ok(cached)
-}
-
 /// Query parameters of `POST /compensate`, for a `text/csv` body only (a
 /// JSON body carries them itself).
 #[derive(Debug, Default, Deserialize, IntoParams)]
@@ -368,7 +285,7 @@ pub struct CompensateQuery {
     pub payload_kg: Option<f64>,
     /// How the joints arrive at the targets, for a calibration with a
     /// backlash (default `positive`).
-    pub approach: Option<ApproachIn>,
+    pub approach: Option<Approach>,
 }
 
 impl CompensateQuery {
@@ -387,37 +304,13 @@ impl CompensateQuery {
     }
 }
 
-/// What the robot runs under, as the request gives it.
-struct Conditions {
-    temp_c: Option<f64>,
-    payload_kg: Option<f64>,
-    approach: Option<ApproachIn>,
-}
-
-impl Conditions {
-    /// A copy of the cached compensator moved to these conditions, when
-    /// they change its answers (a temperature with a thermal effect, a
-    /// payload with a compliance); `None`: the cached one as it is.
-    fn adjust(&self, comp: &Compensator) -> Option<Compensator> {
-        let temp_c = self.temp_c.filter(|_| comp.thermal().is_some());
-        let payload_kg = self.payload_kg.filter(|_| comp.payload_kg().is_some());
-        let negative = self.approach == Some(ApproachIn::Negative) && comp.has_backlash();
-        if temp_c.is_none() && payload_kg.is_none() && !negative {
-            return None;
-        }
-        let mut c = comp.clone();
-        if let Some(t) = temp_c {
-            c = c.at_temperature(t);
-        }
-        if let Some(p) = payload_kg {
-            c = c.with_payload_kg(p);
-        }
-        if negative {
-            c = c.with_approach(&vec![-1.0; c.dof()]);
-        }
-        Some(c)
-    }
-}
+/// How the API names the compensation conditions in its errors: by their
+/// fields.
+const CONDITION_NAMES: ConditionNames = ConditionNames {
+    temp_c: "temp_c",
+    payload_kg: "payload_kg",
+    approach: "approach",
+};
 
 /// The targets as they arrived: JSON objects (checked against the robot
 /// once its calibration is known) or a targets.csv body.
@@ -525,49 +418,56 @@ pub async fn compensate(
     body: RawBody,
 ) -> ApiResult<Response> {
     let csv_out = wants_csv(&headers);
-    let (robot_id, calibration_id, orientation, conditions, inputs) = match body
-        .content_type
-        .as_deref()
-    {
-        ct if is_json(ct) => {
-            if let Some(name) = query.first_given() {
-                return Err(ApiError::invalid(
-                    name,
-                    format!(
-                        "with a JSON body, {name} (like robot_id, calibration_id, orientation, temp_c, payload_kg and approach) goes in the body, not the query string"
-                    ),
-                ));
-            }
-            let req: CompensateRequest = parse_json(&body.bytes)?;
-            let (targets, batch) = match (req.target, req.targets) {
-                (Some(t), None) => (vec![t], false),
-                (None, Some(ts)) => (ts, true),
-                (Some(_), Some(_)) => {
-                    return Err(ApiError::invalid(
-                        "targets",
-                        "give target or targets, not both",
-                    ));
-                }
-                (None, None) => {
-                    return Err(ApiError::invalid(
-                        "targets",
-                        "give target (one) or targets (a batch)",
-                    ));
-                }
-            };
-            check_count(targets.len())?;
-            (
-                req.robot_id,
-                req.calibration_id,
-                req.orientation,
-                Conditions {
-                    temp_c: req.temp_c,
-                    payload_kg: req.payload_kg,
-                    approach: req.approach,
-                },
-                Inputs::Json { targets, batch },
-            )
-        }
+    let req = read_request(query, body)?;
+    // A bad value is refused before the store is read.
+    req.conditions.check(CONDITION_NAMES)?;
+    let cached = calibration_for(&app, req.robot_id, req.calibration_id).await?;
+    let dof = cached.compensator.dof();
+    let targets = checked_targets(req.inputs, dof)?;
+    let warnings: Vec<String> = crate::model::targets::radians_warning(&targets, dof)
+        .into_iter()
+        .collect();
+    let applied = req.conditions.apply(&cached.compensator, CONDITION_NAMES)?;
+    let (used, in_order) = (applied.used(), applied.in_order());
+    let adjusted = applied.into_changed();
+    let results = solve(
+        &app,
+        cached.clone(),
+        adjusted,
+        targets,
+        req.orientation,
+        in_order,
+    )
+    .await?;
+    let answer = Answer {
+        robot_id: req.robot_id,
+        calibration_id: cached.calibration_id,
+        version: cached.version,
+        used,
+        warnings,
+    };
+    if csv_out {
+        csv_answer(answer, dof, &results)
+    } else {
+        Ok(json_answer(answer, results))
+    }
+}
+
+/// A request as it arrived: the robot, the calibration named (if any), the
+/// options and the targets, not yet checked against the robot.
+struct Request {
+    robot_id: i64,
+    calibration_id: Option<i64>,
+    orientation: bool,
+    conditions: Conditions,
+    inputs: Inputs,
+}
+
+/// The request from a JSON body (everything in it) or a targets.csv body
+/// (the options in the query string).
+fn read_request(query: CompensateQuery, body: RawBody) -> ApiResult<Request> {
+    match body.content_type.as_deref() {
+        ct if is_json(ct) => json_request(&query, &body.bytes),
         Some("text/csv") => {
             let robot_id = query.robot_id.ok_or_else(|| {
                 ApiError::invalid(
@@ -575,32 +475,77 @@ pub async fn compensate(
                     "a text/csv body needs robot_id in the query string (/compensate?robot_id=N)",
                 )
             })?;
-            (
+            Ok(Request {
                 robot_id,
-                query.calibration_id,
-                query.orientation.unwrap_or(false),
-                Conditions {
+                calibration_id: query.calibration_id,
+                orientation: query.orientation.unwrap_or(false),
+                conditions: Conditions {
                     temp_c: query.temp_c,
                     payload_kg: query.payload_kg,
                     approach: query.approach,
                 },
-                Inputs::Csv(body.bytes),
-            )
+                inputs: Inputs::Csv(body.bytes),
+            })
         }
-        other => {
-            return Err(ApiError::UnsupportedMediaType(format!(
-                "targets are sent as application/json or text/csv, got {}",
-                other.unwrap_or("none")
-            )));
+        other => Err(ApiError::UnsupportedMediaType(format!(
+            "targets are sent as application/json or text/csv, got {}",
+            other.unwrap_or("none")
+        ))),
+    }
+}
+
+/// The request from a JSON body: one target or a batch, and no option in
+/// the query string (it would be ignored, or contradict the body).
+fn json_request(query: &CompensateQuery, bytes: &[u8]) -> ApiResult<Request> {
+    if let Some(name) = query.first_given() {
+        return Err(ApiError::invalid(
+            name,
+            format!(
+                "with a JSON body, {name} (like robot_id, calibration_id, orientation, temp_c, payload_kg and approach) goes in the body, not the query string"
+            ),
+        ));
+    }
+    let req: CompensateRequest = parse_json(bytes)?;
+    let (targets, batch) = match (req.target, req.targets) {
+        (Some(t), None) => (vec![t], false),
+        (None, Some(ts)) => (ts, true),
+        (Some(_), Some(_)) => {
+            return Err(ApiError::invalid(
+                "targets",
+                "give target or targets, not both",
+            ));
+        }
+        (None, None) => {
+            return Err(ApiError::invalid(
+                "targets",
+                "give target (one) or targets (a batch)",
+            ));
         }
     };
-    if let Some(t) = conditions.temp_c {
-        crate::compensate::check_temp_c("temp_c", t)?;
-    }
-    if let Some(p) = conditions.payload_kg {
-        crate::compensate::check_payload_kg("payload_kg", p)?;
-    }
-    let active = active_calibration(&app, robot_id).await?;
+    check_count(targets.len())?;
+    Ok(Request {
+        robot_id: req.robot_id,
+        calibration_id: req.calibration_id,
+        orientation: req.orientation,
+        conditions: Conditions {
+            temp_c: req.temp_c,
+            payload_kg: req.payload_kg,
+            approach: req.approach,
+        },
+        inputs: Inputs::Json { targets, batch },
+    })
+}
+
+/// The calibration named, else the robot's active one, with its
+/// compensator. Not found when the robot does not exist; a conflict when
+/// it has no active calibration and none is named; invalid when the one
+/// named does not exist or is another robot's.
+async fn calibration_for(
+    app: &AppState,
+    robot_id: i64,
+    calibration_id: Option<i64>,
+) -> ApiResult<Arc<Cached>> {
+    let active = app.cache.active_calibration(&app.store, robot_id).await?;
     let calibration_id = match calibration_id {
         Some(c) => c,
         None => active.ok_or_else(|| {
@@ -609,7 +554,7 @@ pub async fn compensate(
             ))
         })?,
     };
-    let cached = match compensator(&app, calibration_id).await {
+    let cached = match app.cache.compensator(&app.store, calibration_id).await {
         Err(ApiError::NotFound(_)) => {
             return Err(ApiError::invalid(
                 "calibration_id",
@@ -627,9 +572,13 @@ pub async fn compensate(
             ),
         ));
     }
-    let dof = cached.compensator.dof();
-    let targets = match inputs {
-        Inputs::Json { targets, batch } => json_targets(targets, dof, batch)?,
+    Ok(cached)
+}
+
+/// The targets checked against a robot with `dof` joints.
+fn checked_targets(inputs: Inputs, dof: usize) -> ApiResult<Vec<Target>> {
+    match inputs {
+        Inputs::Json { targets, batch } => json_targets(targets, dof, batch),
         Inputs::Csv(bytes) => {
             // targets.csv is parsed here, on the runtime: a few µs per row,
             // like the JSON parse of the same targets. An oversized batch is
@@ -647,88 +596,80 @@ pub async fn compensate(
             }
             let targets = targets_from_csv(&bytes[..], dof)?;
             check_count(targets.len())?;
-            targets
+            Ok(targets)
         }
-    };
-    let warnings: Vec<String> = crate::model::targets::radians_warning(&targets, dof)
-        .into_iter()
-        .collect();
-    let adjusted = conditions.adjust(&cached.compensator);
-    let used = adjusted.as_ref().unwrap_or(&cached.compensator);
-    let (temp_c_used, payload_kg_used) = (used.temperature_c(), used.payload_kg());
-    let approach_used = used
-        .has_backlash()
-        .then(|| conditions.approach.unwrap_or(ApproachIn::Positive));
-    let in_order = approach_used == Some(ApproachIn::InOrder);
-    let results = solve(
-        &app,
-        cached.clone(),
-        adjusted,
-        targets,
-        orientation,
-        in_order,
-    )
-    .await?;
-    if csv_out {
-        let mut out = Vec::with_capacity(64 + results.len() * (16 + 14 * dof));
-        crate::compensate::write_csv(&mut out, dof, &results)
-            .map_err(|e| ApiError::Internal(format!("writing compensated.csv: {e}")))?;
-        let mut resp = (
-            [
-                (CONTENT_TYPE, HeaderValue::from_static("text/csv")),
-                (
-                    HeaderName::from_static("x-calibration-id"),
-                    HeaderValue::from(cached.calibration_id),
-                ),
-                (
-                    HeaderName::from_static("x-calibration-version"),
-                    HeaderValue::from(cached.version),
-                ),
-            ],
-            out,
-        )
-            .into_response();
-        for (name, value) in [
-            ("x-temp-c-used", temp_c_used),
-            ("x-payload-kg-used", payload_kg_used),
-        ] {
-            if let Some(v) = value.and_then(|v| HeaderValue::from_str(&v.to_string()).ok()) {
-                resp.headers_mut().insert(HeaderName::from_static(name), v);
-            }
-        }
-        for w in &warnings {
-            if let Ok(v) = HeaderValue::from_str(w) {
-                resp.headers_mut()
-                    .append(HeaderName::from_static("x-warning"), v);
-            }
-        }
-        if let Some(a) = approach_used {
-            let v = match a {
-                ApproachIn::Positive => "positive",
-                ApproachIn::Negative => "negative",
-                ApproachIn::InOrder => "in_order",
-            };
-            resp.headers_mut().insert(
-                HeaderName::from_static("x-approach-used"),
-                HeaderValue::from_static(v),
-            );
-        }
-        return Ok(resp);
     }
+}
+
+/// What the answer says besides the rows: the calibration that produced
+/// them and the conditions used.
+struct Answer {
+    robot_id: i64,
+    calibration_id: i64,
+    version: i64,
+    used: ConditionsUsed,
+    warnings: Vec<String>,
+}
+
+/// compensated.csv, with the rest of the answer in headers.
+fn csv_answer(answer: Answer, dof: usize, results: &[Compensated]) -> ApiResult<Response> {
+    let mut out = Vec::with_capacity(64 + results.len() * (16 + 14 * dof));
+    write_csv(&mut out, dof, results)
+        .map_err(|e| ApiError::Internal(format!("writing compensated.csv: {e}")))?;
+    let mut resp = (
+        [
+            (CONTENT_TYPE, HeaderValue::from_static("text/csv")),
+            (
+                HeaderName::from_static("x-calibration-id"),
+                HeaderValue::from(answer.calibration_id),
+            ),
+            (
+                HeaderName::from_static("x-calibration-version"),
+                HeaderValue::from(answer.version),
+            ),
+        ],
+        out,
+    )
+        .into_response();
+    for (name, value) in [
+        ("x-temp-c-used", answer.used.temp_c_used),
+        ("x-payload-kg-used", answer.used.payload_kg_used),
+    ] {
+        if let Some(v) = value.and_then(|v| HeaderValue::from_str(&v.to_string()).ok()) {
+            resp.headers_mut().insert(HeaderName::from_static(name), v);
+        }
+    }
+    for w in &answer.warnings {
+        if let Ok(v) = HeaderValue::from_str(w) {
+            resp.headers_mut()
+                .append(HeaderName::from_static("x-warning"), v);
+        }
+    }
+    if let Some(a) = answer.used.approach_used {
+        resp.headers_mut().insert(
+            HeaderName::from_static("x-approach-used"),
+            HeaderValue::from_static(approach_name(a)),
+        );
+    }
+    Ok(resp)
+}
+
+/// The JSON answer.
+fn json_answer(answer: Answer, results: Vec<Compensated>) -> Response {
     let results: Vec<CompensatedOut> = results.into_iter().map(Into::into).collect();
     let n_ok = results.iter().filter(|r| r.status == StatusOut::Ok).count();
-    Ok(Json(CompensateResponse {
-        robot_id,
-        calibration_id: cached.calibration_id,
-        version: cached.version,
-        temp_c_used,
-        payload_kg_used,
-        approach_used,
+    Json(CompensateResponse {
+        robot_id: answer.robot_id,
+        calibration_id: answer.calibration_id,
+        version: answer.version,
+        temp_c_used: answer.used.temp_c_used,
+        payload_kg_used: answer.used.payload_kg_used,
+        approach_used: answer.used.approach_used,
         n_ok,
         results,
-        warnings,
+        warnings: answer.warnings,
     })
-    .into_response())
+    .into_response()
 }
 
 /// A batch has 1 to [`MAX_COMPENSATE_TARGETS`] targets.
@@ -893,6 +834,13 @@ mod tests {
             },
         }];
         assert!(!runs_inline(&cartesian), "IK seeds never run inline");
+    }
+
+    #[test]
+    fn the_approach_names_are_serdes() {
+        for a in Approach::ALL {
+            assert_eq!(serde_json::to_value(a).unwrap(), approach_name(a));
+        }
     }
 
     #[test]

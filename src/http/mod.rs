@@ -12,6 +12,7 @@
 //! the JSON error body in one place. Store errors convert into it; engine
 //! input errors become 422 with `field` and `row`.
 
+pub mod cache;
 pub mod calibrations;
 pub mod compensate;
 pub mod compute;
@@ -22,10 +23,9 @@ pub mod resources;
 pub mod sessions;
 pub mod ui;
 
-use std::collections::HashMap;
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, RwLock};
 use std::time::Duration;
 
 use axum::Router;
@@ -85,15 +85,9 @@ pub struct App {
     pub store: Store,
     /// The job pool (to wake it on enqueue).
     pub jobs: Jobs,
-    /// Built compensators by calibration id (calibrations are immutable).
-    pub compensators: RwLock<HashMap<i64, Arc<compensate::Cached>>>,
-    /// Robots' active calibration ids as last read, with when; refreshed
-    /// after [`ACTIVE_CACHE_TTL`] and dropped at once when this process
-    /// activates or rolls back.
-    pub active: RwLock<HashMap<i64, (Option<i64>, std::time::Instant)>>,
-    /// Bumped by every activation and rollback through this process, so
-    /// that a read of the active id that raced with one is not cached.
-    pub activations: AtomicU64,
+    /// Built compensators and robots' active calibration ids, with the
+    /// rules of when each is dropped.
+    pub cache: cache::CompensationCache,
     /// Threads for request-path numerical work (one per core).
     pub compute: compute::ComputePool,
 }
@@ -298,9 +292,7 @@ impl Service {
         let state = AppState(Arc::new(App {
             store,
             jobs,
-            compensators: RwLock::new(HashMap::new()),
-            active: RwLock::new(HashMap::new()),
-            activations: AtomicU64::new(0),
+            cache: cache::CompensationCache::new(),
             compute: compute::ComputePool::new(compute_threads()),
         }));
         Ok(Service {

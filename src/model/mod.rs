@@ -1,12 +1,15 @@
 //! The calibration inputs, typed and validated: the robot's nominal model
 //! (robot.json), the measuring rig (rig.json), recorded poses (poses.csv) and
-//! compensation targets (targets.csv). Formats: `DATA_FORMAT.md` v1.
+//! compensation targets (targets.csv), and the compensated targets written
+//! back (compensated.csv). Formats: `DATA_FORMAT.md` v1.
 
+pub mod compensated;
 pub mod dataset;
 pub mod rig;
 pub mod robot;
 pub mod targets;
 
+pub use compensated::{Compensated, CompensationStatus};
 pub use dataset::{Dataset, Measurement, PoseRecord, Split};
 pub use rig::{BasePose, Rig, SensorSpec};
 pub use robot::{Convention, JointSpec, LinkMass, Robot};

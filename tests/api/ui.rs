@@ -150,7 +150,8 @@ async fn report_html_renders_the_stored_calibration() {
 /// check of the script; the browser test runs it against the service.
 #[test]
 fn the_compensate_view_sends_the_conditions_and_shows_the_used_ones() {
-    use drawcal::http::compensate::{ApproachIn, CompensateResponse};
+    use drawcal::compensate::Approach;
+    use drawcal::http::compensate::CompensateResponse;
     let js = drawcal::http::ui::APP_JS;
     let html = drawcal::http::ui::INDEX_HTML;
     for needle in [
@@ -183,11 +184,7 @@ fn the_compensate_view_sends_the_conditions_and_shows_the_used_ones() {
         assert!(js.contains(needle), "app.js lacks {needle}");
     }
     // The select's values are the API's approach names.
-    for a in [
-        ApproachIn::Positive,
-        ApproachIn::Negative,
-        ApproachIn::InOrder,
-    ] {
+    for a in Approach::ALL {
         let name = serde_json::to_value(a).unwrap();
         let name = name.as_str().unwrap();
         assert!(

@@ -1,0 +1,322 @@
+//! The solver: damped least squares on the calibrated (or, for seeding,
+//! the nominal) model, from given joints to joints that put T on the
+//! target, or an early "cannot converge from here".
+
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+
+use crate::kinematics::Params;
+use crate::kinematics::chain::{OutputFrame, PointJacobian};
+
+use super::Compensator;
+
+/// A damped least squares solve stops at a stationary point of its error
+/// (MINPACK's `gtol`): when every column of the Jacobian is this close to
+/// orthogonal to the error (`|J_j·e| <= GTOL |J_j| |e|`), with the error
+/// far above the tolerance. Over the targets of `tests/engine/compensate_ik.rs`
+/// the converging solves never came below 7e-4.
+const GTOL: f64 = 1e-6;
+
+/// Which model a solve runs on.
+#[derive(Clone, Copy)]
+pub(super) enum Model {
+    /// The nominal model, without joint effects (seeding).
+    Nominal,
+    /// The calibrated model with its joint effects.
+    Calibrated,
+}
+
+pub(super) struct Solution {
+    pub(super) q: Vec<f64>,
+    pub(super) residual_mm: f64,
+    pub(super) iterations: usize,
+}
+
+/// A solve that did not converge: the iterations it ran before it gave up.
+pub(super) struct NotConverged {
+    pub(super) iterations: usize,
+    /// Least distance (mm) from T to the target over the solve's iterates,
+    /// for a position-only target.
+    pub(super) closest_mm: Option<f64>,
+}
+
+impl Compensator {
+    /// Damped least squares on the calibrated model from `q0`, each step at
+    /// most `max_step_rad` long.
+    pub(super) fn solve(
+        &self,
+        pos: &Vector3<f64>,
+        rot: Option<&Matrix3<f64>>,
+        q0: &[f64],
+        max_step_rad: f64,
+    ) -> std::result::Result<Solution, NotConverged> {
+        self.solve_on(Model::Calibrated, pos, rot, q0, max_step_rad)
+    }
+
+    /// Damped least squares on either model from `q0`, each step at most
+    /// `max_step_rad` long (a trust region; infinite for none).
+    ///
+    /// Besides converging or using up its iterations, a solve gives up as
+    /// soon as it cannot converge from where it is (unreachable targets
+    /// used to cost every seed its full iteration budget):
+    ///
+    /// - at a stationary point of the error far above the tolerance
+    ///   (MINPACK's `gtol` test, [`GTOL`]): the error is orthogonal to every
+    ///   column of the Jacobian, so the damped step is nil; it is a local
+    ///   minimum (or a saddle) of the distance to the target, not the
+    ///   target.
+    /// - frozen: the error did not beat the best so far (the damping has
+    ///   just grown tenfold), the damping is at least the Jacobian's
+    ///   largest curvature (`λ >= min(m, n)`, as it is scaled by the mean
+    ///   one), and the step is too short to bring the error back below that
+    ///   best. From there every further failure grows the damping tenfold
+    ///   and shrinks the step to at most 2/11 of the last, so all the steps
+    ///   still to come add up to at most 11/9 of this one; T moves at most
+    ///   [`super::reach::Reach`]'s radius in mm per radian of a joint (and
+    ///   the flange one radian, weighted 1000 mm), so the error can never
+    ///   come back below the best, which is above the tolerance: the
+    ///   damping never falls again and the solve cannot converge. The test
+    ///   uses twice that allowance ([`Compensator::frozen`]).
+    ///
+    /// Neither test stopped a solve that would have converged: over 6,210
+    /// targets on the arms of `tests/engine/compensate_ik.rs` (BENCHMARKS.md),
+    /// every answer is the same as without them, joint for joint.
+    pub(super) fn solve_on(
+        &self,
+        model: Model,
+        pos: &Vector3<f64>,
+        rot: Option<&Matrix3<f64>>,
+        q0: &[f64],
+        max_step_rad: f64,
+    ) -> std::result::Result<Solution, NotConverged> {
+        let n = self.dof();
+        let (params, effective) = match model {
+            Model::Calibrated => (&self.calibrated, true),
+            Model::Nominal => (&self.nominal, false),
+        };
+        let mut closest_mm = f64::INFINITY;
+        let give_up = |iterations, closest_mm: f64| {
+            Err(NotConverged {
+                iterations,
+                closest_mm: (rot.is_none() && closest_mm.is_finite()).then_some(closest_mm),
+            })
+        };
+        let mut q = q0.to_vec();
+        let mut jac = self.chain.new_jacobian();
+        let m = if rot.is_some() { 6 } else { 3 };
+        // The largest error (below) a converged solve can have.
+        let converged_err = match rot {
+            Some(_) => self.tolerance_mm + 1000.0 * self.tolerance_rad,
+            None => self.tolerance_mm,
+        };
+        let mut lambda: f64 = 1e-6;
+        let mut prev_err = f64::INFINITY;
+        for it in 0..=self.max_iterations {
+            let qe = if effective {
+                self.effective(&q)
+            } else {
+                q.clone()
+            };
+            self.chain
+                .point_jacobian(&params.values, &qe, OutputFrame::Base, &mut jac);
+            let e_pos = pos - jac.point;
+            let e_rot = rot
+                .map(|r| rotation_error(r, &jac.flange.r))
+                .unwrap_or_else(Vector3::zeros);
+            closest_mm = closest_mm.min(e_pos.norm());
+            let pos_ok = e_pos.norm() <= self.tolerance_mm;
+            let rot_ok = e_rot.norm() <= self.tolerance_rad;
+            if pos_ok && rot_ok {
+                return Ok(Solution {
+                    residual_mm: e_pos.norm(),
+                    q,
+                    iterations: it,
+                });
+            }
+            if it == self.max_iterations {
+                // A step now would never be checked.
+                return give_up(it, closest_mm);
+            }
+            // Error in mm with rotation weighted by 1000 mm/rad so both
+            // parts count alike in the damping.
+            let err = e_pos.norm() + 1000.0 * e_rot.norm();
+            let best = prev_err;
+            let improved = err < best;
+            lambda = if improved {
+                (lambda * 0.3).max(1e-12)
+            } else {
+                lambda * 10.0
+            };
+            prev_err = prev_err.min(err);
+            let oriented = rot.is_some();
+            let (j, e) = self.task_system(params, &qe, &jac, oriented, &e_pos, &e_rot);
+            if err > 100.0 * converged_err && stationary(&j, &e) {
+                return give_up(it, closest_mm);
+            }
+            let Some(step) = damped_step(&j, &e, lambda) else {
+                return give_up(it, closest_mm);
+            };
+            if !improved
+                && lambda >= m.min(n) as f64
+                && best > converged_err
+                && self.frozen(model, oriented, err, best, &step)
+            {
+                return give_up(it, closest_mm);
+            }
+            if !take_step(&mut q, &step, max_step_rad) {
+                return give_up(it + 1, closest_mm);
+            }
+        }
+        unreachable!("the last iteration returns")
+    }
+
+    /// The task's Jacobian with respect to the joints and its error at
+    /// `qe`: T's position (mm) and, when `oriented`, the flange's rotation
+    /// weighted by 1000 mm/rad (the weight of the error in `solve_on`).
+    fn task_system(
+        &self,
+        params: &Params,
+        qe: &[f64],
+        jac: &PointJacobian,
+        oriented: bool,
+        e_pos: &Vector3<f64>,
+        e_rot: &Vector3<f64>,
+    ) -> (DMatrix<f64>, DVector<f64>) {
+        let n = self.dof();
+        let m = if oriented { 6 } else { 3 };
+        let mut j = DMatrix::zeros(m, n);
+        let mut e = DVector::zeros(m);
+        let axes = oriented.then(|| self.chain.joint_axes(&params.values, qe, OutputFrame::Base));
+        for c in 0..n {
+            let col = jac.d_params[5 * c + 3];
+            for r in 0..3 {
+                j[(r, c)] = col[r];
+            }
+            if let Some(ax) = &axes {
+                for r in 0..3 {
+                    j[(3 + r, c)] = 1000.0 * ax[c].0[r];
+                }
+            }
+        }
+        for r in 0..3 {
+            e[r] = e_pos[r];
+            if m == 6 {
+                e[3 + r] = 1000.0 * e_rot[r];
+            }
+        }
+        (j, e)
+    }
+
+    /// The frozen test of [`Compensator::solve_on`]: the most all the steps
+    /// to come can change the error, twice over, still leaves it above
+    /// `best`. `|Δq|₁ <= √n |Δq|₂`.
+    fn frozen(
+        &self,
+        model: Model,
+        oriented: bool,
+        err: f64,
+        best: f64,
+        step: &DVector<f64>,
+    ) -> bool {
+        let n = self.dof();
+        let reach = match model {
+            Model::Calibrated => self.reach_calibrated(),
+            Model::Nominal => &self.reach_nominal,
+        };
+        // How fast the error can change per radian of a joint.
+        let per_rad = reach.radius + if oriented { 1000.0 } else { 0.0 };
+        let moved = 2.0 * (11.0 / 9.0) * (n as f64).sqrt() * per_rad * step.norm();
+        err - moved > best
+    }
+}
+
+/// The damped least squares step for `j Δq = e` with damping `lambda`
+/// (scaled by the mean curvature): minimum-norm when the arm has at least
+/// as many joints as the task has rows. `None` when the damped system is
+/// not positive definite.
+fn damped_step(j: &DMatrix<f64>, e: &DVector<f64>, lambda: f64) -> Option<DVector<f64>> {
+    let (m, n) = j.shape();
+    if n >= m {
+        // Minimum-norm: Jᵀ (J Jᵀ + λ I)⁻¹ e.
+        let mut a = j * j.transpose();
+        let scale = a.trace() / m as f64;
+        for i in 0..m {
+            a[(i, i)] += lambda * scale;
+        }
+        let a = a.cholesky()?;
+        Some(j.transpose() * a.solve(e))
+    } else {
+        let mut a = j.transpose() * j;
+        let scale = a.trace() / n as f64;
+        for i in 0..n {
+            a[(i, i)] += lambda * scale;
+        }
+        let a = a.cholesky()?;
+        Some(a.solve(&(j.transpose() * e)))
+    }
+}
+
+/// Move `q` by `step`, shortened to `max_step_rad`; false when the joints
+/// are no longer finite.
+///
+/// A trust region: near a singular configuration (a stretched arm, a wrist
+/// with aligned axes) the barely damped step can swing a joint by turns,
+/// and the solve then settled on joints far from the taught ones (a UR10's
+/// taught home pose came out at -831 deg of joint 1). Shorter steps follow
+/// the error down from the seed instead. The frozen test used the full
+/// step, which bounds the shorter ones too.
+fn take_step(q: &mut [f64], step: &DVector<f64>, max_step_rad: f64) -> bool {
+    let norm = step.norm();
+    let scale = if norm > max_step_rad {
+        max_step_rad / norm
+    } else {
+        1.0
+    };
+    for c in 0..q.len() {
+        q[c] += scale * step[c];
+    }
+    q.iter().all(|v| v.is_finite())
+}
+
+/// True when every column of `j` is orthogonal to `e` to within [`GTOL`]
+/// (a column of zeros counts as orthogonal).
+fn stationary(j: &DMatrix<f64>, e: &DVector<f64>) -> bool {
+    let e_norm = e.norm();
+    j.column_iter()
+        .all(|c| c.dot(e).abs() <= GTOL * c.norm() * e_norm)
+}
+
+/// Rotation vector taking `current` to `target`, in the output frame.
+///
+/// The angle comes from `atan2(sin, cos)` of the relative rotation, so it
+/// stays exact (and finite) when the two agree to rounding: the `acos` of
+/// the trace, as in `Rotation3::angle`, is NaN there once rounding puts the
+/// cosine a hair above 1, which made a converging solve fail (and near a
+/// half turn, below -1).
+pub(super) fn rotation_error(target: &Matrix3<f64>, current: &Matrix3<f64>) -> Vector3<f64> {
+    let d = target * current.transpose();
+    let v = 0.5
+        * Vector3::new(
+            d[(2, 1)] - d[(1, 2)],
+            d[(0, 2)] - d[(2, 0)],
+            d[(1, 0)] - d[(0, 1)],
+        );
+    let (s, c) = (v.norm(), 0.5 * (d.trace() - 1.0));
+    let angle = s.atan2(c);
+    if c < 0.0 {
+        // Beyond a quarter turn the axis comes from the symmetric part,
+        // `c I + (1 - c) n nᵀ`, which stays accurate up to a half turn.
+        let nn = (0.5 * (d + d.transpose()) - Matrix3::identity() * c) / (1.0 - c);
+        let k = (0..3)
+            .max_by(|&i, &j| nn[(i, i)].total_cmp(&nn[(j, j)]))
+            .unwrap_or(0);
+        let mut n = nn.column(k) / nn[(k, k)].sqrt();
+        if n.dot(&v) < 0.0 {
+            n = -n;
+        }
+        return n * angle;
+    }
+    if s == 0.0 {
+        return Vector3::zeros();
+    }
+    v * (angle / s)
+}
