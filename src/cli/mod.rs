@@ -204,6 +204,12 @@ pub struct CompensateArgs {
     /// physics analysis accepted a backlash (ignored otherwise).
     #[arg(long, value_enum, default_value = "positive")]
     pub approach: Approach,
+    /// Largest change of any joint (deg) a joint target's compensation may
+    /// make; a target that needs more is refused (`joint_change`), saying
+    /// which joint and how far.
+    #[arg(long, default_value_t = crate::compensate::DEFAULT_MAX_JOINT_CHANGE_DEG,
+          value_parser = max_joint_change_deg)]
+    pub max_joint_change_deg: f64,
 }
 
 /// `drawcal locate`.
@@ -328,7 +334,8 @@ const CONDITION_NAMES: ConditionNames = ConditionNames {
 
 fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
     let report = core(&a.calibration, Report::from_json(&read(&a.calibration)?))?;
-    let comp = core(&a.calibration, Compensator::from_report(&report))?;
+    let mut comp = core(&a.calibration, Compensator::from_report(&report))?;
+    comp.max_joint_change_deg = a.max_joint_change_deg;
     // One condition at a time, each said as it is taken: what was made of
     // the temperature is said before a bad --payload-kg is refused, and the
     // approach after what is said of the targets.
@@ -539,6 +546,11 @@ fn identifiability_tolerance(s: &str) -> std::result::Result<f64, String> {
 /// `--undetermined-z`: sigmas from 0 to 100.
 fn undetermined_z(s: &str) -> std::result::Result<f64, String> {
     in_range(s, 0.0..=100.0, "sigmas")
+}
+
+/// `--max-joint-change-deg`: degrees, from 0 to 360.
+fn max_joint_change_deg(s: &str) -> std::result::Result<f64, String> {
+    in_range(s, 0.0..=360.0, "degrees")
 }
 
 /// `--holdout`: a fraction from 0 to 0.9 (at least a tenth of the poses

@@ -46,6 +46,7 @@ impl Compensator {
             closed_form: true,
             tolerance_mm: 1e-3,
             tolerance_rad: 1e-6,
+            max_joint_change_deg: super::DEFAULT_MAX_JOINT_CHANGE_DEG,
             max_iterations: 50,
         })
     }

@@ -117,7 +117,17 @@ pub struct Compensator {
     pub tolerance_rad: f64,
     /// Iteration limit per solve.
     pub max_iterations: usize,
+    /// Largest change of any joint (deg) a joint target's compensation may
+    /// make; beyond it the target is refused (`joint_change`), saying which
+    /// joint and how far ([`DEFAULT_MAX_JOINT_CHANGE_DEG`]).
+    pub max_joint_change_deg: f64,
 }
+
+/// The default of [`Compensator::max_joint_change_deg`]: a calibration
+/// corrects millimetres, which takes a fraction of a degree of any joint
+/// away from singular poses; a compensated target that moves a joint
+/// further would swing the arm through the cell.
+pub const DEFAULT_MAX_JOINT_CHANGE_DEG: f64 = 5.0;
 
 impl std::fmt::Debug for Compensator {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

@@ -219,6 +219,16 @@ impl Compensator {
                         limit_msg.get_or_insert(msg);
                         continue;
                     }
+                    if !cartesian {
+                        if let Some(msg) = self.change_beyond_bound(&seed_of(&tried), &sol.q) {
+                            return failed(
+                                target,
+                                CompensationStatus::JointChange,
+                                last_iterations,
+                                msg,
+                            );
+                        }
+                    }
                     return Compensated {
                         target: target.target.clone(),
                         q_deg: Some(sol.q.iter().map(|v| v.to_degrees()).collect()),
@@ -257,6 +267,51 @@ impl Compensator {
                 self.unreachable_message(),
             ),
         }
+    }
+
+    /// Why the compensated joints `q` of a joint target taught at `taught`
+    /// are refused: a joint moves further than
+    /// [`Compensator::max_joint_change_deg`]; which joint, how far, and
+    /// whether the taught pose is singular (where the nearest solution can
+    /// lie far from the taught joints).
+    fn change_beyond_bound(&self, taught: &[f64], q: &[f64]) -> Option<String> {
+        let (j, change_deg) = q
+            .iter()
+            .zip(taught)
+            .map(|(a, b)| (a - b).to_degrees())
+            .enumerate()
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))?;
+        if change_deg.abs() <= self.max_joint_change_deg {
+            return None;
+        }
+        let why = if self.singular_for_position(taught) {
+            "the taught pose is singular for placing T (the arm stretched or folded, or axes aligned): there the calibrated model's nearest solution lies far from the taught joints"
+        } else {
+            "the calibrated model differs from the nominal one more than a calibration should here"
+        };
+        Some(format!(
+            "joint {} would move {change_deg:+.2} deg from the taught {:.2} deg (more than the {} deg bound on a compensation's change): {why}; not compensated, teach the pose away from the singularity or check the calibration",
+            j + 1,
+            taught[j].to_degrees(),
+            self.max_joint_change_deg
+        ))
+    }
+
+    /// True when T's Jacobian at `q` (calibrated model) is nearly rank
+    /// deficient: its smallest singular value under 2 % of its largest.
+    fn singular_for_position(&self, q: &[f64]) -> bool {
+        let mut jac = self.chain.new_jacobian();
+        self.chain.point_jacobian(
+            &self.calibrated.values,
+            &self.effective(q),
+            crate::kinematics::chain::OutputFrame::Base,
+            &mut jac,
+        );
+        let n = self.dof();
+        let j = nalgebra::DMatrix::from_fn(3, n, |r, c| jac.d_params[5 * c + 3][r]);
+        let sv = j.singular_values();
+        let (max, min) = (sv.max(), sv.min());
+        n >= 3 && !(min > 0.02 * max)
     }
 
     /// What breaks [`Compensator::compensate_near`]'s precondition, if
@@ -401,4 +456,9 @@ impl Compensator {
 /// through radians leaves 119.99999999999999 where the file said 120.
 pub(super) fn display_deg(rad: f64) -> f64 {
     (rad.to_degrees() * 1e9).round() / 1e9
+}
+
+/// The seed of the solve just made (the last one tried).
+fn seed_of(tried: &[Vec<f64>]) -> Vec<f64> {
+    tried.last().cloned().unwrap_or_default()
 }

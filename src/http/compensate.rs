@@ -155,6 +155,10 @@ pub enum StatusOut {
     Unreachable,
     /// The joints that reach it violate a joint limit.
     JointLimit,
+    /// A joint target whose compensation would move a joint further from
+    /// the taught one than the bound allows (the message says which and
+    /// how far): never sent silently.
+    JointChange,
 }
 
 impl From<Compensated> for CompensatedOut {
@@ -168,6 +172,7 @@ impl From<Compensated> for CompensatedOut {
                 CompensationStatus::Ok => StatusOut::Ok,
                 CompensationStatus::Unreachable => StatusOut::Unreachable,
                 CompensationStatus::JointLimit => StatusOut::JointLimit,
+                CompensationStatus::JointChange => StatusOut::JointChange,
             },
             message: c.message,
         }

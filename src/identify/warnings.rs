@@ -199,11 +199,6 @@ fn single_poses(
 
 /// RMS of `|R a + t - b|` (mm).
 fn rms(a: &[Vector3<f64>], b: &[Vector3<f64>], r: &Matrix3<f64>, t: &Vector3<f64>) -> f64 {
-    let n = a.len().max(1) as f64;
-    (a.iter()
-        .zip(b)
-        .map(|(x, y)| (r * x + t - y).norm_squared())
-        .sum::<f64>()
-        / n)
-        .sqrt()
+    let residuals: Vec<Vector3<f64>> = a.iter().zip(b).map(|(x, y)| r * x + t - y).collect();
+    crate::stats::rms_norm(&residuals)
 }

@@ -16,6 +16,9 @@ pub enum CompensationStatus {
     Unreachable,
     /// The joints that reach the target violate a joint limit.
     JointLimit,
+    /// The joints that reach the target are further from the taught ones
+    /// than the bound allows (a joint target only): never sent silently.
+    JointChange,
 }
 
 impl CompensationStatus {
@@ -25,6 +28,7 @@ impl CompensationStatus {
             CompensationStatus::Ok => "ok",
             CompensationStatus::Unreachable => "unreachable",
             CompensationStatus::JointLimit => "joint_limit",
+            CompensationStatus::JointChange => "joint_change",
         }
     }
 }

@@ -381,13 +381,30 @@ fn an_arm_without_a_closed_form_falls_back_to_the_numerical_seeds() {
 /// compensated with joints that stay with the taught ones. Before the
 /// solver's step was bounded, the taught home pose went to joint 1 at
 /// -831 deg (refused as a joint-limit violation) and its neighbour, with
-/// the orientation, to joint 4 at -461 deg.
+/// the orientation, to joint 4 at -461 deg. (With the default bound on a
+/// compensation's joint change, these are refused instead, naming the
+/// joint: `compensate_bound`; the bound is raised here to see the solver.)
 #[test]
 fn singular_taught_poses_stay_near_the_taught_joints() {
     let (nom, mut cal) = ur10();
     cal.tool_point_mm[2] -= 16.0;
     cal.tool_point_mm[1] += 0.3;
-    let comp = Compensator::new(&nom, &cal).unwrap();
+    let mut comp = Compensator::new(&nom, &cal).unwrap();
+    let refused = comp.compensate(
+        &Target {
+            target: "taught".into(),
+            kind: TargetKind::Joints {
+                q_deg: vec![-90.0, -90.0, 0.0, -90.0, 0.0, 0.0],
+            },
+        },
+        false,
+    );
+    assert_eq!(
+        refused.status,
+        CompensationStatus::JointChange,
+        "{refused:?}"
+    );
+    comp.max_joint_change_deg = 45.0;
     for (q, orientation) in [
         ([-90.0, -90.0, 0.0, -90.0, 0.0, 0.0], false),
         ([-90.0, -90.0, 10.0, -90.0, 0.0, 0.0], false),

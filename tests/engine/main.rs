@@ -7,6 +7,7 @@ mod common;
 
 mod architecture;
 mod cli;
+mod compensate_bound;
 mod compensate_edited_report;
 mod compensate_ik;
 mod fuzz_parsers;

@@ -260,12 +260,7 @@ fn p_base_rotation(obs: &Observations, p: &[f64]) -> nalgebra::Matrix3<f64> {
 }
 
 /// RMS of 3-D errors (NaN without any: no held-out poses, nothing to say).
-pub(super) fn rms(e: &[Vector3<f64>]) -> f64 {
-    if e.is_empty() {
-        return f64::NAN;
-    }
-    (e.iter().map(|v| v.norm_squared()).sum::<f64>() / e.len() as f64).sqrt()
-}
+pub(super) use crate::stats::rms_norm as rms;
 
 /// Held-out residuals in the space of what was measured (string readings
 /// or point coordinates), per test pose: the sum of squares over the pose's
