@@ -339,7 +339,7 @@ fn run_compensate(a: CompensateArgs) -> Result<(), CliError> {
     // One condition at a time, each said as it is taken: what was made of
     // the temperature is said before a bad --payload-kg is refused, and the
     // approach after what is said of the targets.
-    let bad = |e: crate::Error| CliError::Other(e.to_string());
+    let bad = CliError::Engine;
     let mut applied = Applied::new(&comp, CONDITION_NAMES);
     say(applied.temperature(a.temp_c).map_err(bad)?);
     say(applied.payload(a.payload_kg).map_err(bad)?);

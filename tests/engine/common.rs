@@ -167,3 +167,20 @@ pub fn q_columns_in_radians(csv: &str, rows: Option<&[usize]>) -> String {
 pub fn params(f: &drawcal::report::Finding) -> serde_json::Value {
     serde_json::to_value(&f.parameters).unwrap()
 }
+
+/// The pipeline without the physics analysis (the geometric calibration
+/// and its report), with these identification options.
+pub fn calibrate_geometric(
+    robot: &Robot,
+    rig: &Rig,
+    data: &Dataset,
+    opts: &drawcal::identify::IdentifyOptions,
+    progress: &dyn drawcal::identify::Progress,
+) -> drawcal::Result<drawcal::report::Report> {
+    let opts = drawcal::pipeline::Options {
+        identify: opts.clone(),
+        physics: false,
+        ..Default::default()
+    };
+    drawcal::pipeline::calibrate(robot, rig, data, &opts, progress)
+}

@@ -8,28 +8,11 @@ use drawcal::identify::{IdentifyOptions, Method, NoProgress};
 use drawcal::kinematics::Params;
 use drawcal::kinematics::chain::{Chain, OutputFrame};
 use drawcal::model::{Dataset, Measurement};
-use drawcal::pipeline;
 use drawcal::report::Report;
 use nalgebra::Vector3;
 
 fn geometric_only() -> IdentifyOptions {
     IdentifyOptions::default()
-}
-
-/// The pipeline without the physics analysis.
-fn calibrate_geometric(
-    robot: &drawcal::model::Robot,
-    rig: &drawcal::model::Rig,
-    data: &Dataset,
-    opts: &IdentifyOptions,
-    progress: &dyn drawcal::identify::Progress,
-) -> drawcal::Result<drawcal::report::Report> {
-    let opts = pipeline::Options {
-        identify: opts.clone(),
-        physics: false,
-        ..Default::default()
-    };
-    pipeline::calibrate(robot, rig, data, &opts, progress)
 }
 
 fn true_points(name: &str) -> Vec<Vector3<f64>> {
@@ -65,7 +48,8 @@ fn model_vs_truth_mm(name: &str, rep: &Report, data: &Dataset, n_strings: usize)
 
 fn check_simulated(name: &str) {
     let (robot, rig, data) = common::load(name);
-    let rep = calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let rep =
+        common::calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
     let truth = common::truth(name);
     let point_noise = truth["point_noise_mm"].as_f64().unwrap();
     let floor = rep.noise_floor_mm.unwrap();
@@ -142,7 +126,8 @@ fn er3a_paper_like_reaches_the_noise_floor_and_the_truth() {
 fn ur5_geometric_reaches_the_noise_floor_and_the_truth() {
     check_simulated("ur5_geometric");
     let (robot, rig, data) = common::load("ur5_geometric");
-    let rep = calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let rep =
+        common::calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
     assert!(rep.stats.test.after.rms_mm < 1.2 * rep.noise_floor_mm.unwrap());
 }
 
@@ -153,7 +138,7 @@ fn paper_method_runs_as_published() {
         method: Method::Paper,
         ..geometric_only()
     };
-    let rep = calibrate_geometric(&robot, &rig, &data, &opts, &NoProgress).unwrap();
+    let rep = common::calibrate_geometric(&robot, &rig, &data, &opts, &NoProgress).unwrap();
     assert_eq!(rep.method, "paper");
     // One linear step removes much of the error but stops far from the floor.
     assert!(rep.stats.test.after.rms_mm < 0.6 * rep.stats.test.before.rms_mm);
@@ -167,7 +152,8 @@ fn paper_method_runs_as_published() {
 #[test]
 fn real_ur10_random_tracker_data() {
     let (robot, rig, data) = common::load("real_ur10_ipa_random");
-    let rep = calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let rep =
+        common::calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
     assert_eq!(rep.split_source, "file");
     assert!(
         rep.noise_floor_mm.is_none(),
@@ -189,7 +175,8 @@ fn real_ur10_random_tracker_data() {
 #[test]
 fn real_positioner_two_axes_camera() {
     let (robot, rig, data) = common::load("real_positioner2ax_rosi");
-    let rep = calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let rep =
+        common::calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
     assert!(
         rep.stats.test.after.rms_mm <= 0.42,
         "{}",
@@ -202,7 +189,8 @@ fn real_positioner_two_axes_camera() {
 fn real_ur10_grid_calibrates_in_full() {
     let (robot, rig, data) = common::load("real_ur10_ipa_grid");
     assert_eq!(data.poses.len(), 11911);
-    let rep = calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let rep =
+        common::calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
     assert_eq!(rep.stats.train.n + rep.stats.test.n, 11911);
     // SOURCE.md: 0.841 mm before, 0.441 mm after (independent check).
     assert!(rep.stats.test.before.rms_mm < 0.9);
@@ -219,8 +207,10 @@ fn chosen_split_is_reported_and_reproducible() {
     for p in &mut data.poses {
         p.split = None;
     }
-    let a = calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
-    let b = calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let a =
+        common::calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let b =
+        common::calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
     assert_eq!(a.held_out, b.held_out);
     assert_eq!(a.held_out.len(), 24); // 30% of 80
     assert!(a.split_source.starts_with("chosen"));
@@ -273,7 +263,8 @@ fn uncertainties_come_from_the_final_model_with_its_effects() {
     // the string noise, and so are its sigmas; the final model (geometry +
     // compliance) must report the sigmas of its own, much tighter, fit.
     let (robot, rig, data) = common::load("er3a_compliance_j2");
-    let geo = calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let geo =
+        common::calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
     let fin = common::identify_default(&robot, &rig, &data);
     assert!(!fin.findings.is_empty());
     let mut ratios: Vec<f64> = fin
@@ -303,7 +294,8 @@ fn er3a_paper_like_noise_as_the_readme_quotes_it() {
     let (robot, rig, data) = common::load(name);
     let truth = true_points(name);
     let anchors: Vec<Vector3<f64>> = (0..rig.n_strings()).map(|k| rig.anchor(k)).collect();
-    let rep = calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
+    let rep =
+        common::calibrate_geometric(&robot, &rig, &data, &geometric_only(), &NoProgress).unwrap();
     let (mut string_ss, mut n_strings, mut located_ss, mut n_test) = (0.0, 0, 0.0, 0);
     for (pose, t) in data.poses.iter().zip(&truth) {
         let Measurement::Strings(l) = &pose.measurement else {
@@ -340,7 +332,9 @@ fn er3a_paper_like_noise_as_the_readme_quotes_it() {
 fn held_parameters_say_why() {
     use drawcal::report::FixedReason;
     let (robot, rig, data) = common::load("er3a_paper_like");
-    let run = |opts: IdentifyOptions| calibrate_geometric(&robot, &rig, &data, &opts, &NoProgress);
+    let run = |opts: IdentifyOptions| {
+        common::calibrate_geometric(&robot, &rig, &data, &opts, &NoProgress)
+    };
     let reason = |rep: &Report, name: &str| {
         rep.identifiability
             .fixed

@@ -19,22 +19,6 @@ fn no_physics() -> IdentifyOptions {
     IdentifyOptions::default()
 }
 
-/// The pipeline without the physics analysis.
-fn calibrate_geometric(
-    robot: &drawcal::model::Robot,
-    rig: &drawcal::model::Rig,
-    data: &Dataset,
-    opts: &IdentifyOptions,
-    progress: &dyn drawcal::identify::Progress,
-) -> drawcal::Result<drawcal::report::Report> {
-    let opts = pipeline::Options {
-        identify: opts.clone(),
-        physics: false,
-        ..Default::default()
-    };
-    pipeline::calibrate(robot, rig, data, &opts, progress)
-}
-
 fn warnings_of(robot: &Robot, rig: &Rig, data: &Dataset) -> Vec<String> {
     let session = Observations::new(robot, rig, data, &no_physics()).unwrap();
     input_warnings(&session)
@@ -85,7 +69,8 @@ fn a_file_in_radians_is_refused_and_forced_with_a_warning() {
 
     // The same poses in degrees: no warning, and the list is there, empty.
     let (_, _, data) = common::load("er3a_paper_like");
-    let report = calibrate_geometric(&robot, &rig, &data, &no_physics(), &NoProgress).unwrap();
+    let report =
+        common::calibrate_geometric(&robot, &rig, &data, &no_physics(), &NoProgress).unwrap();
     assert!(report.warnings.is_empty(), "{:?}", report.warnings);
     assert_eq!(
         serde_json::to_value(&report).unwrap()["warnings"],
