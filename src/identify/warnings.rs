@@ -44,6 +44,23 @@ pub fn input_warnings(obs: &Observations) -> Vec<String> {
     radians_in_degree_columns(obs)
 }
 
+/// The input warnings of a session and, when every joint angle looks like
+/// radians, the evidence ([`file_in_radians`]), from one pass over the
+/// poses.
+pub fn check_input(obs: &Observations) -> (Vec<String>, Option<String>) {
+    radians_check(obs, |file, single| match file {
+        Some(evidence) => (vec![file_warning(&evidence)], Some(evidence)),
+        None => (single(), None),
+    })
+}
+
+/// The warning a calibration from poses in radians carries.
+fn file_warning(evidence: &str) -> String {
+    format!(
+        "{evidence}; poses.csv holds degrees (deg = rad × 180/π): convert the angles and identify again, this calibration is not to be trusted"
+    )
+}
+
 /// The file's number for each joint angle (degrees, as the file holds it).
 fn file_numbers(q_rad: &[f64]) -> Vec<f64> {
     q_rad.iter().map(|q| q.to_degrees()).collect()
@@ -57,9 +74,7 @@ fn within_two_pi(q_rad: &[f64]) -> bool {
 /// Joint angles that look like radians: the whole file, or single poses.
 pub fn radians_in_degree_columns(obs: &Observations) -> Vec<String> {
     radians_check(obs, |file, single| match file {
-        Some(evidence) => vec![format!(
-            "{evidence}; poses.csv holds degrees (deg = rad × 180/π): convert the angles and identify again, this calibration is not to be trusted"
-        )],
+        Some(evidence) => vec![file_warning(&evidence)],
         None => single(),
     })
 }

@@ -103,8 +103,8 @@ pub fn run<'a>(
     progress: &dyn Progress,
 ) -> Result<Run<'a>> {
     let obs = Observations::new(robot, rig, data, &opts.identify)?;
-    refuse_radians(&obs, opts)?;
-    let mut warnings = warnings::input_warnings(&obs);
+    let (mut warnings, in_radians) = warnings::check_input(&obs);
+    refuse_radians(in_radians, opts)?;
     let geo = identify::geometric(&obs, &opts.identify, progress)?;
     warnings.extend(identify::few_poses_warning(&obs, &geo, &opts.identify));
     let physics = physics_step(&obs, &geo, opts, progress)?;
@@ -119,8 +119,8 @@ pub fn run<'a>(
 /// Poses whose joint angles look like radians are not calibrated (the
 /// result would move a robot by a model fitted to the wrong angles) unless
 /// the caller insists.
-fn refuse_radians(obs: &Observations, opts: &Options) -> Result<()> {
-    match warnings::file_in_radians(obs) {
+fn refuse_radians(in_radians: Option<String>, opts: &Options) -> Result<()> {
+    match in_radians {
         Some(evidence) if !opts.force => Err(Error::field(
             "poses",
             format!(
