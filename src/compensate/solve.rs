@@ -172,7 +172,7 @@ impl Compensator {
     /// The task's Jacobian with respect to the joints and its error at
     /// `qe`: T's position (mm) and, when `oriented`, the flange's rotation
     /// weighted by 1000 mm/rad (the weight of the error in `solve_on`).
-    fn task_system(
+    pub(super) fn task_system(
         &self,
         params: &Params,
         qe: &[f64],

@@ -187,6 +187,9 @@ impl Compensator {
     fn solve_from(&self, target: &Target, start: Start) -> Compensated {
         let Start { pos, rot, seeds } = start;
         let cartesian = matches!(target.kind, TargetKind::Cartesian { .. });
+        // A joint target's one seed is its taught joints, which the answer
+        // must stay with.
+        let taught = (!cartesian).then(|| seeds[0].clone());
         let mut last_iterations = 0;
         let mut limit_msg = None;
         let mut closest_mm = f64::INFINITY;
@@ -215,19 +218,23 @@ impl Compensator {
             match solved {
                 Ok(sol) => {
                     last_iterations += sol.iterations;
+                    // A swing is refused as such, even when it also ends
+                    // past a limit (the limit's "a turn away" hint would
+                    // not be the point).
+                    if let Some(msg) = taught
+                        .as_ref()
+                        .and_then(|t| self.change_beyond_bound(t, &sol.q, rot.is_some()))
+                    {
+                        return failed(
+                            target,
+                            CompensationStatus::JointChange,
+                            last_iterations,
+                            msg,
+                        );
+                    }
                     if let Some(msg) = self.limit_violation(&sol.q, !cartesian) {
                         limit_msg.get_or_insert(msg);
                         continue;
-                    }
-                    if !cartesian {
-                        if let Some(msg) = self.change_beyond_bound(&seed_of(&tried), &sol.q) {
-                            return failed(
-                                target,
-                                CompensationStatus::JointChange,
-                                last_iterations,
-                                msg,
-                            );
-                        }
                     }
                     return Compensated {
                         target: target.target.clone(),
@@ -274,7 +281,7 @@ impl Compensator {
     /// [`Compensator::max_joint_change_deg`]; which joint, how far, and
     /// whether the taught pose is singular (where the nearest solution can
     /// lie far from the taught joints).
-    fn change_beyond_bound(&self, taught: &[f64], q: &[f64]) -> Option<String> {
+    fn change_beyond_bound(&self, taught: &[f64], q: &[f64], oriented: bool) -> Option<String> {
         let (j, change_deg) = q
             .iter()
             .zip(taught)
@@ -284,34 +291,36 @@ impl Compensator {
         if change_deg.abs() <= self.max_joint_change_deg {
             return None;
         }
-        let why = if self.singular_for_position(taught) {
-            "the taught pose is singular for placing T (the arm stretched or folded, or axes aligned): there the calibrated model's nearest solution lies far from the taught joints"
+        let why = if self.singular_for_task(taught, oriented) {
+            "the taught pose is singular for the task (the arm stretched or folded, or axes aligned): there the calibrated model's nearest solution lies far from the taught joints; teach the pose away from the singularity"
         } else {
-            "the calibrated model differs from the nominal one more than a calibration should here"
+            "the calibrated model differs from the nominal one more than a calibration should here; check the calibration"
         };
         Some(format!(
-            "joint {} would move {change_deg:+.2} deg from the taught {:.2} deg (more than the {} deg bound on a compensation's change): {why}; not compensated, teach the pose away from the singularity or check the calibration",
+            "joint {} would move {change_deg:+.2} deg from the taught {:.2} deg (more than the {} deg bound on a compensation's change): {why}; not compensated",
             j + 1,
             taught[j].to_degrees(),
             self.max_joint_change_deg
         ))
     }
 
-    /// True when T's Jacobian at `q` (calibrated model) is nearly rank
+    /// True when the task's Jacobian at `q` (calibrated model: T's
+    /// position, and the flange's rotation when `oriented`) is nearly rank
     /// deficient: its smallest singular value under 2 % of its largest.
-    fn singular_for_position(&self, q: &[f64]) -> bool {
+    fn singular_for_task(&self, q: &[f64], oriented: bool) -> bool {
+        let qe = self.effective(q);
         let mut jac = self.chain.new_jacobian();
         self.chain.point_jacobian(
             &self.calibrated.values,
-            &self.effective(q),
+            &qe,
             crate::kinematics::chain::OutputFrame::Base,
             &mut jac,
         );
-        let n = self.dof();
-        let j = nalgebra::DMatrix::from_fn(3, n, |r, c| jac.d_params[5 * c + 3][r]);
+        let zero = nalgebra::Vector3::zeros();
+        let (j, _) = self.task_system(&self.calibrated, &qe, &jac, oriented, &zero, &zero);
         let sv = j.singular_values();
         let (max, min) = (sv.max(), sv.min());
-        n >= 3 && !(min > 0.02 * max)
+        j.ncols() >= j.nrows() && !(min > 0.02 * max)
     }
 
     /// What breaks [`Compensator::compensate_near`]'s precondition, if
@@ -456,9 +465,4 @@ impl Compensator {
 /// through radians leaves 119.99999999999999 where the file said 120.
 pub(super) fn display_deg(rad: f64) -> f64 {
     (rad.to_degrees() * 1e9).round() / 1e9
-}
-
-/// The seed of the solve just made (the last one tried).
-fn seed_of(tried: &[Vec<f64>]) -> Vec<f64> {
-    tried.last().cloned().unwrap_or_default()
 }

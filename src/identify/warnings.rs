@@ -38,64 +38,43 @@ const MAX_POSES_NAMED: usize = 5;
 /// Most pose ids listed after those.
 const MAX_IDS_LISTED: usize = 20;
 
-/// The input warnings of a session, in the order found (empty when
-/// nothing is suspect).
+/// What the input check found.
+#[derive(Debug, Default)]
+pub struct InputCheck {
+    /// The warnings, one sentence each, in the order found (empty when
+    /// nothing is suspect).
+    pub warnings: Vec<String>,
+    /// Why every joint angle looks like radians, when it does: a
+    /// calibration from such poses is refused unless forced
+    /// ([`InputCheck::refusal`]).
+    pub in_radians: Option<String>,
+}
+
+impl InputCheck {
+    /// The error that refuses a calibration from poses in radians.
+    pub fn refusal(evidence: &str) -> String {
+        format!(
+            "not calibrated: {evidence}; {DEGREES_ADVICE} (--force, or the job option \"force\": true, calibrates them as degrees anyway)"
+        )
+    }
+}
+
+/// What the user should do about angles in radians.
+const DEGREES_ADVICE: &str =
+    "poses.csv holds degrees (deg = rad × 180/π): convert the angles and identify again";
+
+/// The input warnings of a session (see [`check_input`]).
 pub fn input_warnings(obs: &Observations) -> Vec<String> {
-    radians_in_degree_columns(obs)
+    check_input(obs).warnings
 }
 
-/// The input warnings of a session and, when every joint angle looks like
-/// radians, the evidence ([`file_in_radians`]), from one pass over the
-/// poses.
-pub fn check_input(obs: &Observations) -> (Vec<String>, Option<String>) {
-    radians_check(obs, |file, single| match file {
-        Some(evidence) => (vec![file_warning(&evidence)], Some(evidence)),
-        None => (single(), None),
-    })
-}
-
-/// The warning a calibration from poses in radians carries.
-fn file_warning(evidence: &str) -> String {
-    format!(
-        "{evidence}; poses.csv holds degrees (deg = rad × 180/π): convert the angles and identify again, this calibration is not to be trusted"
-    )
-}
-
-/// The file's number for each joint angle (degrees, as the file holds it).
-fn file_numbers(q_rad: &[f64]) -> Vec<f64> {
-    q_rad.iter().map(|q| q.to_degrees()).collect()
-}
-
-/// Every angle of a pose within ±2π (in the file's numbers).
-fn within_two_pi(q_rad: &[f64]) -> bool {
-    q_rad.iter().all(|q| q.to_degrees().abs() <= RADIANS_BOUND)
-}
-
-/// Joint angles that look like radians: the whole file, or single poses.
-pub fn radians_in_degree_columns(obs: &Observations) -> Vec<String> {
-    radians_check(obs, |file, single| match file {
-        Some(evidence) => vec![file_warning(&evidence)],
-        None => single(),
-    })
-}
-
-/// Why the whole file's joint angles look like radians (the evidence),
-/// if they do: a calibration from them is refused unless forced
-/// (`pipeline::Options::force`).
-pub fn file_in_radians(obs: &Observations) -> Option<String> {
-    radians_check(obs, |file, _| file)
-}
-
-/// The radians test, its answer given to `answer`: the whole file's
-/// evidence (when every pose is within ±2π and the measurements say
-/// radians), and a way to ask about single poses otherwise.
-fn radians_check<T: Default>(
-    obs: &Observations,
-    answer: impl FnOnce(Option<String>, &dyn Fn() -> Vec<String>) -> T,
-) -> T {
+/// Joint angles that look like radians, in one pass over the poses: the
+/// whole file (a warning, and the evidence the pipeline refuses on), or
+/// single poses among others that do not (warnings only).
+pub fn check_input(obs: &Observations) -> InputCheck {
     let poses = &obs.data.poses;
     if poses.len() < 3 || obs.measured.len() != poses.len() {
-        return T::default();
+        return InputCheck::default();
     }
     let nominal = Params::nominal(
         obs.robot,
@@ -118,11 +97,31 @@ fn radians_check<T: Default>(
         obs.chain.point(&nominal.values, &q, OutputFrame::Base).1
     };
     let within: Vec<bool> = poses.iter().map(|p| within_two_pi(&p.q_rad)).collect();
-    if within.iter().all(|&w| w) {
-        answer(whole_file(obs, &point), &Vec::new)
-    } else {
-        answer(None, &|| single_poses(obs, &point, &within))
+    if !within.iter().all(|&w| w) {
+        return InputCheck {
+            warnings: single_poses(obs, &point, &within),
+            in_radians: None,
+        };
     }
+    match whole_file(obs, &point) {
+        Some(evidence) => InputCheck {
+            warnings: vec![format!(
+                "{evidence}; {DEGREES_ADVICE}, this calibration is not to be trusted"
+            )],
+            in_radians: Some(evidence),
+        },
+        None => InputCheck::default(),
+    }
+}
+
+/// The file's number for each joint angle (degrees, as the file holds it).
+fn file_numbers(q_rad: &[f64]) -> Vec<f64> {
+    q_rad.iter().map(|q| q.to_degrees()).collect()
+}
+
+/// Every angle of a pose within ±2π (in the file's numbers).
+fn within_two_pi(q_rad: &[f64]) -> bool {
+    q_rad.iter().all(|q| q.to_degrees().abs() <= RADIANS_BOUND)
 }
 
 /// The whole file within ±2π: do the measurements say radians?

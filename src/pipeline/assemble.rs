@@ -110,6 +110,7 @@ pub fn report(
         .string_sigma()
         .or_else(|| (l.n_strings > 0).then_some(geo.sigma));
     let paper = paper::one_step(obs, &geo.before);
+    let physics_notes = physics.notes();
     let (model, findings) = final_model(obs, geo, opts, &paper, physics.analysis)?;
     let all: Vec<usize> = (0..data.poses.len()).collect();
     let eb = obs.errors(&geo.before.values, &all);
@@ -181,7 +182,7 @@ pub fn report(
         per_pose: per_pose(obs, &train_problem, &model, &eb),
         findings,
         physics: physics.run,
-        physics_notes: physics.notes,
+        physics_notes,
         warnings,
     })
 }

@@ -20,6 +20,7 @@ pub mod assemble;
 pub mod evaluate;
 
 use crate::error::{Error, Result};
+use crate::identify::warnings::InputCheck;
 use crate::identify::{self, Geometric, IdentifyOptions, Method, Observations, Progress, warnings};
 use crate::model::{Dataset, Rig, Robot};
 use crate::physics::{self, Analysis};
@@ -33,7 +34,8 @@ pub struct Options {
     /// Run the physics analysis after the geometric identification.
     pub physics: bool,
     /// Calibrate even from poses whose joint angles look like radians
-    /// (refused otherwise: [`warnings::file_in_radians`]).
+    /// (refused otherwise, since the result would move a robot by a model
+    /// fitted to the wrong angles: [`InputCheck::in_radians`]).
     pub force: bool,
 }
 
@@ -103,8 +105,11 @@ pub fn run<'a>(
     progress: &dyn Progress,
 ) -> Result<Run<'a>> {
     let obs = Observations::new(robot, rig, data, &opts.identify)?;
-    let (mut warnings, in_radians) = warnings::check_input(&obs);
-    refuse_radians(in_radians, opts)?;
+    let checked = warnings::check_input(&obs);
+    if let (Some(evidence), false) = (&checked.in_radians, opts.force) {
+        return Err(Error::field("poses", InputCheck::refusal(evidence)));
+    }
+    let mut warnings = checked.warnings;
     let geo = identify::geometric(&obs, &opts.identify, progress)?;
     warnings.extend(identify::few_poses_warning(&obs, &geo, &opts.identify));
     let physics = physics_step(&obs, &geo, opts, progress)?;
@@ -116,30 +121,26 @@ pub fn run<'a>(
     })
 }
 
-/// Poses whose joint angles look like radians are not calibrated (the
-/// result would move a robot by a model fitted to the wrong angles) unless
-/// the caller insists.
-fn refuse_radians(in_radians: Option<String>, opts: &Options) -> Result<()> {
-    match in_radians {
-        Some(evidence) if !opts.force => Err(Error::field(
-            "poses",
-            format!(
-                "not calibrated: {evidence}; poses.csv holds degrees (deg = rad × 180/π): convert the angles and identify again (--force, or the job option \"force\": true, calibrates them as degrees anyway)"
-            ),
-        )),
-        _ => Ok(()),
-    }
-}
-
-/// What the physics step did: whether it ran, its analysis when it did,
-/// and the notes that say why when it did not.
+/// What the physics step did: whether it ran, and its analysis when it
+/// did or why not when it did not.
 pub struct PhysicsOutcome {
     /// Whether the analysis ran.
     pub run: PhysicsRun,
     /// The analysis (when it ran).
     pub analysis: Option<Analysis>,
-    /// Why it did not run (empty when it did: the analysis has its own).
-    pub notes: Vec<String>,
+    /// Why it did not run (beginning with [`PhysicsRun::NOTE_PREFIX`]).
+    pub why_not: Option<String>,
+}
+
+impl PhysicsOutcome {
+    /// The report's `physics_notes`: the analysis's own, or why it did not
+    /// run.
+    pub fn notes(&self) -> Vec<String> {
+        match &self.analysis {
+            Some(a) => a.notes.clone(),
+            None => self.why_not.iter().cloned().collect(),
+        }
+    }
 }
 
 /// Step 3: the physics analysis on top of the geometric fit, when it can
@@ -150,37 +151,35 @@ pub fn physics_step(
     opts: &Options,
     progress: &dyn Progress,
 ) -> Result<PhysicsOutcome> {
-    let not_run = |run, note: &str| PhysicsOutcome {
+    let not_run = |run, why: String| PhysicsOutcome {
         run,
         analysis: None,
-        notes: vec![format!("{} {note}", PhysicsRun::NOTE_PREFIX)],
+        why_not: Some(format!("{}{why}", PhysicsRun::NOTE_PREFIX)),
     };
     if !opts.physics {
-        return Ok(not_run(PhysicsRun::Off, "(physics off)"));
+        return Ok(not_run(PhysicsRun::Off, " (physics off)".into()));
     }
     if opts.identify.method == Method::Paper {
         return Ok(not_run(
             PhysicsRun::PaperMethod,
-            "(method paper: the analysis builds on the Levenberg-Marquardt fit; run --method lm)",
+            " (method paper: the analysis builds on the Levenberg-Marquardt fit; run --method lm)"
+                .into(),
         ));
     }
     let train_rms_mm = crate::stats::rms_norm(&obs.errors(&geo.after.values, &obs.train));
     // NaN counts as broken.
     if !(train_rms_mm <= PHYSICS_MAX_GEOMETRIC_RMS_MM) {
-        return Ok(PhysicsOutcome {
-            run: PhysicsRun::GeometryMisses,
-            analysis: None,
-            notes: vec![format!(
-                "{}: the calibrated geometric model still misses the train poses by {train_rms_mm:.1} mm RMS (more than {PHYSICS_MAX_GEOMETRIC_RMS_MM} mm), so it does not describe these recordings and any effect fitted on top would fit a broken model; check the units (degrees, mm), the robot model and the rig first",
-                PhysicsRun::NOTE_PREFIX
-            )],
-        });
+        return Ok(not_run(
+            PhysicsRun::GeometryMisses,
+            format!(
+                ": the calibrated geometric model still misses the train poses by {train_rms_mm:.1} mm RMS (more than {PHYSICS_MAX_GEOMETRIC_RMS_MM} mm), so it does not describe these recordings and any effect fitted on top would fit a broken model; check the units (degrees, mm), the robot model and the rig first"
+            ),
+        ));
     }
     progress.update("physics analysis", 0.0);
-    let analysis = physics::analyse(obs, geo, progress)?;
     Ok(PhysicsOutcome {
         run: PhysicsRun::Ran,
-        notes: analysis.notes.clone(),
-        analysis: Some(analysis),
+        analysis: Some(physics::analyse(obs, geo, progress)?),
+        why_not: None,
     })
 }

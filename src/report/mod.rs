@@ -17,6 +17,11 @@ fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> 
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
+/// NaN, the default of a figure a report does not carry.
+fn nan() -> f64 {
+    f64::NAN
+}
+
 /// Current report format tag. v2 (drawcal 0.1, 2026-12) added `physics`
 /// (whether the physics analysis ran, [`PhysicsRun`]; v1 said it only by a
 /// note beginning "not run").
@@ -455,12 +460,15 @@ impl EffectParameters {
 pub struct UnexplainedLocation {
     /// The ordering of the poses along which the residual varies
     /// smoothly (`joint 2 angle`, `time`...).
+    #[serde(default)]
     pub ordering: String,
     /// True when the ordering is a joint's angle and the residual was
-    /// projected on that joint's motion.
+    /// projected on that joint's motion (absent, false, in v1 reports
+    /// written before it existed).
+    #[serde(default)]
     pub along_joint_motion: bool,
     /// Significance (z) of the structure along `ordering`.
-    #[serde(deserialize_with = "nan_if_null")]
+    #[serde(default = "nan", deserialize_with = "nan_if_null")]
     pub z: f64,
     /// A mismatch confined to a stretch of one joint's range: the joint
     /// (1-based).
@@ -742,6 +750,21 @@ mod tests {
         assert_eq!(s.z.max_abs_mm, 1.0);
         assert_eq!(s.x.mean_abs_mm, 1.5);
         assert!(ErrorStats::of(&[]).rms_mm.is_nan());
+    }
+
+    #[test]
+    fn an_unexplained_finding_of_an_early_v1_report_reads_typed() {
+        // Before `along_joint_motion` (and older still, before `z`).
+        for v in [
+            serde_json::json!({"ordering": "time", "z": 4.2}),
+            serde_json::json!({"ordering": "joint 2 angle"}),
+        ] {
+            let m: FindingModel = serde_json::from_value(v).unwrap();
+            let FindingModel::Unexplained(u) = m else {
+                panic!("read as an effect")
+            };
+            assert!(!u.along_joint_motion);
+        }
     }
 
     #[test]

@@ -383,7 +383,11 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
     // The physics analysis's note when it did not run (physics off, or a
     // geometric model too far off the data to fit effects on).
     let not_run = (!r.physics.ran())
-        .then(|| r.physics_notes.first())
+        .then(|| {
+            r.physics_notes
+                .iter()
+                .find(|n| n.starts_with(crate::report::PhysicsRun::NOTE_PREFIX))
+        })
         .flatten();
     sections::summary(&mut o, r, not_run);
     sections::accuracy(&mut o, r);
