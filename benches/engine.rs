@@ -74,6 +74,7 @@ pub fn ur5_strings(n: usize) -> (Robot, Rig, Dataset) {
         Dataset {
             poses,
             n_strings: 4,
+            ignored_columns: vec![],
         },
     )
 }

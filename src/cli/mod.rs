@@ -89,9 +89,9 @@ pub enum MethodArg {
     Paper,
 }
 
-/// `--approach`: the core's [`Approach`], spelt on the command line in
-/// kebab case (`in-order`), with the help said in the command line's terms
-/// (the targets' file order).
+/// `--approach`: the core's [`Approach`], spelt as the API spells it
+/// (`in_order`; `in-order` is accepted too), with the help said in the
+/// command line's terms (the targets' file order).
 impl ValueEnum for Approach {
     fn value_variants<'a>() -> &'a [Self] {
         &Approach::ALL
@@ -102,7 +102,7 @@ impl ValueEnum for Approach {
             Approach::Positive => PossibleValue::new("positive")
                 .help("Every joint moving in +q (most teach programs finish so)"),
             Approach::Negative => PossibleValue::new("negative").help("Every joint moving in -q"),
-            Approach::InOrder => PossibleValue::new("in-order").help(
+            Approach::InOrder => PossibleValue::new("in_order").alias("in-order").help(
                 "The robot visits the targets in file order: each joint arrives from the \
                  previous target's compensated joints",
             ),
@@ -157,6 +157,11 @@ pub struct IdentifyArgs {
     /// otherwise: poses.csv holds degrees).
     #[arg(long)]
     pub force: bool,
+    /// Print the summary's detail too: every candidate effect not kept and
+    /// why, each finding's explanation and evidence, which parameter is
+    /// aliased with which, the paper's closed form against least squares.
+    #[arg(long, short = 'v')]
+    pub verbose: bool,
     /// Identifiability tolerance: a parameter whose scaled Jacobian column
     /// lies within this sine of the span of those kept is held at nominal
     /// (from 1e-9 to 0.5).
@@ -198,7 +203,8 @@ pub struct CompensateArgs {
     /// Payload the robot carries at T (kg, 0 to 5000), for a calibration
     /// whose physics analysis accepted a joint compliance (default: the
     /// calibration session's median payload, 0 if it recorded none).
-    #[arg(long)]
+    /// A negative one reaches the range check, which names it.
+    #[arg(long, allow_negative_numbers = true)]
     pub payload_kg: Option<f64>,
     /// How the joints arrive at the targets, for a calibration whose
     /// physics analysis accepted a backlash (ignored otherwise).
@@ -309,9 +315,13 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
     }
     to_stdout(&summary::render(
         &report,
-        &robot,
-        data.poses.len(),
-        data.n_strings,
+        &summary::Input {
+            robot: &robot,
+            n_poses: data.poses.len(),
+            n_strings: data.n_strings,
+            ignored_columns: &data.ignored_columns,
+        },
+        a.verbose,
     ));
     if let Some(out) = &a.out {
         let text = serde_json::to_string_pretty(&report).map_err(CliError::Json)?;
@@ -408,6 +418,16 @@ fn write_compensated(out: Option<&Path>, dof: usize, rows: &[Compensated]) -> Re
 
 fn run_locate(a: LocateArgs) -> Result<(), CliError> {
     let rig = core(&a.rig, Rig::from_json(&read(&a.rig)?))?;
+    if rig.n_strings() == 0 {
+        // A tracker, CMM or camera rig: poses.csv has the points already.
+        return Err(CliError::Core {
+            path: a.rig.clone(),
+            source: crate::Error::field(
+                "anchors_mm",
+                "the rig has no strings: its poses.csv gives T's measured points                  (x_mm, y_mm, z_mm) already, so there is nothing to locate                  (identify takes them as they are)",
+            ),
+        });
+    }
     let file = File::open(&a.poses).map_err(|source| CliError::Io {
         path: a.poses.clone(),
         source,
@@ -510,10 +530,13 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
     if let Some(c) = ClosedFormComparison::from_distances(&cf, mirrored) {
         let bad = cf.iter().filter(|d| **d > 1.0).count();
         eprintln!(
-            "paper closed form vs least squares: RMS {:.4} mm, max {:.4} mm, {bad} poses more than 1 mm apart{}",
+            "paper closed form vs least squares: RMS {:.4} mm, max {:.4} mm, {bad} pose{} more \
+             than 1 mm apart{} ({})",
             c.rms_mm,
             c.max_mm,
-            c.mirrored_note()
+            if bad == 1 { "" } else { "s" },
+            c.mirrored_note(),
+            ClosedFormComparison::WHY
         );
     }
     Ok(())

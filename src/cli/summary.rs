@@ -1,79 +1,179 @@
-//! The human-readable summary `drawcal identify` prints: the paper's Tables
-//! 3 and 4 (train and test, before and after) and what was found.
+//! The human-readable summary `drawcal identify` prints: the held-out
+//! accuracy before and after and the verdict first, then the paper's
+//! Tables 3 and 4 (train and test, before and after) and what was found,
+//! one line each. No line is wider than [`WIDTH`] columns; the detail
+//! (every candidate the physics analysis did not keep, each finding's
+//! explanation and evidence, the paper's closed form against least
+//! squares, which parameter is aliased with which) is printed with
+//! `--verbose`.
 
 use std::fmt::Write;
 
 use crate::model::Robot;
-use crate::report::{ErrorStats, FixedReason, Report};
+use crate::report::verdict::Verdict;
+use crate::report::{ClosedFormComparison, ErrorStats, FixedReason, Report};
 
-/// Render the summary of a report. The report's warnings come right
-/// after the first line, each as `WARNING: ...`.
-pub fn render(r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) -> String {
+/// The widest line of the summary (columns).
+pub const WIDTH: usize = 100;
+
+/// What the summary says of the input beside the report.
+pub struct Input<'a> {
+    /// The nominal robot.
+    pub robot: &'a Robot,
+    /// Poses read.
+    pub n_poses: usize,
+    /// Strings per pose (0: measured points).
+    pub n_strings: usize,
+    /// Columns of poses.csv that were not read.
+    pub ignored_columns: &'a [String],
+}
+
+/// Render the summary of a report; `verbose` adds the detail.
+pub fn render(r: &Report, input: &Input, verbose: bool) -> String {
     let mut s = String::new();
-    header(&mut s, r, robot, n_poses, n_strings);
-    method(&mut s, r);
-    fixed(&mut s, r);
-    precision(&mut s, r);
+    header(&mut s, r, input);
+    accuracy(&mut s, r);
+    method(&mut s, r, verbose);
+    precision(&mut s, r, verbose);
     error_table(&mut s, r);
     outliers(&mut s, r);
-    physics(&mut s, r);
+    physics(&mut s, r, verbose);
     s
 }
 
-/// The first line (robot, poses, what measured them), the warnings, and
-/// the split.
-fn header(s: &mut String, r: &Report, robot: &Robot, n_poses: usize, n_strings: usize) {
-    let source = if n_strings > 0 {
-        format!("{n_strings} strings")
+/// Append `text` wrapped at [`WIDTH`] between words: its leading spaces
+/// kept, the following lines indented by `indent` spaces. A word longer
+/// than a line stays whole.
+fn line(s: &mut String, text: &str, indent: usize) {
+    let lead = text.len() - text.trim_start_matches(' ').len();
+    s.push_str(&text[..lead]);
+    let mut col = lead;
+    let mut fresh = true;
+    for word in text[lead..].split(' ').filter(|w| !w.is_empty()) {
+        let len = word.chars().count();
+        if !fresh && col + 1 + len > WIDTH {
+            s.push('\n');
+            s.extend(std::iter::repeat_n(' ', indent));
+            col = indent;
+            fresh = true;
+        }
+        if !fresh {
+            s.push(' ');
+            col += 1;
+        }
+        s.push_str(word);
+        col += len;
+        fresh = false;
+    }
+    s.push('\n');
+}
+
+/// The first line (robot, poses, what measured them), the warnings, the
+/// ignored columns and the split.
+fn header(s: &mut String, r: &Report, input: &Input) {
+    let source = if input.n_strings > 0 {
+        format!("{} strings", input.n_strings)
     } else {
         "measured points".to_string()
     };
-    let _ = writeln!(
+    line(
         s,
-        "drawcal identify: {} ({} joints), {} poses from {}",
-        robot.name,
-        robot.dof(),
-        n_poses,
-        source
+        &format!(
+            "drawcal identify: {} ({} joints), {} poses from {}",
+            input.robot.name,
+            input.robot.dof(),
+            input.n_poses,
+            source
+        ),
+        2,
     );
     for w in &r.warnings {
-        let _ = writeln!(s, "WARNING: {w}");
+        line(s, &format!("WARNING: {w}"), 2);
     }
-    let _ = writeln!(
+    if !input.ignored_columns.is_empty() {
+        line(
+            s,
+            &format!(
+                "poses.csv columns not read: {}",
+                input.ignored_columns.join(", ")
+            ),
+            2,
+        );
+    }
+    line(
         s,
-        "split: {} train, {} test ({})",
-        r.stats.train.n, r.stats.test.n, r.split_source
+        &format!(
+            "split: {} train, {} test ({})",
+            r.stats.train.n, r.stats.test.n, r.split_source
+        ),
+        2,
     );
 }
 
-/// The method line: the solver's figures, or the paper's one step.
-fn method(s: &mut String, r: &Report) {
+/// Held out before -> after (and the geometric model's figure when physics
+/// was modelled), then the verdict.
+fn accuracy(s: &mut String, r: &Report) {
+    let test = &r.stats.test;
+    if test.n > 0 {
+        let mut text = format!(
+            "held out: {:.4} -> {:.4} mm RMS (nominal -> calibrated)",
+            test.before.rms_mm, test.after.rms_mm
+        );
+        if let Some(first) = r.findings.first().filter(|f| f.effect != "unexplained") {
+            let _ = write!(
+                text,
+                "; {:.4} mm with the geometric model alone",
+                first.test_rms_before_mm
+            );
+        }
+        line(s, &text, 2);
+    }
+    let v = Verdict::of(r);
+    line(
+        s,
+        &format!(
+            "verdict: {}: {}",
+            v.level.to_string().to_uppercase(),
+            v.reasons.join("; ")
+        ),
+        2,
+    );
+}
+
+/// The method line (the solver's figures, or the paper's one step) and the
+/// parameters held at nominal, one line per reason (with what each is
+/// aliased with when `verbose`).
+fn method(s: &mut String, r: &Report, verbose: bool) {
     let id = &r.identifiability;
     if r.method == "paper" {
         // The solver figures in the report are those of the base-and-tool
         // fit the paper's step starts from, not of the step.
-        let _ = writeln!(
+        line(
             s,
-            "method paper: one pseudo-inverse step of the linearised error model on the located points, {} joint parameters, from the nominal joints with base and tool fitted",
-            id.n_identified
+            &format!(
+                "method paper: one pseudo-inverse step of the linearised error model on the \
+                 located points, {} joint parameters, from the nominal joints with base and \
+                 tool fitted",
+                id.n_identified
+            ),
+            2,
         );
     } else {
-        let _ = writeln!(
+        line(
             s,
-            "method {}: {} iterations ({}), {} of {} parameters identified, condition number {:.0}",
-            r.method,
-            r.convergence.iterations,
-            r.convergence.termination,
-            id.n_identified,
-            id.n_candidates,
-            id.condition_number
+            &format!(
+                "method {}: {} iterations ({}), {} of {} parameters identified, condition \
+                 number {:.0}",
+                r.method,
+                r.convergence.iterations,
+                r.convergence.termination,
+                id.n_identified,
+                id.n_candidates,
+                id.condition_number
+            ),
+            2,
         );
     }
-}
-
-/// The parameters held at nominal, grouped by why.
-fn fixed(s: &mut String, r: &Report) {
-    let id = &r.identifiability;
     for reason in [
         FixedReason::Aliased,
         FixedReason::Undetermined,
@@ -83,57 +183,90 @@ fn fixed(s: &mut String, r: &Report) {
         if group.is_empty() {
             continue;
         }
-        let _ = writeln!(s, "{}:", reason.heading());
-        for f in group {
-            if f.aliased_with.is_empty() {
-                let _ = writeln!(s, "  {}", f.name);
-            } else {
-                let _ = writeln!(
-                    s,
-                    "  {:<11} aliased with {}",
-                    f.name,
-                    f.aliased_with.join(", ")
-                );
+        if verbose {
+            line(s, &format!("{}:", reason.heading()), 2);
+            for f in group {
+                match f.aliased_with.as_slice() {
+                    [] => line(s, &format!("  {}", f.name), 4),
+                    with => line(
+                        s,
+                        &format!("  {} aliased with {}", f.name, with.join(", ")),
+                        4,
+                    ),
+                }
             }
+        } else {
+            let names: Vec<&str> = group.iter().map(|f| f.name.as_str()).collect();
+            let why = match reason {
+                FixedReason::Aliased => "aliased",
+                FixedReason::Undetermined => "undetermined",
+                FixedReason::Requested => "as asked",
+            };
+            line(
+                s,
+                &format!(
+                    "held at nominal, {why} ({}): {}",
+                    names.len(),
+                    names.join(" ")
+                ),
+                4,
+            );
         }
     }
 }
 
-/// What the data allow: string noise and the noise floor, the held-out RMS
-/// an exact model would show, the flange orientation's sigma, and the
-/// paper's closed form against least squares.
-fn precision(s: &mut String, r: &Report) {
+/// What the data allow: string noise, the noise floor and the held-out RMS
+/// an exact model would show; with `verbose`, the flange orientation's
+/// sigma and the paper's closed form against least squares.
+fn precision(s: &mut String, r: &Report, verbose: bool) {
     if let Some(sig) = r.string_sigma_mm {
-        let _ = writeln!(
-            s,
-            "string noise {:.4} mm (1 sigma); noise floor of the held-out 3-D RMS {}",
-            sig,
-            r.noise_floor_mm
-                .map(|f| format!("{f:.4} mm"))
-                .unwrap_or("-".into())
-        );
+        let mut text = format!("string noise {sig:.4} mm (1 sigma)");
+        if let Some(f) = r.noise_floor_mm {
+            let _ = write!(text, "; held-out noise floor {f:.4} mm");
+        }
+        if let Some(e) = r.expected_test_rms_mm {
+            let _ = write!(text, "; an exact model would show about {e:.4} mm held out");
+        }
+        line(s, &text, 2);
     }
-    if let Some(e) = r.expected_test_rms_mm {
-        let _ = writeln!(
+    if !verbose {
+        return;
+    }
+    if r.expected_test_rms_mm.is_some() {
+        line(
             s,
-            "an exact model identified from these {} train poses would show about {e:.4} mm held out (the floor plus the parameters' spread)",
-            r.stats.train.n
+            &format!(
+                "(the exact model's figure is the noise floor plus the spread of parameters \
+                 identified from {} train poses)",
+                r.stats.train.n
+            ),
+            2,
         );
     }
     if let Some(o) = r.flange_orientation_sigma_deg {
-        let _ = writeln!(
+        line(
             s,
-            "these data determine the flange orientation to {o:.3} deg (RMS rotation angle, 1 sigma, robot base frame, before undetermined parameters are held; parameters held at nominal, among them those position data never see, taken as exact)"
+            &format!(
+                "these data determine the flange orientation to {o:.3} deg (RMS rotation angle, \
+                 1 sigma, robot base frame, before undetermined parameters are held; parameters \
+                 held at nominal, among them those position data never see, taken as exact)"
+            ),
+            2,
         );
     }
     if let Some(c) = &r.closed_form_vs_lsq {
-        let _ = writeln!(
+        line(
             s,
-            "paper closed form vs least-squares points: RMS {:.4} mm, max {:.4} mm over {} poses{}",
-            c.rms_mm,
-            c.max_mm,
-            c.n,
-            c.mirrored_note()
+            &format!(
+                "paper closed form vs least-squares points: RMS {:.4} mm, max {:.4} mm over {} \
+                 poses{}: {}",
+                c.rms_mm,
+                c.max_mm,
+                c.n,
+                c.mirrored_note(),
+                ClosedFormComparison::WHY
+            ),
+            2,
         );
     }
 }
@@ -190,49 +323,79 @@ fn outliers(s: &mut String, r: &Report) {
             .iter()
             .map(|o| format!("{} ({:.2} mm)", o.pose, o.residual_mm))
             .collect();
-        let _ = writeln!(
+        let _ = writeln!(s);
+        line(
             s,
-            "\noutlier poses{}: {}",
-            if r.robust { " (down-weighted)" } else { "" },
-            ids.join(", ")
+            &format!(
+                "outlier poses{}: {}",
+                if r.robust { " (down-weighted)" } else { "" },
+                ids.join(", ")
+            ),
+            2,
         );
     }
 }
 
-/// The physics analysis: its notes, then what it found (or that it found
-/// nothing).
-fn physics(s: &mut String, r: &Report) {
+/// The physics analysis: its notes (the candidates it did not keep
+/// counted, listed with `verbose`), then what it found, one line each
+/// (with each finding's explanation and evidence when `verbose`).
+fn physics(s: &mut String, r: &Report, verbose: bool) {
     let _ = writeln!(s);
-    for note in &r.physics_notes {
-        let _ = writeln!(s, "physics: {note}");
+    let (not_kept, notes): (Vec<&String>, Vec<&String>) = r
+        .physics_notes
+        .iter()
+        .partition(|n| n.ends_with("not kept"));
+    for note in notes {
+        line(s, &format!("physics: {note}"), 2);
+    }
+    if verbose {
+        for note in &not_kept {
+            line(s, &format!("physics: {note}"), 2);
+        }
+    } else if !not_kept.is_empty() {
+        line(
+            s,
+            &format!(
+                "physics: {} candidate effect{} not kept (--verbose lists why)",
+                not_kept.len(),
+                if not_kept.len() == 1 { "" } else { "s" }
+            ),
+            2,
+        );
     }
     if r.findings.is_empty() {
         if r.physics.ran() {
-            let _ = writeln!(s, "physics: nothing found beyond the geometric model");
+            line(s, "physics: nothing found beyond the geometric model", 2);
         }
-    } else {
-        let _ = writeln!(s, "physics found beyond the geometric model:");
-        for f in &r.findings {
-            let place = match (f.joint, f.sensor) {
-                (Some(j), _) => format!(" joint {j}"),
-                (_, Some(k)) => format!(" sensor {k}"),
-                _ => String::new(),
-            };
-            let _ = writeln!(
-                s,
-                "- {}{}: {} {}",
+        return;
+    }
+    line(
+        s,
+        "physics found beyond the geometric model (held-out RMS before -> after):",
+        2,
+    );
+    for f in &r.findings {
+        let place = match (f.joint, f.sensor) {
+            (Some(j), _) => format!(" joint {j}"),
+            (_, Some(k)) => format!(" sensor {k}"),
+            _ => String::new(),
+        };
+        line(
+            s,
+            &format!(
+                "- {}{}: {} {}; {:.4} -> {:.4} mm",
                 f.effect,
                 place,
                 value_and_sigma(f.magnitude, f.sigma),
-                f.unit
-            );
-            let _ = writeln!(s, "  {}", f.explanation);
-            let _ = writeln!(s, "  evidence: {}", f.evidence);
-            let _ = writeln!(
-                s,
-                "  held-out RMS {:.4} -> {:.4} mm",
-                f.test_rms_before_mm, f.test_rms_after_mm
-            );
+                f.unit,
+                f.test_rms_before_mm,
+                f.test_rms_after_mm
+            ),
+            4,
+        );
+        if verbose {
+            line(s, &format!("  {}", f.explanation), 4);
+            line(s, &format!("  evidence: {}", f.evidence), 4);
         }
     }
 }
@@ -250,7 +413,23 @@ fn value_and_sigma(value: f64, sigma: f64) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::value_and_sigma;
+    use super::{WIDTH, line, value_and_sigma};
+
+    #[test]
+    fn lines_wrap_between_words_at_the_width() {
+        let words = "word ".repeat(60);
+        let mut s = String::new();
+        line(&mut s, &format!("  {words}"), 4);
+        let lines: Vec<&str> = s.lines().collect();
+        assert!(lines.len() == 4, "{s}");
+        assert!(lines.iter().all(|l| l.chars().count() <= WIDTH), "{s}");
+        assert!(lines[0].starts_with("  word") && lines[1].starts_with("    word"));
+        assert_eq!(s.matches("word").count(), 60);
+        // A word longer than the width stays whole, on its own line.
+        let mut s = String::new();
+        line(&mut s, &format!("a {}", "x".repeat(120)), 2);
+        assert_eq!(s, format!("a\n  {}\n", "x".repeat(120)));
+    }
 
     #[test]
     fn values_are_shown_to_their_sigma() {

@@ -197,8 +197,8 @@ impl Compensator {
 /// How the joints arrive at the targets, for a calibration with a backlash
 /// (where a joint stops depends on the side it comes from).
 ///
-/// Serde spells it in snake case (`in_order`), as the API does; the
-/// command line spells it in kebab case (`in-order`, its own `ValueEnum`).
+/// Serde spells it in snake case (`in_order`), as the API and the command
+/// line do (which also takes `in-order`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Approach {

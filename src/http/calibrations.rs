@@ -291,17 +291,12 @@ pub async fn robot_accuracy(
     let history = rows
         .into_iter()
         .map(|c| AccuracyPoint {
+            effects: c.effect_names(),
             calibration_id: c.id,
             version: c.version,
             created_at: c.created_at,
             test_rms_before_mm: c.test_rms_before_mm,
             test_rms_after_mm: c.test_rms_after_mm,
-            effects: c
-                .effects
-                .split(',')
-                .filter(|s| !s.is_empty())
-                .map(str::to_string)
-                .collect(),
             active: c.active,
         })
         .collect();

@@ -209,6 +209,12 @@ pub struct CompensateResponse {
     /// each (joint angles that look like radians); empty when nothing does.
     /// On text/csv answers: the `X-Warning` header.
     pub warnings: Vec<String>,
+    /// What was made of the run-time conditions, one sentence each, as
+    /// the command line says them: a condition given that this calibration
+    /// does not use (`temp_c is not used: ...`), one it uses that was not
+    /// given (its default), an effect compensation leaves out, one applied.
+    /// On text/csv answers: the `X-Note` header.
+    pub notes: Vec<String>,
 }
 
 fn check_target(i: usize, t: TargetIn, dof: usize, batch: bool) -> ApiResult<Target> {
@@ -408,7 +414,8 @@ fn wants_csv(headers: &HeaderMap) -> bool {
                 ("x-temp-c-used" = f64, description = "Temperature (°C) the geometry was taken at, on text/csv answers when the calibration has thermal expansion driven by the temperature (JSON: `temp_c_used`)"),
                 ("x-payload-kg-used" = f64, description = "Payload (kg at T) the joint compliance was evaluated with, on text/csv answers when the calibration has a compliance that depends on it (JSON: `payload_kg_used`)"),
                 ("x-approach-used" = String, description = "`positive`, `negative` or `in_order`: how the joints were taken to arrive, on text/csv answers when the calibration has a backlash (JSON: `approach_used`)"),
-                ("x-warning" = String, description = "What looks wrong in the targets but did not stop them (joint angles that look like radians), one header each, on text/csv answers (JSON: `warnings`)"))),
+                ("x-warning" = String, description = "What looks wrong in the targets but did not stop them (joint angles that look like radians), one header each, on text/csv answers (JSON: `warnings`)"),
+                ("x-note" = String, description = "What was made of the run-time conditions (a condition given that the calibration does not use, a default taken, an effect left out), one header each, on text/csv answers (JSON: `notes`)"))),
         (status = 400, description = "Malformed JSON or query string", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody),
         (status = 409, description = "The robot has no active calibration", body = ErrorBody),
@@ -434,6 +441,7 @@ pub async fn compensate(
         .collect();
     let applied = req.conditions.apply(&cached.compensator, CONDITION_NAMES)?;
     let (used, in_order) = (applied.used(), applied.in_order());
+    let notes = applied.notes().iter().map(|n| n.text.clone()).collect();
     let adjusted = applied.into_changed();
     let results = solve(
         &app,
@@ -450,6 +458,7 @@ pub async fn compensate(
         version: cached.version,
         used,
         warnings,
+        notes,
     };
     if csv_out {
         csv_answer(answer, dof, &results)
@@ -614,6 +623,7 @@ struct Answer {
     version: i64,
     used: ConditionsUsed,
     warnings: Vec<String>,
+    notes: Vec<String>,
 }
 
 /// compensated.csv, with the rest of the answer in headers.
@@ -644,10 +654,11 @@ fn csv_answer(answer: Answer, dof: usize, results: &[Compensated]) -> ApiResult<
             resp.headers_mut().insert(HeaderName::from_static(name), v);
         }
     }
-    for w in &answer.warnings {
-        if let Ok(v) = HeaderValue::from_str(w) {
-            resp.headers_mut()
-                .append(HeaderName::from_static("x-warning"), v);
+    for (name, lines) in [("x-warning", &answer.warnings), ("x-note", &answer.notes)] {
+        for line in lines {
+            if let Ok(v) = HeaderValue::from_str(line) {
+                resp.headers_mut().append(HeaderName::from_static(name), v);
+            }
         }
     }
     if let Some(a) = answer.used.approach_used {
@@ -673,6 +684,7 @@ fn json_answer(answer: Answer, results: Vec<Compensated>) -> Response {
         n_ok,
         results,
         warnings: answer.warnings,
+        notes: answer.notes,
     })
     .into_response()
 }

@@ -54,6 +54,9 @@ pub struct Dataset {
     pub poses: Vec<PoseRecord>,
     /// Number of strings per pose (0 for point data).
     pub n_strings: usize,
+    /// Columns of the file that were not read, in file order (a
+    /// measured point beside string readings, a column of the user's own).
+    pub ignored_columns: Vec<String>,
 }
 
 fn parse_opt(
@@ -111,6 +114,7 @@ impl Dataset {
             } else {
                 0
             },
+            ignored_columns: cols.ignored(&headers),
         })
     }
 
@@ -193,6 +197,29 @@ impl Columns {
             payload: idx("payload_kg").map(|i| (i, "payload_kg")),
             split: idx("split"),
         })
+    }
+
+    /// The headers of `headers` that no column read.
+    fn ignored(&self, headers: &csv::StringRecord) -> Vec<String> {
+        let point = if self.strings.is_some() {
+            &[][..]
+        } else {
+            &self.xyz[..]
+        };
+        let read: HashSet<usize> = [Some(self.pose), self.split]
+            .into_iter()
+            .chain(self.q.iter().map(|&i| Some(i)))
+            .chain(self.strings.iter().flatten().map(|&i| Some(i)))
+            .chain(point.iter().copied())
+            .chain([self.time, self.temp, self.payload].map(|c| c.map(|(i, _)| i)))
+            .flatten()
+            .collect();
+        headers
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !read.contains(i))
+            .map(|(_, h)| h.to_string())
+            .collect()
     }
 
     /// A row's pose id, not empty.

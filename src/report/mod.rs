@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 pub mod effect;
+pub mod verdict;
 
 use nalgebra::Vector3;
 
@@ -295,6 +296,10 @@ impl ClosedFormComparison {
             mirrored,
         })
     }
+
+    /// Why the two differ, for a summary: what the closed form is and
+    /// where it does not hold.
+    pub const WHY: &str = "the closed form is the paper's equations (26)-(38) on strings A, C and D alone, without least squares; it holds where the paper's geometry does (T above the plane of A, C and D, and not behind A along AC, where its tangents change sign), and a few poses outside it make most of the RMS (`drawcal locate` gives each pose's distance); identification uses the least-squares points";
 
     /// What a summary adds when the closed form gave mirror images (empty
     /// when it gave none).

@@ -16,13 +16,17 @@
 //! Migrations live in `migrations/sqlite` and `migrations/postgres` with the
 //! same version numbers (a test checks that).
 
+mod migrations;
 mod postgres;
+mod record;
 mod sqlite;
 pub mod time;
 
 use serde::Serialize;
 use thiserror::Error;
 use utoipa::ToSchema;
+
+use record::record;
 
 pub use time::{now_ms, now_rfc3339};
 
@@ -78,43 +82,47 @@ pub struct Page {
     pub offset: i64,
 }
 
-/// A nominal robot model (robot.json).
-#[derive(Debug, Clone, Serialize, sqlx::FromRow, ToSchema)]
-pub struct ModelRec {
-    /// Id.
-    pub id: i64,
-    /// Name (from robot.json unless given).
-    pub name: String,
-    /// Number of joints.
-    pub dof: i64,
-    /// The robot.json text as uploaded.
-    #[serde(skip)]
-    pub robot_json: String,
-    /// Creation time (RFC 3339 UTC).
-    pub created_at: String,
+record! {
+    /// A nominal robot model (robot.json).
+    #[derive(Debug, Clone, Serialize, ToSchema)]
+    pub struct ModelRec {
+        /// Id.
+        pub id: i64,
+        /// Name (from robot.json unless given).
+        pub name: String,
+        /// Number of joints.
+        pub dof: i64,
+        /// The robot.json text as uploaded.
+        #[serde(skip)]
+        pub robot_json: String,
+        /// Creation time (RFC 3339 UTC).
+        pub created_at: String,
+    }
 }
 
-/// A robot of the fleet.
-#[derive(Debug, Clone, Serialize, sqlx::FromRow, ToSchema)]
-pub struct RobotRec {
-    /// Id.
-    pub id: i64,
-    /// Serial number, unique.
-    pub serial_number: String,
-    /// Its model.
-    pub model_id: i64,
-    /// Site tag.
-    pub site: Option<String>,
-    /// Line tag.
-    pub line: Option<String>,
-    /// Cell tag.
-    pub cell: Option<String>,
-    /// The calibration in use, if any.
-    pub active_calibration_id: Option<i64>,
-    /// Creation time.
-    pub created_at: String,
-    /// Last change.
-    pub updated_at: String,
+record! {
+    /// A robot of the fleet.
+    #[derive(Debug, Clone, Serialize, ToSchema)]
+    pub struct RobotRec {
+        /// Id.
+        pub id: i64,
+        /// Serial number, unique.
+        pub serial_number: String,
+        /// Its model.
+        pub model_id: i64,
+        /// Site tag.
+        pub site: Option<String>,
+        /// Line tag.
+        pub line: Option<String>,
+        /// Cell tag.
+        pub cell: Option<String>,
+        /// The calibration in use, if any.
+        pub active_calibration_id: Option<i64>,
+        /// Creation time.
+        pub created_at: String,
+        /// Last change.
+        pub updated_at: String,
+    }
 }
 
 /// New robot fields.
@@ -132,131 +140,161 @@ pub struct NewRobot {
     pub cell: Option<String>,
 }
 
-/// A measurement rig (rig.json).
-#[derive(Debug, Clone, Serialize, sqlx::FromRow, ToSchema)]
-pub struct RigRec {
-    /// Id.
-    pub id: i64,
-    /// Name.
-    pub name: String,
-    /// Number of drawstrings (0 for a point instrument).
-    pub n_strings: i64,
-    /// The rig.json text as uploaded.
-    #[serde(skip)]
-    pub rig_json: String,
-    /// Creation time.
-    pub created_at: String,
+record! {
+    /// A measurement rig (rig.json).
+    #[derive(Debug, Clone, Serialize, ToSchema)]
+    pub struct RigRec {
+        /// Id.
+        pub id: i64,
+        /// Name.
+        pub name: String,
+        /// Number of drawstrings (0 for a point instrument).
+        pub n_strings: i64,
+        /// The rig.json text as uploaded.
+        #[serde(skip)]
+        pub rig_json: String,
+        /// Creation time.
+        pub created_at: String,
+    }
 }
 
-/// A calibration session: a robot, a rig and recorded poses.
-#[derive(Debug, Clone, Serialize, sqlx::FromRow, ToSchema)]
-pub struct SessionRec {
-    /// Id.
-    pub id: i64,
-    /// Robot measured.
-    pub robot_id: i64,
-    /// Rig used.
-    pub rig_id: i64,
-    /// Free-form name.
-    pub name: Option<String>,
-    /// Poses stored so far.
-    pub n_poses: i64,
-    /// Upload batches stored so far.
-    pub n_batches: i64,
-    /// CSV header of the stored poses (fixed by the first batch).
-    pub columns: Option<String>,
-    /// Creation time.
-    pub created_at: String,
-    /// Last change.
-    pub updated_at: String,
+record! {
+    /// A calibration session: a robot, a rig and recorded poses.
+    #[derive(Debug, Clone, Serialize, ToSchema)]
+    pub struct SessionRec {
+        /// Id.
+        pub id: i64,
+        /// Robot measured.
+        pub robot_id: i64,
+        /// Rig used.
+        pub rig_id: i64,
+        /// Free-form name.
+        pub name: Option<String>,
+        /// Poses stored so far.
+        pub n_poses: i64,
+        /// Upload batches stored so far.
+        pub n_batches: i64,
+        /// CSV header of the stored poses (fixed by the first batch).
+        pub columns: Option<String>,
+        /// Creation time.
+        pub created_at: String,
+        /// Last change.
+        pub updated_at: String,
+    }
 }
 
-/// An identification job.
-#[derive(Debug, Clone, Serialize, sqlx::FromRow, ToSchema)]
-pub struct JobRec {
-    /// Id.
-    pub id: i64,
-    /// Session identified.
-    pub session_id: i64,
-    /// Robot of the session.
-    pub robot_id: i64,
-    /// Options (JSON text).
-    #[serde(skip)]
-    pub options: String,
-    /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
-    pub state: String,
-    /// Current stage, as the engine reports it.
-    pub stage: Option<String>,
-    /// Progress in [0, 1].
-    pub progress: f64,
-    /// Times it was claimed by a worker.
-    pub attempts: i64,
-    /// Claims allowed before it is given up.
-    pub max_attempts: i64,
-    /// Worker holding the lease.
-    #[serde(skip)]
-    pub locked_by: Option<String>,
-    /// Lease expiry (epoch ms).
-    #[serde(skip)]
-    pub locked_until_ms: Option<i64>,
-    /// Cancellation was asked for.
-    pub cancel_requested: bool,
-    /// Why it failed; for a job cancelled as it finished (its progress at
-    /// 100 %), that its result was not stored.
-    pub error: Option<String>,
-    /// The calibration it produced.
-    pub calibration_id: Option<i64>,
-    /// Creation time.
-    pub created_at: String,
-    /// Last change.
-    pub updated_at: String,
-    /// When a worker last started it.
-    pub started_at: Option<String>,
-    /// When it ended.
-    pub finished_at: Option<String>,
+record! {
+    /// An identification job.
+    #[derive(Debug, Clone, Serialize, ToSchema)]
+    pub struct JobRec {
+        /// Id.
+        pub id: i64,
+        /// Session identified.
+        pub session_id: i64,
+        /// Robot of the session.
+        pub robot_id: i64,
+        /// Options (JSON text).
+        #[serde(skip)]
+        pub options: String,
+        /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
+        pub state: String,
+        /// Current stage, as the engine reports it.
+        pub stage: Option<String>,
+        /// Progress in [0, 1].
+        pub progress: f64,
+        /// Times it was claimed by a worker.
+        pub attempts: i64,
+        /// Claims allowed before it is given up.
+        pub max_attempts: i64,
+        /// Worker holding the lease.
+        #[serde(skip)]
+        pub locked_by: Option<String>,
+        /// Lease expiry (epoch ms).
+        #[serde(skip)]
+        pub locked_until_ms: Option<i64>,
+        /// Cancellation was asked for.
+        pub cancel_requested: bool,
+        /// Why it failed; for a job cancelled as it finished (its progress at
+        /// 100 %), that its result was not stored.
+        pub error: Option<String>,
+        /// The calibration it produced.
+        pub calibration_id: Option<i64>,
+        /// Creation time.
+        pub created_at: String,
+        /// Last change.
+        pub updated_at: String,
+        /// When a worker last started it.
+        pub started_at: Option<String>,
+        /// When it ended.
+        pub finished_at: Option<String>,
+    }
 }
 
-/// Summary of a calibration (the report itself is fetched separately).
-#[derive(Debug, Clone, Serialize, sqlx::FromRow, ToSchema)]
-pub struct CalibrationRec {
-    /// Id.
-    pub id: i64,
-    /// Robot calibrated.
-    pub robot_id: i64,
-    /// Robot serial number.
-    pub serial_number: String,
-    /// Robot model.
-    pub model_id: i64,
-    /// Robot site tag.
-    pub site: Option<String>,
-    /// Robot line tag.
-    pub line: Option<String>,
-    /// Robot cell tag.
-    pub cell: Option<String>,
-    /// Session the data came from.
-    pub session_id: i64,
-    /// Job that produced it.
-    pub job_id: i64,
-    /// Version number, per robot, from 1.
-    pub version: i64,
-    /// Identification method.
-    pub method: String,
-    /// Poses used (train + test).
-    pub n_poses: i64,
-    /// Held-out poses.
-    pub n_test: i64,
-    /// Held-out RMS with the nominal model (mm).
-    pub test_rms_before_mm: Option<f64>,
-    /// Held-out RMS with the calibrated model (mm).
-    pub test_rms_after_mm: Option<f64>,
-    /// Training RMS with the calibrated model (mm).
-    pub train_rms_after_mm: Option<f64>,
-    /// Physical effects found (comma separated names).
-    pub effects: String,
-    /// Whether it is the robot's active calibration now.
-    pub active: bool,
-    /// Creation time.
-    pub created_at: String,
+record! {
+    /// Summary of a calibration (the report itself is fetched separately).
+    #[derive(Debug, Clone, Serialize, ToSchema)]
+    pub struct CalibrationRec {
+        /// Id.
+        pub id: i64,
+        /// Robot calibrated.
+        pub robot_id: i64,
+        /// Robot serial number.
+        pub serial_number: String,
+        /// Robot model.
+        pub model_id: i64,
+        /// Robot site tag.
+        pub site: Option<String>,
+        /// Robot line tag.
+        pub line: Option<String>,
+        /// Robot cell tag.
+        pub cell: Option<String>,
+        /// Session the data came from.
+        pub session_id: i64,
+        /// Job that produced it.
+        pub job_id: i64,
+        /// Version number, per robot, from 1.
+        pub version: i64,
+        /// Identification method.
+        pub method: String,
+        /// Poses used (train + test).
+        pub n_poses: i64,
+        /// Held-out poses.
+        pub n_test: i64,
+        /// Held-out RMS with the nominal model (mm).
+        pub test_rms_before_mm: Option<f64>,
+        /// Held-out RMS with the calibrated model (mm).
+        pub test_rms_after_mm: Option<f64>,
+        /// Training RMS with the calibrated model (mm).
+        pub train_rms_after_mm: Option<f64>,
+        /// Physical effects found: stored comma separated, answered as a list
+        /// (`[]` for none), as `/robots/{id}/accuracy` answers them.
+        #[serde(serialize_with = "effect_list")]
+        #[schema(value_type = Vec<String>)]
+        pub effects: String,
+        /// Whether it is the robot's active calibration now.
+        pub active: bool,
+        /// Creation time.
+        pub created_at: String,
+    }
+}
+
+impl CalibrationRec {
+    /// The effects found, one name each (none for an empty column).
+    pub fn effect_names(&self) -> Vec<String> {
+        split_effects(&self.effects)
+    }
+}
+
+fn split_effects(stored: &str) -> Vec<String> {
+    stored
+        .split(',')
+        .filter(|s| !s.is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
+fn effect_list<S: serde::Serializer>(stored: &str, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_seq(split_effects(stored))
 }
 
 /// A new calibration, written with the job's success in one transaction.
@@ -301,25 +339,27 @@ pub struct CalibrationFilter {
     pub min_test_rms_mm: Option<f64>,
 }
 
-/// An activation or rollback, as recorded.
-#[derive(Debug, Clone, Serialize, sqlx::FromRow, ToSchema)]
-pub struct ActivationRec {
-    /// Id.
-    pub id: i64,
-    /// Robot.
-    pub robot_id: i64,
-    /// `activate` or `rollback`.
-    pub action: String,
-    /// Calibration active after the change (none: the nominal model).
-    pub calibration_id: Option<i64>,
-    /// Calibration active before the change.
-    pub previous_calibration_id: Option<i64>,
-    /// Who did it.
-    pub actor: String,
-    /// Why.
-    pub reason: String,
-    /// When.
-    pub created_at: String,
+record! {
+    /// An activation or rollback, as recorded.
+    #[derive(Debug, Clone, Serialize, ToSchema)]
+    pub struct ActivationRec {
+        /// Id.
+        pub id: i64,
+        /// Robot.
+        pub robot_id: i64,
+        /// `activate` or `rollback`.
+        pub action: String,
+        /// Calibration active after the change (none: the nominal model).
+        pub calibration_id: Option<i64>,
+        /// Calibration active before the change.
+        pub previous_calibration_id: Option<i64>,
+        /// Who did it.
+        pub actor: String,
+        /// Why.
+        pub reason: String,
+        /// When.
+        pub created_at: String,
+    }
 }
 
 /// The database behind the service.

@@ -36,7 +36,7 @@ impl Backend {
             .connect(url)
             .await
             .map_err(super::StoreError::Db)?;
-        sqlx::migrate!("migrations/postgres").run(&pool).await?;
+        super::migrations::postgres().run(&pool).await?;
         Ok(Backend { pool })
     }
 

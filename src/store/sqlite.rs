@@ -47,7 +47,7 @@ impl Backend {
             .connect_with(opts)
             .await
             .map_err(super::StoreError::Db)?;
-        sqlx::migrate!("migrations/sqlite").run(&pool).await?;
+        super::migrations::sqlite().run(&pool).await?;
         Ok(Backend { pool })
     }
 

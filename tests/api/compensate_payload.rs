@@ -60,6 +60,17 @@ async fn payload_kg_moves_a_compliant_calibration_and_is_reported() {
         heavy["results"][0]["q_deg"]
     );
     assert!(heavy_batch["temp_c_used"].is_null());
+    let notes: Vec<&str> = heavy_batch["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    assert!(
+        notes.iter().any(|n| n.starts_with("temp_c is not used"))
+            && notes.iter().any(|n| n.contains("payload of 12 kg")),
+        "{notes:?}"
+    );
 
     // targets.csv with payload_kg in the query string; compensated.csv
     // carries it in X-Payload-Kg-Used.

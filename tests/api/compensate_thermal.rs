@@ -179,5 +179,16 @@ async fn temp_c_used_is_null_without_a_thermal_effect() {
     .await;
     assert!(with["temp_c_used"].is_null(), "{with}");
     assert_eq!(with["results"], plain["results"]);
+    // ... and the answer says the temperature went unused, as the CLI does.
+    assert_eq!(plain["notes"], serde_json::json!([]), "{plain}");
+    let notes = with["notes"].as_array().unwrap();
+    assert!(
+        notes.len() == 1
+            && notes[0]
+                .as_str()
+                .unwrap()
+                .starts_with("temp_c is not used: the calibration has no thermal expansion"),
+        "{with}"
+    );
     app.stop().await;
 }

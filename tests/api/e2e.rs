@@ -316,6 +316,9 @@ async fn calibrate_activate_compensate_against_truth() {
         acc["history"][0]["test_rms_after_mm"].as_f64().unwrap(),
         after
     );
+    // The effects found: a list in both answers (`[]` for none, never "").
+    assert!(hist["items"][0]["effects"].is_array(), "{hist}");
+    assert_eq!(acc["history"][0]["effects"], hist["items"][0]["effects"]);
     let csv_r = app.get("/calibrations?format=csv").await;
     assert_eq!(csv_r.headers()["content-type"], "text/csv");
     let csv_text = csv_r.text().await.unwrap();

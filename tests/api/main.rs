@@ -19,6 +19,7 @@ mod helpers;
 mod jobs;
 mod logs;
 mod openapi;
+mod requires;
 mod slow_clients;
 mod store;
 mod ui;

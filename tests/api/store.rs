@@ -4,7 +4,6 @@
 use std::collections::BTreeSet;
 
 use drawcal::store::{CalibrationFilter, NewCalibration, NewRobot, Page, Store, StoreError};
-use sqlx::Connection;
 
 use crate::helpers::{fresh_dir, read};
 
@@ -373,19 +372,19 @@ async fn store_conformance_sqlite() {
 
 /// PostgreSQL at `DATABASE_URL_POSTGRES` (as `.ci/run` sets it; default
 /// postgres://postgres@127.0.0.1:5432/test); a fresh database per run.
+/// Fails when the server is down, unless `DRAWCAL_SKIP_POSTGRES` is set
+/// (see `requires`).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn store_conformance_postgres() {
-    let admin = std::env::var("DATABASE_URL_POSTGRES")
-        .or_else(|_| std::env::var("DRAWCAL_TEST_PG"))
-        .unwrap_or_else(|_| "postgres://postgres@127.0.0.1:5432/test".into());
+    let Some((admin, mut conn)) = crate::requires::postgres("store_conformance_postgres").await
+    else {
+        return;
+    };
     let name = format!(
         "drawcal_t_{}_{}",
         std::process::id(),
         drawcal::store::now_ms()
     );
-    let mut conn = sqlx::PgConnection::connect(&admin)
-        .await
-        .expect("PostgreSQL reachable for the conformance suite");
     sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}")))
         .execute(&mut conn)
         .await
@@ -433,17 +432,15 @@ fn migrations_are_in_lockstep() {
 async fn service_runs_on_postgres() {
     use crate::helpers::{Options, TestApp, ok_json};
     use serde_json::json;
-    let admin = std::env::var("DATABASE_URL_POSTGRES")
-        .or_else(|_| std::env::var("DRAWCAL_TEST_PG"))
-        .unwrap_or_else(|_| "postgres://postgres@127.0.0.1:5432/test".into());
+    let Some((admin, mut conn)) = crate::requires::postgres("service_runs_on_postgres").await
+    else {
+        return;
+    };
     let name = format!(
         "drawcal_app_{}_{}",
         std::process::id(),
         drawcal::store::now_ms()
     );
-    let mut conn = sqlx::PgConnection::connect(&admin)
-        .await
-        .expect("PostgreSQL reachable");
     sqlx::query(sqlx::AssertSqlSafe(format!("CREATE DATABASE {name}")))
         .execute(&mut conn)
         .await

@@ -207,6 +207,7 @@ fn the_compensate_view_sends_the_conditions_and_shows_the_used_ones() {
         n_ok: 0,
         results: vec![],
         warnings: vec![],
+        notes: vec![],
     })
     .unwrap();
     for field in [
@@ -214,6 +215,7 @@ fn the_compensate_view_sends_the_conditions_and_shows_the_used_ones() {
         "payload_kg_used",
         "approach_used",
         "warnings",
+        "notes",
     ] {
         assert!(answer.get(field).is_some(), "the API answers {field}");
         assert!(js.contains(&format!("r.{field}")), "app.js reads {field}");

@@ -21,8 +21,8 @@
 //! unexplained, with the running mean the engine computed).
 //!
 //! Needs `chromium` and `chromedriver` (Debian `chromium`,
-//! `chromium-driver`; `.ci/run` installs them). Without them the test says
-//! so and passes, unless `CI` or `DRAWCAL_REQUIRE_BROWSER` is set.
+//! `chromium-driver`; `.ci/run` installs them). Without them the test fails
+//! saying so, unless `DRAWCAL_SKIP_BROWSER` is set (see `requires`).
 //! `DRAWCAL_UI_SCREENSHOTS=1` writes a screenshot of each view to
 //! `docs/ui/`.
 
@@ -37,14 +37,6 @@ use helpers::{TestApp, data_dir, ok_json, read};
 use serde_json::{Value, json};
 
 const ELEMENT: &str = "element-6066-11e4-a52e-4f735466cecf";
-
-fn which(name: &str) -> Option<PathBuf> {
-    std::env::var_os("PATH")?
-        .to_str()?
-        .split(':')
-        .map(|d| Path::new(d).join(name))
-        .find(|p| p.is_file())
-}
 
 struct Driver {
     child: Child,
@@ -325,15 +317,9 @@ fn num(v: &Value) -> f64 {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn from_an_empty_database_to_compensated_targets_in_the_browser() {
-    let (Some(chromium), Some(chromedriver)) = (which("chromium"), which("chromedriver")) else {
-        assert!(
-            std::env::var_os("DRAWCAL_REQUIRE_BROWSER").is_none()
-                && std::env::var_os("CI").is_none(),
-            "chromium and chromedriver are required in CI (.ci/run installs them) or with DRAWCAL_REQUIRE_BROWSER"
-        );
-        eprintln!(
-            "SKIPPED: chromium or chromedriver not installed (apt-get install chromium chromium-driver)"
-        );
+    let Some((chromium, chromedriver)) =
+        crate::requires::browser("from_an_empty_database_to_compensated_targets_in_the_browser")
+    else {
         return;
     };
     let app = TestApp::spawn("ui-browser").await;
@@ -1095,5 +1081,10 @@ async fn check_used(d: &Driver, api: &Value, sent: &Value) {
             );
         }
     }
+    // The answer's notes on the conditions, each shown as the API said it.
+    let shown = d
+        .js("return [...document.querySelectorAll('#comp-notes li')].map(e => e.innerText)")
+        .await;
+    assert_eq!(&shown, &api["notes"], "the page shows the answer's notes");
     eprintln!("compensate view: {text}");
 }

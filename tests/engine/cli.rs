@@ -131,23 +131,43 @@ fn identify_then_compensate() {
         "one bad target, reported per row: {}",
         lines[2]
     );
-    // Without a backlash the approach changes nothing, and says so.
+    // Without a backlash the approach changes nothing, and says so; it is
+    // spelt as the API spells it, the kebab form accepted too.
+    for approach in ["in_order", "in-order"] {
+        let out = bin()
+            .arg("compensate")
+            .arg("--calibration")
+            .arg(&report)
+            .arg("--targets")
+            .arg(&targets)
+            .args(["--approach", approach])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{approach}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("--approach is not used"),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(String::from_utf8_lossy(&out.stdout), text);
+    }
+    // A negative payload reaches the range check (not clap's "unexpected
+    // argument"), which names the option.
     let out = bin()
         .arg("compensate")
         .arg("--calibration")
         .arg(&report)
         .arg("--targets")
         .arg(&targets)
-        .args(["--approach", "in-order"])
+        .args(["--payload-kg", "-1"])
         .output()
         .unwrap();
-    assert!(out.status.success());
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        String::from_utf8_lossy(&out.stderr).contains("--approach is not used"),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        err.contains("--payload-kg") && err.contains("0 to 5000") && !err.contains("unexpected"),
+        "{err}"
     );
-    assert_eq!(String::from_utf8_lossy(&out.stdout), text);
 
     // Bad input: a clear error naming the row and column.
     let bad = dir.join("bad.csv");
@@ -183,6 +203,33 @@ fn locate_compares_closed_form_and_least_squares() {
     assert_eq!(csv.lines().count(), 51);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("paper closed form vs least squares"), "{err}");
+}
+
+/// Tracker data are points already: `locate` says so, naming rig.json.
+#[test]
+fn locate_on_tracker_data_says_the_points_are_measured() {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/real_ur10_ipa_random");
+    for with_robot in [false, true] {
+        let mut cmd = bin();
+        cmd.arg("locate")
+            .arg("--rig")
+            .arg(d.join("rig.json"))
+            .arg("--poses")
+            .arg(d.join("poses.csv"));
+        if with_robot {
+            cmd.arg("--robot").arg(d.join("robot.json"));
+        }
+        let out = cmd.output().unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("rig.json")
+                && err.contains("anchors_mm")
+                && err.contains("measured points")
+                && !err.contains("poses.csv:"),
+            "{err}"
+        );
+    }
 }
 
 /// A report of another format version is refused by name; the service's
@@ -729,5 +776,109 @@ fn a_typo_in_robot_or_rig_json_is_refused_by_name() {
     assert!(
         err.contains("unknown key `r_m` (did you mean `r_mm`?)"),
         "{err}"
+    );
+}
+
+/// The figures README.md quotes for its first `identify` are the ones the
+/// command prints ("held out: before -> after").
+#[test]
+fn readme_figures() {
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+    let flat = readme.split_whitespace().collect::<Vec<_>>().join(" ");
+    let quoted = flat
+        .split_once("RMS falls from ")
+        .and_then(|(_, rest)| rest.split_once(" mm to "))
+        .and_then(|(before, rest)| Some((before, rest.split_once(" mm")?.0)))
+        .expect("README quotes 'RMS falls from X mm to Y mm'");
+    let out = bin()
+        .args(["identify", "--robot"])
+        .arg(data("robot.json"))
+        .arg("--rig")
+        .arg(data("rig.json"))
+        .arg("--poses")
+        .arg(data("poses.csv"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let (before, after) = text
+        .lines()
+        .find_map(|l| l.strip_prefix("held out: "))
+        .and_then(|l| l.split_once(" -> "))
+        .map(|(b, rest)| (b.to_string(), rest.split(' ').next().unwrap().to_string()))
+        .expect("the summary's held-out line");
+    let before: f64 = before.parse().unwrap();
+    let decimals = quoted.0.split('.').nth(1).map_or(0, str::len);
+    assert_eq!(format!("{before:.decimals$}"), quoted.0, "{text}");
+    assert_eq!(after, quoted.1, "{text}");
+}
+
+/// `identify`'s summary is read by a person: no line wider than 100
+/// columns on any shipped dataset, with or without `--verbose`; the
+/// candidates not kept are counted, and listed only with `--verbose`; the
+/// closed form's comparison, with why it differs, only with `--verbose`.
+#[test]
+fn the_summary_fits_a_terminal_and_keeps_the_detail_for_verbose() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let run = |ds: &str, verbose: bool| {
+        let d = root.join(ds);
+        let mut cmd = bin();
+        cmd.arg("identify")
+            .arg("--robot")
+            .arg(d.join("robot.json"))
+            .arg("--rig")
+            .arg(d.join("rig.json"))
+            .arg("--poses")
+            .arg(d.join("poses.csv"));
+        if verbose {
+            cmd.arg("--verbose");
+        }
+        let out = cmd.output().unwrap();
+        assert!(out.status.success(), "{ds}");
+        String::from_utf8(out.stdout).unwrap()
+    };
+    for ds in [
+        "er3a_paper_like",
+        "er3a_compliance_j2",
+        "ur5_geometric",
+        "real_ur10_ipa_random",
+        "real_positioner2ax_rosi",
+        "xcheck_bump_j3",
+    ] {
+        for verbose in [false, true] {
+            let text = run(ds, verbose);
+            let widest = text.lines().map(|l| l.chars().count()).max().unwrap();
+            assert!(
+                widest <= 100,
+                "{ds} verbose={verbose}: {widest} columns\n{text}"
+            );
+            assert!(text.contains("\nverdict: "), "{ds}: {text}");
+        }
+    }
+    let (short, long) = (
+        run("real_ur10_ipa_random", false),
+        run("real_ur10_ipa_random", true),
+    );
+    let listed = long.lines().filter(|l| l.ends_with("not kept")).count();
+    assert!(listed >= 2, "{long}");
+    assert!(!short.lines().any(|l| l.ends_with("not kept")), "{short}");
+    assert!(
+        short.contains(&format!(
+            "physics: {listed} candidate effects not kept (--verbose"
+        )),
+        "{short}"
+    );
+    assert!(
+        short.contains("poses.csv columns not read: std_x_mm"),
+        "{short}"
+    );
+    let (short, long) = (run("ur5_geometric", false), run("ur5_geometric", true));
+    assert!(!short.contains("closed form"), "{short}");
+    let flat = long.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(
+        flat.contains("paper closed form vs least-squares points")
+            && flat.contains("not behind A along AC"),
+        "{long}"
     );
 }

@@ -85,6 +85,7 @@ fn synthesise(
         Dataset {
             poses,
             n_strings: m,
+            ignored_columns: vec![],
         },
         truth,
     )

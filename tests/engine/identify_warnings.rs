@@ -151,6 +151,7 @@ fn simulated(
     Dataset {
         poses,
         n_strings: 0,
+        ignored_columns: vec![],
     }
 }
 

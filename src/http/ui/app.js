@@ -517,8 +517,8 @@ t1,10,-20,30,0,40,0</textarea><br>
       or load a file <input type="file" id="comp-file" accept=".csv">
       <fieldset id="comp-conditions"><legend>Run-time conditions (optional: sent only when filled in)</legend>
         <div id="comp-cal-info" class="muted"></div>
-        ${cond("temp", "temperature", '<input type="text" id="comp-temp" size="6" inputmode="decimal" placeholder="-50 to 150">', " °C")}
-        ${cond("payload", "payload at T", '<input type="text" id="comp-payload" size="6" inputmode="decimal" placeholder="0 to 5000">', " kg")}
+        ${cond("temp", "temperature", '<input type="text" id="comp-temp" size="11" inputmode="decimal" placeholder="-50 to 150">', " °C")}
+        ${cond("payload", "payload at T", '<input type="text" id="comp-payload" size="11" inputmode="decimal" placeholder="0 to 5000">', " kg")}
         ${cond("approach", "joints arrive", `<select id="comp-approach"><option value="">default (not sent)</option>
           <option value="positive">positive: every joint moving in +q</option><option value="negative">negative: every joint moving in −q</option>
           <option value="in_order">in order: each joint from the previous target</option></select>`, "")}
@@ -592,6 +592,7 @@ t1,10,-20,30,0,40,0</textarea><br>
         <a id="comp-download" href="${url}" download="compensated.csv">Download compensated.csv</a></p>
         ${usedHtml(r, req)}
         ${(r.warnings || []).length ? `<div class="warnings" id="comp-warnings"><b>Warning</b><ul>${r.warnings.map(w => `<li>${esc(w)}</li>`).join("")}</ul></div>` : ""}
+        ${(r.notes || []).length ? `<ul class="muted" id="comp-notes">${r.notes.map(n => `<li>${esc(n)}</li>`).join("")}</ul>` : ""}
         <textarea id="comp-csv" rows="8" readonly>${esc(csv)}</textarea>`;
     } catch (e) { showError(msg, e); }
   };
