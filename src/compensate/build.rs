@@ -47,6 +47,13 @@ impl Compensator {
             tolerance_mm: 1e-3,
             tolerance_rad: 1e-6,
             max_joint_change_deg: super::DEFAULT_MAX_JOINT_CHANGE_DEG,
+            tool_difference_mm: nominal
+                .tool_point_mm
+                .iter()
+                .zip(&calibrated.tool_point_mm)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>()
+                .sqrt(),
             max_iterations: 50,
         })
     }

@@ -121,6 +121,10 @@ pub struct Compensator {
     /// make; beyond it the target is refused (`joint_change`), saying which
     /// joint and how far ([`DEFAULT_MAX_JOINT_CHANGE_DEG`]).
     pub max_joint_change_deg: f64,
+    /// How far the calibrated tool point is from the nominal one (mm, in
+    /// the flange frame): a correction the joints make up for at every
+    /// joint target, said when a target is refused.
+    tool_difference_mm: f64,
 }
 
 /// The default of [`Compensator::max_joint_change_deg`]: a calibration

@@ -34,10 +34,127 @@ pub(super) struct Solution {
 /// A solve that did not converge: the iterations it ran before it gave up.
 pub(super) struct NotConverged {
     pub(super) iterations: usize,
-    /// Least distance (mm) from T to the target over the solve's iterates,
-    /// for a position-only target.
+    /// Least distance (mm) from T to the target over the solve's iterates
+    /// (for a target with an orientation: at the iterate nearest in
+    /// position and orientation together).
     pub(super) closest_mm: Option<f64>,
+    /// The flange's rotation (deg) from the target orientation there, for
+    /// a target with one.
+    pub(super) closest_deg: Option<f64>,
 }
+
+/// The nearest-solution solve's first weight on the joint change, relative
+/// to the mean curvature of the task (`tr(JᵀJ)/n` at the taught joints),
+/// its last, and the factor between stages.
+const NEAREST_MU: (f64, f64, f64) = (1e-1, 1e-12, 0.1);
+/// Gauss-Newton iterations per stage of the nearest-solution solve.
+const NEAREST_ITERATIONS: usize = 8;
+
+impl Compensator {
+    /// The calibrated model's joints nearest `q0` (in the joint-space
+    /// norm) that put T on `pos` (and the flange at `rot`, when given): a
+    /// joint target's compensation, which must stay with the taught pose.
+    ///
+    /// Tikhonov continuation: each stage minimises
+    /// `|e(q)|² + μ |q - q0|²` by Gauss-Newton from the last stage's
+    /// joints, μ falling tenfold per stage to nothing. Where the arm is
+    /// redundant for the task each step is the minimum-norm one towards
+    /// `q0`; at a singular pose the weight keeps the steps short, so the
+    /// solve follows the branch of solutions through the taught joints
+    /// instead of wandering off to another (a UR10 stretched upright had
+    /// joint 3 bent 5.2 deg by plain damped least squares where the
+    /// nearest solution bends no joint more than 3.7 deg).
+    pub(super) fn solve_nearest(
+        &self,
+        pos: &Vector3<f64>,
+        rot: Option<&Matrix3<f64>>,
+        q0: &[f64],
+    ) -> std::result::Result<Solution, NotConverged> {
+        let n = self.dof();
+        let oriented = rot.is_some();
+        let mut q = q0.to_vec();
+        let mut jac = self.chain.new_jacobian();
+        let mut best = (f64::INFINITY, f64::INFINITY, None);
+        let mut iterations = 0;
+        let mut mu_scale = None;
+        let (mu_first, mu_last, factor) = NEAREST_MU;
+        let mut mu_rel = mu_first;
+        let mut within = None;
+        loop {
+            for _ in 0..NEAREST_ITERATIONS {
+                let qe = self.effective(&q);
+                self.chain.point_jacobian(
+                    &self.calibrated.values,
+                    &qe,
+                    OutputFrame::Base,
+                    &mut jac,
+                );
+                let e_pos = pos - jac.point;
+                let e_rot = rot
+                    .map(|r| rotation_error(r, &jac.flange.r))
+                    .unwrap_or_else(Vector3::zeros);
+                let err = e_pos.norm() + 1000.0 * e_rot.norm();
+                if err < best.0 {
+                    best = (
+                        err,
+                        e_pos.norm(),
+                        oriented.then(|| e_rot.norm().to_degrees()),
+                    );
+                }
+                // Within the tolerance while the weight still pulls
+                // towards the taught joints, the answer is that much biased:
+                // the solve goes on to a thousandth of it, and answers the
+                // last iterate within the tolerance if it gets no nearer.
+                if e_pos.norm() <= self.tolerance_mm && e_rot.norm() <= self.tolerance_rad {
+                    let solution = Solution {
+                        residual_mm: e_pos.norm(),
+                        q: q.clone(),
+                        iterations,
+                    };
+                    if e_pos.norm() <= 1e-3 * self.tolerance_mm
+                        && e_rot.norm() <= 1e-3 * self.tolerance_rad
+                    {
+                        return Ok(solution);
+                    }
+                    within = Some(solution);
+                }
+                let (j, e) =
+                    self.task_system(&self.calibrated, &qe, &jac, oriented, &e_pos, &e_rot);
+                let mut a = j.transpose() * &j;
+                let scale = *mu_scale.get_or_insert(a.trace() / n as f64);
+                let mu = mu_rel * scale;
+                let toward = DVector::from_iterator(n, q0.iter().zip(&q).map(|(a, b)| a - b));
+                for i in 0..n {
+                    a[(i, i)] += mu;
+                }
+                let Some(a) = a.cholesky() else { break };
+                let step = a.solve(&(j.transpose() * e + toward * mu));
+                iterations += 1;
+                if !take_step(&mut q, &step, MAX_NEAREST_STEP_RAD) {
+                    break;
+                }
+                if step.norm() < 1e-13 {
+                    break;
+                }
+            }
+            if mu_rel <= mu_last || iterations >= self.max_iterations * 4 {
+                if let Some(solution) = within {
+                    return Ok(solution);
+                }
+                return Err(NotConverged {
+                    iterations,
+                    closest_mm: best.1.is_finite().then_some(best.1),
+                    closest_deg: best.2,
+                });
+            }
+            mu_rel *= factor;
+        }
+    }
+}
+
+/// Longest joint step (rad, Euclidean over the joints) of one iteration of
+/// the nearest-solution solve.
+const MAX_NEAREST_STEP_RAD: f64 = 0.2;
 
 impl Compensator {
     /// Damped least squares on the calibrated model from `q0`, each step at
@@ -98,6 +215,7 @@ impl Compensator {
             Err(NotConverged {
                 iterations,
                 closest_mm: (rot.is_none() && closest_mm.is_finite()).then_some(closest_mm),
+                closest_deg: None,
             })
         };
         let mut q = q0.to_vec();

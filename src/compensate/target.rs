@@ -10,11 +10,11 @@ use crate::model::{Target, TargetKind};
 use crate::rng::Rng;
 
 use super::solve::Model;
-use super::{Compensated, CompensationStatus, Compensator};
 
-/// Longest joint step (rad, Euclidean over the joints) of one solver
-/// iteration from taught joints.
+/// Longest joint step (rad, Euclidean over the joints) of one iteration of
+/// the damped least squares solve from taught joints.
 const MAX_STEP_RAD: f64 = 0.2;
+use super::{Compensated, CompensationStatus, Compensator};
 
 /// Where a target's solves start: T's wanted position, the flange's wanted
 /// orientation (when held) and the first starting joints to try.
@@ -193,6 +193,7 @@ impl Compensator {
         let mut last_iterations = 0;
         let mut limit_msg = None;
         let mut closest_mm = f64::INFINITY;
+        let mut closest_deg = None;
         let mut tried: Vec<Vec<f64>> = Vec::new();
         let numeric = cartesian
             .then(|| self.numeric_seeds(&pos, rot.as_ref()))
@@ -206,14 +207,31 @@ impl Compensator {
             {
                 continue;
             }
-            // Taught joints are where the answer should stay: their solve
-            // takes bounded steps.
-            let max_step = if cartesian {
-                f64::INFINITY
+            // Taught joints are where the answer should stay: theirs is
+            // the nearest solution; where the branch through them has none
+            // (a target beyond a stretched arm), damped least squares in
+            // bounded steps may find one farther off, which the bound then
+            // refuses by name rather than as unreachable.
+            let solved = if cartesian {
+                self.solve(&pos, rot.as_ref(), &seed, f64::INFINITY)
             } else {
-                MAX_STEP_RAD
+                self.solve_nearest(&pos, rot.as_ref(), &seed)
+                    .or_else(|near| {
+                        self.solve(&pos, rot.as_ref(), &seed, MAX_STEP_RAD)
+                            .map(|mut far| {
+                                far.iterations += near.iterations;
+                                far
+                            })
+                            .map_err(|mut not| {
+                                not.iterations += near.iterations;
+                                if near.closest_mm < not.closest_mm || not.closest_mm.is_none() {
+                                    not.closest_mm = near.closest_mm;
+                                    not.closest_deg = near.closest_deg;
+                                }
+                                not
+                            })
+                    })
             };
-            let solved = self.solve(&pos, rot.as_ref(), &seed, max_step);
             tried.push(seed);
             match solved {
                 Ok(sol) => {
@@ -247,8 +265,9 @@ impl Compensator {
                 }
                 Err(failed) => {
                     last_iterations += failed.iterations;
-                    if let Some(c) = failed.closest_mm {
-                        closest_mm = closest_mm.min(c);
+                    if let Some(c) = failed.closest_mm.filter(|c| *c < closest_mm) {
+                        closest_mm = c;
+                        closest_deg = failed.closest_deg;
                     }
                 }
             }
@@ -263,8 +282,11 @@ impl Compensator {
                 CompensationStatus::Unreachable,
                 last_iterations,
                 format!(
-                    "{}; the nearest the calibrated model came is {closest_mm:.4} mm",
-                    self.unreachable_message()
+                    "{}; the nearest the calibrated model came is {closest_mm:.4} mm{}",
+                    self.unreachable_message(),
+                    closest_deg
+                        .map(|d| format!(", with the flange {d:.4} deg from the orientation asked"))
+                        .unwrap_or_default()
                 ),
             ),
             None => failed(
@@ -296,8 +318,21 @@ impl Compensator {
         } else {
             "the calibrated model differs from the nominal one more than a calibration should here; check the calibration"
         };
+        let correction_mm = (self.nominal_pose(taught).0 - self.calibrated_pose(taught).0).norm();
+        // A tool point far from robot.json's is most of the correction at
+        // every target, and is the tool's, not the arm's.
+        let tool = if self.tool_difference_mm > 1.0 {
+            format!(
+                "; the correction asked is {correction_mm:.2} mm, and the calibrated tool point is \
+                 {:.2} mm from robot.json's: if robot.json's was only a guess, put the calibrated \
+                 one (calibrated_robot.tool_point_mm) in robot.json and in the controller's TCP",
+                self.tool_difference_mm
+            )
+        } else {
+            format!("; the correction asked is {correction_mm:.2} mm")
+        };
         Some(format!(
-            "joint {} would move {change_deg:+.2} deg from the taught {:.2} deg (more than the {} deg bound on a compensation's change): {why}; not compensated",
+            "joint {} would move {change_deg:+.2} deg from the taught {:.2} deg (more than the {} deg bound on a compensation's change): {why}{tool}; not compensated",
             j + 1,
             taught[j].to_degrees(),
             self.max_joint_change_deg
