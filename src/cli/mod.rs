@@ -3,6 +3,7 @@
 
 mod error;
 pub mod evaluate;
+pub mod keys;
 pub mod report;
 pub mod serve;
 pub mod simulate;
@@ -73,6 +74,8 @@ pub enum Command {
     Locate(LocateArgs),
     /// Run the HTTP service.
     Serve(serve::ServeArgs),
+    /// API keys of the service: create (printed once), list, revoke.
+    Keys(keys::KeysArgs),
     /// Simulate a recording from a spec (robot, rig, deviations, effects).
     Simulate(simulate::SimulateArgs),
     /// Blind evaluation of the physics analysis on simulated datasets.
@@ -256,6 +259,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Compensate(a) => run_compensate(a),
         Command::Locate(a) => run_locate(a),
         Command::Serve(a) => serve::run(a),
+        Command::Keys(a) => keys::run(a),
         Command::Simulate(a) => simulate::run(a),
         Command::Evaluate(a) => evaluate::run(a),
         Command::Report(a) => report::run(a),
@@ -572,7 +576,7 @@ fn undetermined_z(s: &str) -> std::result::Result<f64, String> {
 }
 
 /// `--max-joint-change-deg`: degrees, from 0 to 360.
-fn max_joint_change_deg(s: &str) -> std::result::Result<f64, String> {
+pub(crate) fn max_joint_change_deg(s: &str) -> std::result::Result<f64, String> {
     in_range(s, 0.0..=360.0, "degrees")
 }
 

@@ -35,6 +35,22 @@ pub struct ServeArgs {
     /// before the service does. At most 86400.
     #[arg(long, env = "DRAWCAL_IDLE_TIMEOUT_SECS", default_value_t = 120)]
     pub idle_timeout_secs: u64,
+    /// Largest change of any joint (deg) a joint target's compensation may
+    /// make; `/compensate` refuses a target that needs more
+    /// (`joint_change`), saying which joint and how far.
+    #[arg(long, env = "DRAWCAL_MAX_JOINT_CHANGE_DEG",
+          default_value_t = crate::compensate::DEFAULT_MAX_JOINT_CHANGE_DEG,
+          value_parser = super::max_joint_change_deg)]
+    pub max_joint_change_deg: f64,
+    /// Serve without API keys: every request acts as an admin. Refused
+    /// unless --listen is a loopback address.
+    #[arg(long)]
+    pub insecure_no_auth: bool,
+    /// A file holding the first admin key (the Docker image's way in; see
+    /// `DRAWCAL_ADMIN_KEY` for the key itself): created on start if no key
+    /// has it. At least 32 characters.
+    #[arg(long, env = "DRAWCAL_ADMIN_KEY_FILE")]
+    pub admin_key_file: Option<std::path::PathBuf>,
     /// Job lease (seconds): a job whose process died runs again this long
     /// after its last heartbeat.
     #[arg(long, env = "DRAWCAL_JOB_LEASE_SECS", default_value_t = 15)]
@@ -116,6 +132,21 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
     if args.job_lease_secs == 0 {
         return usage("--job-lease-secs must be at least 1".into());
     }
+    let admin_key = match (
+        &args.admin_key_file,
+        std::env::var("DRAWCAL_ADMIN_KEY").ok(),
+    ) {
+        (Some(path), _) => Some(
+            std::fs::read_to_string(path)
+                .map_err(|source| CliError::Io {
+                    path: path.clone(),
+                    source,
+                })?
+                .trim()
+                .to_string(),
+        ),
+        (None, key) => key.map(|k| k.trim().to_string()),
+    };
     init_tracing(args.log_format);
     let cfg = ServiceConfig {
         listen: args.listen,
@@ -123,6 +154,9 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
         max_upload_bytes: args.max_upload_bytes,
         client_timeout: Duration::from_secs(args.client_timeout_secs),
         idle_timeout: Duration::from_secs(args.idle_timeout_secs),
+        max_joint_change_deg: args.max_joint_change_deg,
+        insecure_no_auth: args.insecure_no_auth,
+        bootstrap_admin_key: admin_key,
         jobs: JobConfig {
             workers: args.workers,
             lease: Duration::from_secs(args.job_lease_secs),

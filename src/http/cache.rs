@@ -32,7 +32,6 @@ pub struct Cached {
 }
 
 /// The compensation cache of a service (see the module documentation).
-#[derive(Default)]
 pub struct CompensationCache {
     /// Built compensators by calibration id.
     compensators: RwLock<HashMap<i64, Arc<Cached>>>,
@@ -41,12 +40,20 @@ pub struct CompensationCache {
     /// Bumped by every activation and rollback through this process, so
     /// that a read of the active id that raced with one is not kept.
     activations: AtomicU64,
+    /// The bound every compensator built here is given.
+    max_joint_change_deg: f64,
 }
 
 impl CompensationCache {
-    /// An empty cache.
-    pub fn new() -> Self {
-        Self::default()
+    /// An empty cache whose compensators refuse a joint target's change
+    /// beyond `max_joint_change_deg`.
+    pub fn new(max_joint_change_deg: f64) -> Self {
+        CompensationCache {
+            compensators: RwLock::default(),
+            active: RwLock::default(),
+            activations: AtomicU64::default(),
+            max_joint_change_deg,
+        }
     }
 
     /// Drop the robot's active calibration id: this process activated
@@ -129,11 +136,14 @@ impl CompensationCache {
         }
         let cal = store.get_calibration(calibration_id).await?;
         let text = store.calibration_report(calibration_id).await?;
+        let bound = self.max_joint_change_deg;
         let built = tokio::task::spawn_blocking(move || -> ApiResult<Compensator> {
             let report = Report::from_json(&text)
                 .map_err(|e| ApiError::Internal(format!("stored report: {e}")))?;
-            Compensator::from_report(&report)
-                .map_err(|e| ApiError::Internal(format!("compensator: {e}")))
+            let mut comp = Compensator::from_report(&report)
+                .map_err(|e| ApiError::Internal(format!("compensator: {e}")))?;
+            comp.max_joint_change_deg = bound;
+            Ok(comp)
         })
         .await
         .map_err(|e| ApiError::Internal(e.to_string()))??;

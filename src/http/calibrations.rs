@@ -1,5 +1,8 @@
 //! Calibrations, activation and fleet history.
 
+use axum::Extension;
+
+use super::auth::Caller;
 use axum::Json;
 use axum::extract::State;
 use axum::http::header::CONTENT_TYPE;
@@ -90,7 +93,7 @@ fn opt_num(x: Option<f64>) -> String {
 /// (serial number, site, line, cell) that begins like a formula (`=`, `+`,
 /// `-`, `@`, tab, carriage return) gets a leading `'`, so an MES export
 /// opened in a spreadsheet shows it instead of running it.
-fn text_cell(s: &str) -> String {
+pub(super) fn text_cell(s: &str) -> String {
     if s.starts_with(['=', '+', '-', '@', '\t', '\r']) {
         format!("'{s}")
     } else {
@@ -314,9 +317,7 @@ pub async fn robot_accuracy(
 pub struct Activate {
     /// Calibration of this robot.
     pub calibration_id: i64,
-    /// Who does it.
-    pub by: String,
-    /// Why.
+    /// Why (recorded with the key's name, the actor).
     pub reason: String,
 }
 
@@ -324,9 +325,7 @@ pub struct Activate {
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Rollback {
-    /// Who does it.
-    pub by: String,
-    /// Why.
+    /// Why (recorded with the key's name, the actor).
     pub reason: String,
 }
 
@@ -336,10 +335,7 @@ fn forget_active(app: &AppState, robot_id: i64) {
     app.cache.forget_active(robot_id);
 }
 
-fn check_actor(by: &str, reason: &str) -> ApiResult<()> {
-    if by.trim().is_empty() || by.len() > 200 {
-        return Err(ApiError::invalid("by", "say who (1 to 200 characters)"));
-    }
+fn check_reason(reason: &str) -> ApiResult<()> {
     if reason.trim().is_empty() || reason.len() > 2000 {
         return Err(ApiError::invalid(
             "reason",
@@ -361,13 +357,14 @@ fn check_actor(by: &str, reason: &str) -> ApiResult<()> {
         (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
         (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
-        (status = 422, description = "Unknown calibration, another robot's, or missing who/why", body = ErrorBody)))]
+        (status = 422, description = "Unknown calibration, another robot's, or missing reason", body = ErrorBody)))]
 pub async fn activate(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Id(id): Id,
     ApiJson(a): ApiJson<Activate>,
 ) -> ApiResult<Json<ActivationRec>> {
-    check_actor(&a.by, &a.reason)?;
+    check_reason(&a.reason)?;
     app.store.get_robot(id).await?;
     match app.store.get_calibration(a.calibration_id).await {
         Err(crate::store::StoreError::NotFound { .. }) => {
@@ -394,12 +391,21 @@ pub async fn activate(
             id,
             Some(a.calibration_id),
             "activate",
-            a.by.trim(),
+            &caller.name,
             a.reason.trim(),
         )
         .await;
     forget_active(&app, id);
-    Ok(Json(rec?))
+    let rec = rec?;
+    app.store
+        .audit(
+            &caller.name,
+            "activate",
+            &format!("robot {id}"),
+            &format!("calibration {}: {}", a.calibration_id, a.reason.trim()),
+        )
+        .await?;
+    Ok(Json(rec))
 }
 
 /// Roll back to the calibration that was active before the current one
@@ -415,20 +421,36 @@ pub async fn activate(
         (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
         (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
-        (status = 422, description = "Missing who/why", body = ErrorBody)))]
+        (status = 422, description = "Missing reason", body = ErrorBody)))]
 pub async fn rollback(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Id(id): Id,
     ApiJson(r): ApiJson<Rollback>,
 ) -> ApiResult<Json<ActivationRec>> {
-    check_actor(&r.by, &r.reason)?;
+    check_reason(&r.reason)?;
     let previous = app.store.previous_active(id).await?;
     let rec = app
         .store
-        .set_active(id, previous, "rollback", r.by.trim(), r.reason.trim())
+        .set_active(id, previous, "rollback", &caller.name, r.reason.trim())
         .await;
     forget_active(&app, id);
-    Ok(Json(rec?))
+    let rec = rec?;
+    app.store
+        .audit(
+            &caller.name,
+            "rollback",
+            &format!("robot {id}"),
+            &format!(
+                "to {}: {}",
+                previous.map_or("the nominal model".to_string(), |c| format!(
+                    "calibration {c}"
+                )),
+                r.reason.trim()
+            ),
+        )
+        .await?;
+    Ok(Json(rec))
 }
 
 /// A robot's activations and rollbacks, newest first.

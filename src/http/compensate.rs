@@ -139,7 +139,7 @@ pub struct CompensatedOut {
     pub residual_mm: Option<f64>,
     /// Solver iterations.
     pub iterations: usize,
-    /// `ok`, `unreachable` or `joint_limit`.
+    /// `ok`, `unreachable`, `joint_limit` or `joint_change`.
     pub status: StatusOut,
     /// Why, when not ok.
     pub message: Option<String>,

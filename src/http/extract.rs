@@ -177,6 +177,18 @@ pub fn without_bom(bytes: &[u8]) -> &[u8] {
 /// shape errors 422 `invalid_input` naming the field path.
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let bytes = without_bom(bytes);
+    // JSON writes a NUL character only as the escape `\u0000` (a raw one is
+    // a syntax error): rare, so only a body that has one is walked.
+    if bytes.windows(6).any(|w| w == b"\\u0000")
+        && let Ok(v) = serde_json::from_slice::<serde_json::Value>(bytes)
+        && let Some(field) = nul_path(&v, String::new())
+    {
+        return Err(ApiError::Invalid {
+            message: NUL_MESSAGE.into(),
+            field: Some(field),
+            row: None,
+        });
+    }
     // The common case in one pass; only a failed parse pays for the
     // classification below (it is on the /compensate hot path).
     if let Ok(v) = serde_json::from_slice::<T>(bytes) {
@@ -228,6 +240,34 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     }
 }
 
+/// Why a text with a NUL character is refused.
+const NUL_MESSAGE: &str = "contains a NUL character (U+0000), which no text field accepts";
+
+/// The path (`a.b[2]`) of the first string of `v` holding a NUL
+/// character, or of the object key that does.
+fn nul_path(v: &serde_json::Value, at: String) -> Option<String> {
+    use serde_json::Value;
+    match v {
+        Value::String(s) if s.contains('\0') => Some(if at.is_empty() { ".".into() } else { at }),
+        Value::Array(a) => a
+            .iter()
+            .enumerate()
+            .find_map(|(i, x)| nul_path(x, format!("{at}[{i}]"))),
+        Value::Object(m) => m.iter().find_map(|(k, x)| {
+            let here = if at.is_empty() {
+                k.clone()
+            } else {
+                format!("{at}.{k}")
+            };
+            if k.contains('\0') {
+                return Some(here);
+            }
+            nul_path(x, here)
+        }),
+        _ => None,
+    }
+}
+
 /// A JSON body (`Content-Type: application/json` required).
 pub struct ApiJson<T>(pub T);
 
@@ -257,9 +297,13 @@ impl<S: Send + Sync> FromRequestParts<S> for Id {
             axum::extract::Path::<String>::from_request_parts(parts, state)
                 .await
                 .map_err(|r| ApiError::BadRequest(r.body_text()))?;
-        raw.parse::<i64>()
+        // Digits only: `+1` or ` 1` is not the id 1.
+        raw.bytes()
+            .all(|b| b.is_ascii_digit())
+            .then(|| raw.parse::<i64>().ok())
+            .flatten()
             .map(Id)
-            .map_err(|_| ApiError::BadRequest(format!("'{raw}' is not a valid id (an integer)")))
+            .ok_or_else(|| ApiError::BadRequest(format!("'{raw}' is not a valid id (an integer)")))
     }
 }
 
@@ -270,6 +314,14 @@ impl<S: Send + Sync, T: DeserializeOwned> FromRequestParts<S> for ApiQuery<T> {
     type Rejection = ApiError;
 
     async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
+        let query = parts.uri.query().unwrap_or("");
+        if let Some(pair) = query.split('&').find(|p| p.contains("%00")) {
+            return Err(ApiError::Invalid {
+                message: NUL_MESSAGE.into(),
+                field: Some(pair.split('=').next().unwrap_or(pair).to_string()),
+                row: None,
+            });
+        }
         axum::extract::Query::<T>::from_request_parts(parts, state)
             .await
             .map(|q| ApiQuery(q.0))

@@ -12,12 +12,14 @@
 //! the JSON error body in one place. Store errors convert into it; engine
 //! input errors become 422 with `field` and `row`.
 
+pub mod auth;
 pub mod cache;
 pub mod calibrations;
 pub mod compensate;
 pub mod compute;
 pub mod error;
 pub mod extract;
+pub mod keys;
 pub mod ops;
 pub mod resources;
 pub mod sessions;
@@ -66,6 +68,16 @@ pub struct ServiceConfig {
     /// (`--idle-timeout-secs`): a client sending its headers a byte at a
     /// time, or an idle keep-alive connection, is closed after it.
     pub idle_timeout: Duration,
+    /// Largest change of any joint (deg) a joint target's compensation may
+    /// make (`--max-joint-change-deg`): beyond it `/compensate` answers
+    /// that target `joint_change` ([`crate::compensate::Compensator::max_joint_change_deg`]).
+    pub max_joint_change_deg: f64,
+    /// Serve without API keys (`--insecure-no-auth`): every request acts
+    /// as an admin. Refused unless `listen` is a loopback address.
+    pub insecure_no_auth: bool,
+    /// An admin key to create on start if no key has it (`DRAWCAL_ADMIN_KEY`,
+    /// `--admin-key-file`): how a fresh deployment gets its first key.
+    pub bootstrap_admin_key: Option<String>,
 }
 
 /// The whole request body must arrive within this many client timeouts
@@ -90,6 +102,8 @@ pub struct App {
     pub cache: cache::CompensationCache,
     /// Threads for request-path numerical work (one per core).
     pub compute: compute::ComputePool,
+    /// No API keys asked ([`ServiceConfig::insecure_no_auth`]).
+    pub insecure_no_auth: bool,
 }
 
 /// Threads for request-path numerical work: the number of cores.
@@ -171,9 +185,33 @@ impl<T: ToSchema> Paged<T> {
         description = "Robot kinematic calibration: sessions, identification jobs, calibrations, activation, compensation and fleet history. Lengths in mm, angles in degrees. Every error answers `{error, message, field?, row?}`.",
         license(name = "MIT OR Apache-2.0")
     ),
-    components(schemas(ErrorBody))
+    // Format is referenced only by query parameters, which utoipa does
+    // not collect schemas from.
+    components(schemas(ErrorBody, calibrations::Format)),
+    modifiers(&BearerKeys),
+    security(("api_key" = []))
 )]
 struct ApiDoc;
+
+/// Every route needs an API key (`/health` and `/ready` override it).
+struct BearerKeys;
+
+impl utoipa::Modify for BearerKeys {
+    fn modify(&self, doc: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+        let scheme = SecurityScheme::Http(
+            HttpBuilder::new()
+                .scheme(HttpAuthScheme::Bearer)
+                .description(Some(
+                    "An API key (`drawcal keys create`, `POST /keys`); its role decides the routes: reader (GET), operator (POST /compensate), engineer (other writes), admin (activation, rollback, keys, audit)",
+                ))
+                .build(),
+        );
+        doc.components
+            .get_or_insert_with(Default::default)
+            .add_security_scheme("api_key", scheme);
+    }
+}
 
 /// Routes and their documentation, from the same handler annotations.
 fn api() -> OpenApiRouter<AppState> {
@@ -201,6 +239,9 @@ fn api() -> OpenApiRouter<AppState> {
         .routes(routes!(calibrations::rollback))
         .routes(routes!(calibrations::list_activations))
         .routes(routes!(compensate::compensate))
+        .routes(routes!(keys::create_key, keys::list_keys))
+        .routes(routes!(keys::revoke_key))
+        .routes(routes!(keys::list_audit))
 }
 
 /// The OpenAPI document of the service.
@@ -231,6 +272,14 @@ impl MakeRequestId for CounterId {
     }
 }
 
+/// An `x-request-id` safe to log as it is: 1 to 64 letters, digits and
+/// `.`, `_`, `:`, `-`.
+fn is_plain_request_id(s: &str) -> bool {
+    (1..=64).contains(&s.len())
+        && s.bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b".:_-".contains(&b))
+}
+
 /// The application, ready to serve.
 pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration) -> Router {
     let client_timeout = client_timeout.min(MAX_TIMEOUT);
@@ -239,7 +288,14 @@ pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration
         prefix: format!("{:x}", crate::store::now_ms() & 0xff_ffff).into(),
         next: Arc::new(AtomicU64::new(1)),
     };
+    // The key check runs on the API's matched routes (after routing, so it
+    // sees the route's template); the page's own files and the fallbacks
+    // are public.
     router
+        .route_layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            auth::require_key,
+        ))
         .merge(ui::routes())
         .fallback(|| async { ApiError::NotFound("no such route".into()) })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
@@ -253,10 +309,13 @@ pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration
             TraceLayer::new_for_http()
                 .on_response(DefaultOnResponse::new().level(tracing::Level::INFO))
                 .make_span_with(|req: &Request<_>| {
+                // A client's own id is logged only when it cannot pass
+                // for log syntax (`a method=DELETE`) or be a novel.
                 let id = req
                     .headers()
                     .get("x-request-id")
                     .and_then(|v| v.to_str().ok())
+                    .filter(|s| is_plain_request_id(s))
                     .unwrap_or("-");
                 tracing::info_span!("request", request_id = %id, method = %req.method(), uri = %req.uri())
             }),
@@ -285,15 +344,27 @@ impl Service {
         cfg: &ServiceConfig,
         job_fn: JobFn,
     ) -> Result<Service, Box<dyn std::error::Error + Send + Sync>> {
+        if cfg.insecure_no_auth && !cfg.listen.ip().is_loopback() {
+            return Err(format!(
+                "--insecure-no-auth serves without API keys, so only on a loopback address \
+                 (127.0.0.1, ::1), not {}",
+                cfg.listen
+            )
+            .into());
+        }
         let store = Store::connect(&cfg.database_url).await?;
+        if let Some(secret) = &cfg.bootstrap_admin_key {
+            keys::ensure_admin(&store, secret).await?;
+        }
         let jobs = Jobs::start(store.clone(), cfg.jobs.clone(), job_fn);
         let listener = tokio::net::TcpListener::bind(cfg.listen).await?;
         let addr = listener.local_addr()?;
         let state = AppState(Arc::new(App {
             store,
             jobs,
-            cache: cache::CompensationCache::new(),
+            cache: cache::CompensationCache::new(cfg.max_joint_change_deg),
             compute: compute::ComputePool::new(compute_threads()),
+            insecure_no_auth: cfg.insecure_no_auth,
         }));
         Ok(Service {
             addr,
@@ -453,3 +524,15 @@ pub async fn shutdown_signal() {
 
 /// Default lease if not configured.
 pub const DEFAULT_LEASE: Duration = Duration::from_secs(15);
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn only_plain_request_ids_are_logged_as_sent() {
+        use super::is_plain_request_id as plain;
+        assert!(plain("a1b2-3") && plain("mes.line-2:42_x"));
+        for forged in ["", "a method=DELETE", "x\"y", "a\tb", &"x".repeat(65)] {
+            assert!(!plain(forged), "{forged:?}");
+        }
+    }
+}

@@ -26,7 +26,7 @@ pub struct Ready {
 }
 
 /// The process is up.
-#[utoipa::path(get, path = "/health", tag = "operations",
+#[utoipa::path(get, path = "/health", tag = "operations", security(()),
     responses((status = 200, description = "Alive", body = Health)))]
 pub async fn health() -> Json<Health> {
     Json(Health {
@@ -36,7 +36,7 @@ pub async fn health() -> Json<Health> {
 }
 
 /// The database answers: the service can take requests.
-#[utoipa::path(get, path = "/ready", tag = "operations",
+#[utoipa::path(get, path = "/ready", tag = "operations", security(()),
     responses(
         (status = 200, description = "Ready", body = Ready),
         (status = 503, description = "The database is not answering", body = ErrorBody)))]

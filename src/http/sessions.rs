@@ -6,6 +6,9 @@
 //! with the poses already stored, before anything is written: one
 //! validation path, and a bad upload stores nothing.
 
+use axum::Extension;
+
+use super::auth::Caller;
 use std::collections::HashMap;
 
 use axum::Json;
@@ -343,6 +346,7 @@ async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot
         (status = 422, description = "A bad row or column (named)", body = ErrorBody)))]
 pub async fn upload_poses(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Id(id): Id,
     body: RawBody,
 ) -> ApiResult<Json<UploadResult>> {
@@ -367,6 +371,14 @@ pub async fn upload_poses(
         total = session.n_poses,
         "poses stored"
     );
+    app.store
+        .audit(
+            &caller.name,
+            "upload_poses",
+            &format!("session {id}"),
+            &format!("{n_new} poses ({} in all)", session.n_poses),
+        )
+        .await?;
     Ok(Json(UploadResult {
         added: n_new,
         session,
@@ -524,6 +536,7 @@ pub async fn get_poses(State(app): State<AppState>, Id(id): Id) -> ApiResult<Res
         (status = 422, description = "Bad options, or the session has no poses", body = ErrorBody)))]
 pub async fn enqueue_job(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Id(id): Id,
     body: RawBody,
 ) -> ApiResult<Response> {
@@ -573,6 +586,14 @@ pub async fn enqueue_job(
     let opts = serde_json::to_string(&options).map_err(|e| ApiError::Internal(e.to_string()))?;
     let job = app.store.create_job(id, session.robot_id, &opts, 3).await?;
     app.jobs.wake();
+    app.store
+        .audit(
+            &caller.name,
+            "enqueue_job",
+            &format!("job {}", job.id),
+            &format!("session {id}"),
+        )
+        .await?;
     let mut headers = HeaderMap::new();
     if let Ok(v) = HeaderValue::from_str(&format!("/jobs/{}", job.id)) {
         headers.insert(LOCATION, v);
@@ -636,10 +657,12 @@ pub async fn get_job(State(app): State<AppState>, Id(id): Id) -> ApiResult<Json<
         (status = 409, description = "The job has already ended", body = ErrorBody)))]
 pub async fn cancel_job(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Id(id): Id,
 ) -> ApiResult<(StatusCode, Json<JobRec>)> {
-    Ok((
-        StatusCode::ACCEPTED,
-        Json(app.store.request_cancel(id).await?),
-    ))
+    let job = app.store.request_cancel(id).await?;
+    app.store
+        .audit(&caller.name, "cancel_job", &format!("job {id}"), "")
+        .await?;
+    Ok((StatusCode::ACCEPTED, Json(job)))
 }

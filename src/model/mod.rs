@@ -223,6 +223,15 @@ pub(crate) fn csv_record(
             format!("{cells} where the header has {} columns", headers.len()),
         ));
     }
+    // A NUL byte is no text anyone typed, and PostgreSQL refuses it in
+    // text: refused here, naming the cell, for every file read.
+    if let Some(i) = rec.iter().position(|c| c.contains('\0')) {
+        return Err(Error::cell(
+            row,
+            headers.get(i).unwrap_or("?"),
+            "contains a NUL byte (U+0000)",
+        ));
+    }
     Ok(rec)
 }
 

@@ -15,17 +15,31 @@ use sqlx::migrate::{Migration, MigrationType, Migrator};
 /// spaces, as sqlx reads it) and SQL.
 type File = (i64, &'static str, &'static str);
 
-const SQLITE: &[File] = &[(
-    1,
-    "initial",
-    include_str!("../../migrations/sqlite/0001_initial.sql"),
-)];
+const SQLITE: &[File] = &[
+    (
+        1,
+        "initial",
+        include_str!("../../migrations/sqlite/0001_initial.sql"),
+    ),
+    (
+        2,
+        "api keys",
+        include_str!("../../migrations/sqlite/0002_api_keys.sql"),
+    ),
+];
 
-const POSTGRES: &[File] = &[(
-    1,
-    "initial",
-    include_str!("../../migrations/postgres/0001_initial.sql"),
-)];
+const POSTGRES: &[File] = &[
+    (
+        1,
+        "initial",
+        include_str!("../../migrations/postgres/0001_initial.sql"),
+    ),
+    (
+        2,
+        "api keys",
+        include_str!("../../migrations/postgres/0002_api_keys.sql"),
+    ),
+];
 
 fn migrator(files: &[File]) -> Migrator {
     Migrator::with_migrations(

@@ -297,6 +297,54 @@ fn effect_list<S: serde::Serializer>(stored: &str, s: S) -> Result<S::Ok, S::Err
     s.collect_seq(split_effects(stored))
 }
 
+record! {
+    /// An API key as stored: never its secret, only the secret's SHA-256
+    /// and its first characters (to tell keys apart in a list).
+    #[derive(Debug, Clone, Serialize, ToSchema)]
+    pub struct KeyRec {
+        /// Id.
+        pub id: i64,
+        /// Who holds it (unique): the name recorded as the actor of what
+        /// is done with it.
+        pub name: String,
+        /// `reader`, `operator`, `engineer` or `admin`.
+        pub role: String,
+        /// Sites it is limited to, comma separated (empty: every site).
+        pub sites: String,
+        /// The key's first characters (`dck_ab12...`).
+        pub prefix: String,
+        /// SHA-256 of the key (hex).
+        #[serde(skip)]
+        pub secret_hash: String,
+        /// Creation time.
+        pub created_at: String,
+        /// When it stops working, if ever.
+        pub expires_at: Option<String>,
+        /// When it was revoked, if it was.
+        pub revoked_at: Option<String>,
+    }
+}
+
+record! {
+    /// One entry of the audit log: who did what, when.
+    #[derive(Debug, Clone, Serialize, ToSchema)]
+    pub struct AuditRec {
+        /// Id (increasing).
+        pub id: i64,
+        /// When (RFC 3339 UTC).
+        pub at: String,
+        /// The key's name that did it.
+        pub actor: String,
+        /// What (`activate`, `rollback`, `cancel_job`, `enqueue_job`,
+        /// `upload_poses`, `create_key`, `revoke_key`...).
+        pub action: String,
+        /// On what (`robot 3`, `job 12`, `key 2`...).
+        pub target: String,
+        /// More, in words.
+        pub detail: String,
+    }
+}
+
 /// A new calibration, written with the job's success in one transaction.
 #[derive(Debug, Clone)]
 pub struct NewCalibration {
@@ -632,4 +680,45 @@ impl Store {
     ) -> Result<(Vec<ActivationRec>, i64)> {
         dispatch!(self.list_activations(robot_id, page))
     }
+    /// Store a new key (its secret's hash); a taken name is a conflict.
+    pub async fn create_key(&self, k: &NewKey) -> Result<KeyRec> {
+        dispatch!(self.create_key(k))
+    }
+    /// The key whose secret hashes to `secret_hash`, revoked or not.
+    pub async fn key_by_hash(&self, secret_hash: &str) -> Result<Option<KeyRec>> {
+        dispatch!(self.key_by_hash(secret_hash))
+    }
+    /// Every key, oldest first.
+    pub async fn list_keys(&self) -> Result<Vec<KeyRec>> {
+        dispatch!(self.list_keys())
+    }
+    /// Revoke a key (again: no change).
+    pub async fn revoke_key(&self, id: i64) -> Result<KeyRec> {
+        dispatch!(self.revoke_key(id))
+    }
+    /// Append to the audit log.
+    pub async fn audit(&self, actor: &str, action: &str, target: &str, detail: &str) -> Result<()> {
+        dispatch!(self.audit(actor, action, target, detail))
+    }
+    /// A page of the audit log, newest first, and the total count.
+    pub async fn list_audit(&self, page: Page) -> Result<(Vec<AuditRec>, i64)> {
+        dispatch!(self.list_audit(page))
+    }
+}
+
+/// A new API key.
+#[derive(Debug, Clone)]
+pub struct NewKey {
+    /// Who holds it (unique).
+    pub name: String,
+    /// Its role.
+    pub role: String,
+    /// Sites, comma separated (empty: every site).
+    pub sites: String,
+    /// The key's first characters.
+    pub prefix: String,
+    /// SHA-256 of the key (hex).
+    pub secret_hash: String,
+    /// When it stops working (RFC 3339), if ever.
+    pub expires_at: Option<String>,
 }

@@ -4,8 +4,9 @@
 // `LOCK_ROBOT_SQL`. Nothing else differs between the backends.
 
 use super::{
-    ActivationRec, CalibrationFilter, CalibrationRec, JobRec, ModelRec, NewCalibration, NewRobot,
-    Page, Result, RigRec, RobotRec, SessionRec, StoreError, now_rfc3339,
+    ActivationRec, AuditRec, CalibrationFilter, CalibrationRec, JobRec, KeyRec, ModelRec,
+    NewCalibration, NewKey, NewRobot, Page, Result, RigRec, RobotRec, SessionRec, StoreError,
+    now_rfc3339,
 };
 
 macro_rules! model_cols {
@@ -33,6 +34,11 @@ macro_rules! job_cols {
         "id, session_id, robot_id, options, state, stage, progress, attempts, max_attempts, \
          locked_by, locked_until_ms, cancel_requested, error, calibration_id, created_at, \
          updated_at, started_at, finished_at"
+    };
+}
+macro_rules! key_cols {
+    () => {
+        "id, name, role, sites, prefix, secret_hash, created_at, expires_at, revoked_at"
     };
 }
 macro_rules! calibration_select {
@@ -755,6 +761,96 @@ impl Backend {
                 .bind(robot_id)
                 .fetch_one(&self.pool)
                 .await?;
+        Ok((items, total))
+    }
+
+    pub async fn create_key(&self, k: &NewKey) -> Result<KeyRec> {
+        let taken = sqlx::query_scalar::<_, i64>("SELECT id FROM api_keys WHERE name = $1")
+            .bind(&k.name)
+            .fetch_optional(&self.pool)
+            .await?;
+        if taken.is_some() {
+            return Err(StoreError::Conflict(format!(
+                "a key named '{}' exists (revoke it, or choose another name)",
+                k.name
+            )));
+        }
+        Ok(sqlx::query_as::<_, KeyRec>(concat!(
+            "INSERT INTO api_keys (name, role, sites, prefix, secret_hash, created_at, expires_at) \
+             VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING ",
+            key_cols!()
+        ))
+        .bind(&k.name)
+        .bind(&k.role)
+        .bind(&k.sites)
+        .bind(&k.prefix)
+        .bind(&k.secret_hash)
+        .bind(now_rfc3339())
+        .bind(&k.expires_at)
+        .fetch_one(&self.pool)
+        .await?)
+    }
+
+    pub async fn key_by_hash(&self, secret_hash: &str) -> Result<Option<KeyRec>> {
+        Ok(sqlx::query_as::<_, KeyRec>(concat!(
+            "SELECT ",
+            key_cols!(),
+            " FROM api_keys WHERE secret_hash = $1"
+        ))
+        .bind(secret_hash)
+        .fetch_optional(&self.pool)
+        .await?)
+    }
+
+    pub async fn list_keys(&self) -> Result<Vec<KeyRec>> {
+        Ok(sqlx::query_as::<_, KeyRec>(concat!(
+            "SELECT ",
+            key_cols!(),
+            " FROM api_keys ORDER BY id"
+        ))
+        .fetch_all(&self.pool)
+        .await?)
+    }
+
+    pub async fn revoke_key(&self, id: i64) -> Result<KeyRec> {
+        sqlx::query("UPDATE api_keys SET revoked_at = $1 WHERE id = $2 AND revoked_at IS NULL")
+            .bind(now_rfc3339())
+            .bind(id)
+            .execute(&self.pool)
+            .await?;
+        sqlx::query_as::<_, KeyRec>(concat!("SELECT ", key_cols!(), " FROM api_keys WHERE id = $1"))
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?
+            .ok_or(StoreError::NotFound { what: "key", id })
+    }
+
+    pub async fn audit(&self, actor: &str, action: &str, target: &str, detail: &str) -> Result<()> {
+        sqlx::query(
+            "INSERT INTO audit_log (at, actor, action, target, detail) VALUES ($1, $2, $3, $4, $5)",
+        )
+        .bind(now_rfc3339())
+        .bind(actor)
+        .bind(action)
+        .bind(target)
+        .bind(detail)
+        .execute(&self.pool)
+        .await?;
+        Ok(())
+    }
+
+    pub async fn list_audit(&self, page: Page) -> Result<(Vec<AuditRec>, i64)> {
+        let items = sqlx::query_as::<_, AuditRec>(
+            "SELECT id, at, actor, action, target, detail FROM audit_log ORDER BY id DESC \
+             LIMIT $1 OFFSET $2",
+        )
+        .bind(page.limit)
+        .bind(page.offset)
+        .fetch_all(&self.pool)
+        .await?;
+        let total = sqlx::query_scalar::<_, i64>("SELECT COUNT(*) FROM audit_log")
+            .fetch_one(&self.pool)
+            .await?;
         Ok((items, total))
     }
 }

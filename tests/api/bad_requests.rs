@@ -338,6 +338,63 @@ async fn bad_requests_are_refused_and_change_nothing() {
         None,
     )
     .await;
+    // `+1` is not the id 1.
+    refused(
+        &app,
+        c.get(app.url("/sessions/+1")),
+        400,
+        "bad_request",
+        None,
+        None,
+    )
+    .await;
+
+    // A NUL character in any text is refused naming the field (PostgreSQL
+    // refuses it in text, SQLite would store it): a serial number, a
+    // session name, a pose id, a filter.
+    let nul = "A\u{0}B";
+    refused(
+        &app,
+        c.post(app.url("/robots"))
+            .json(&json!({"serial_number": nul, "model_id": model_id})),
+        422,
+        "invalid_input",
+        Some("serial_number"),
+        None,
+    )
+    .await;
+    refused(
+        &app,
+        c.post(app.url("/sessions"))
+            .json(&json!({"robot_id": robot_id, "rig_id": rig_id, "name": nul})),
+        422,
+        "invalid_input",
+        Some("name"),
+        None,
+    )
+    .await;
+    let mut with_nul = lines[..1].to_vec();
+    let row = lines[30].replacen(',', "\u{0},", 1);
+    with_nul.push(&row);
+    let e = refused(
+        &app,
+        upload(with_nul.join("\n")),
+        422,
+        "invalid_input",
+        Some("pose"),
+        Some(1),
+    )
+    .await;
+    assert!(e["message"].as_str().unwrap().contains("NUL"), "{e}");
+    refused(
+        &app,
+        c.get(app.url("/calibrations?site=plant%001")),
+        422,
+        "invalid_input",
+        Some("site"),
+        None,
+    )
+    .await;
     refused(
         &app,
         upload(poses.clone())
@@ -702,7 +759,7 @@ async fn bad_requests_are_refused_and_change_nothing() {
     refused(
         &app,
         c.post(app.url(&format!("/robots/{robot_id}/activate")))
-            .json(&json!({"calibration_id": 77, "by": "me", "reason": "why not"})),
+            .json(&json!({"calibration_id": 77, "reason": "why not"})),
         422,
         "invalid_input",
         Some("calibration_id"),
@@ -712,7 +769,7 @@ async fn bad_requests_are_refused_and_change_nothing() {
     refused(
         &app,
         c.post(app.url(&format!("/robots/{robot_id}/activate")))
-            .json(&json!({"calibration_id": 77, "by": "", "reason": "r"})),
+            .json(&json!({"calibration_id": 77, "by": "someone else", "reason": "r"})),
         422,
         "invalid_input",
         Some("by"),
@@ -722,7 +779,7 @@ async fn bad_requests_are_refused_and_change_nothing() {
     refused(
         &app,
         c.post(app.url(&format!("/robots/{robot_id}/rollback")))
-            .json(&json!({"by": "me", "reason": "r"})),
+            .json(&json!({"reason": "r"})),
         409,
         "conflict",
         None,
@@ -809,7 +866,7 @@ async fn json_with_a_byte_order_mark_is_read() {
     let mut body = b"\xEF\xBB\xBF".to_vec();
     body.extend_from_slice(read(DS, "rig.json").as_bytes());
     let rig = ok_json(
-        reqwest::Client::new()
+        app.client
             .post(app.url("/rigs"))
             .header("content-type", "application/json")
             .body(body)

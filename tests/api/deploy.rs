@@ -113,6 +113,8 @@ fn start(stage: &RuntimeStage, data: &Path, port: u16, extra_env: &[(&str, &str)
             .replace("0.0.0.0:8080", &format!("127.0.0.1:{port}"));
         cmd.env(k, v);
     }
+    // The first admin key, as a container is given it.
+    cmd.env("DRAWCAL_ADMIN_KEY", crate::helpers::TEST_ADMIN_KEY);
     for (k, v) in extra_env {
         cmd.env(k, v);
     }
@@ -163,7 +165,7 @@ async fn binary_runs_as_the_dockerfile_says() {
     let port = free_port();
     let mut child = start(&stage, &data, port, &[]);
     let base = format!("http://127.0.0.1:{port}");
-    let client = reqwest::Client::new();
+    let client = crate::helpers::client_with_key(crate::helpers::TEST_ADMIN_KEY);
     wait_ready(&client, &base, &mut child).await;
     // The HEALTHCHECK command itself, against the mapped port.
     let hc: Vec<String> = stage
@@ -209,7 +211,7 @@ async fn binary_runs_as_the_dockerfile_says() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn runtime_threads_flag_sets_the_runtime_and_is_printed() {
     let stage = parse_dockerfile();
-    let client = reqwest::Client::new();
+    let client = crate::helpers::client_with_key(crate::helpers::TEST_ADMIN_KEY);
     for n in ["1", "3"] {
         let data = fresh_dir(&format!("runtime-threads-{n}"));
         let port = free_port();
@@ -233,7 +235,7 @@ async fn sigkill_during_a_job_then_restart_completes_it() {
     let extra = [("DRAWCAL_JOB_LEASE_SECS", "2")];
     let mut child = start(&stage, &data, port, &extra);
     let base = format!("http://127.0.0.1:{port}");
-    let client = reqwest::Client::new();
+    let client = crate::helpers::client_with_key(crate::helpers::TEST_ADMIN_KEY);
     wait_ready(&client, &base, &mut child).await;
 
     let ds = "real_ur10_ipa_random";
@@ -424,13 +426,25 @@ async fn readme_walkthrough_works_as_written() {
         ))
         .spawn()
         .unwrap();
-    let client = reqwest::Client::new();
+    let client = crate::helpers::client_with_key(crate::helpers::TEST_ADMIN_KEY);
     wait_ready(&client, &format!("http://127.0.0.1:{port}"), &mut child).await;
 
-    let script = blocks[1..].join("\n").replace(
-        "BASE=http://127.0.0.1:8080",
-        &format!("BASE=http://127.0.0.1:{port}"),
-    );
+    // The port, and the key made on this service's database with the
+    // built binary (not a second release build).
+    let script = blocks[1..]
+        .join("\n")
+        .replace(
+            "BASE=http://127.0.0.1:8080",
+            &format!("BASE=http://127.0.0.1:{port}"),
+        )
+        .replace(
+            "cargo run --release -q -- keys create",
+            &format!(
+                "{} keys create --database sqlite://{}/drawcal.db",
+                bin(),
+                dir.display()
+            ),
+        );
     let out = tokio::task::spawn_blocking(move || {
         Command::new("bash")
             .args(["-euo", "pipefail", "-c", &script])

@@ -11,6 +11,19 @@ use drawcal::jobs::{JobConfig, JobFn, engine_job_fn};
 use reqwest::{Client, Response, StatusCode};
 use serde_json::{Value, json};
 
+/// The admin key a test gives a binary it starts (`DRAWCAL_ADMIN_KEY`).
+pub const TEST_ADMIN_KEY: &str = "dck_test_admin_key_0123456789abcdef0123456789";
+
+/// A client that sends `key` as its bearer key on every request.
+pub fn client_with_key(key: &str) -> Client {
+    let mut headers = reqwest::header::HeaderMap::new();
+    headers.insert(
+        reqwest::header::AUTHORIZATION,
+        reqwest::header::HeaderValue::from_str(&format!("Bearer {key}")).unwrap(),
+    );
+    Client::builder().default_headers(headers).build().unwrap()
+}
+
 pub fn data_dir(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data")
@@ -39,6 +52,8 @@ pub struct TestApp {
     pub base: String,
     pub client: Client,
     pub db_url: String,
+    /// The admin key `client` sends.
+    pub admin_key: String,
     shutdown: Option<tokio::sync::oneshot::Sender<()>>,
     task: Option<tokio::task::JoinHandle<std::io::Result<()>>>,
 }
@@ -51,6 +66,7 @@ pub struct Options {
     pub grace: Duration,
     pub client_timeout: Duration,
     pub idle_timeout: Duration,
+    pub max_joint_change_deg: f64,
 }
 
 impl Default for Options {
@@ -63,6 +79,7 @@ impl Default for Options {
             grace: Duration::from_secs(10),
             client_timeout: Duration::from_secs(30),
             idle_timeout: Duration::from_secs(120),
+            max_joint_change_deg: drawcal::compensate::DEFAULT_MAX_JOINT_CHANGE_DEG,
         }
     }
 }
@@ -85,6 +102,9 @@ impl TestApp {
             max_upload_bytes: o.max_upload_bytes,
             client_timeout: o.client_timeout,
             idle_timeout: o.idle_timeout,
+            max_joint_change_deg: o.max_joint_change_deg,
+            insecure_no_auth: false,
+            bootstrap_admin_key: None,
             jobs: JobConfig {
                 workers: o.workers,
                 lease: o.lease,
@@ -96,6 +116,18 @@ impl TestApp {
         let service = Service::start(&cfg, o.job_fn)
             .await
             .expect("service starts");
+        // Every test client holds an admin key (the auth tests make their
+        // own keys and clients); a restart on the same database makes
+        // another.
+        let store = &service.state().store;
+        let n = store.list_keys().await.expect("keys").len();
+        let name = match n {
+            0 => "test-admin".to_string(),
+            n => format!("test-admin-{n}"),
+        };
+        let admin = drawcal::http::keys::create(store, "test harness", &name, "admin", None)
+            .await
+            .expect("an admin key");
         let base = format!("http://{}", service.addr);
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(service.run(async move {
@@ -103,7 +135,8 @@ impl TestApp {
         }));
         TestApp {
             base,
-            client: Client::new(),
+            client: client_with_key(&admin.secret),
+            admin_key: admin.secret,
             db_url: db_url.to_string(),
             shutdown: Some(tx),
             task: Some(task),
@@ -259,7 +292,7 @@ impl TestApp {
         ok_json(
             self.post_json(
                 &format!("/robots/{robot}/activate"),
-                &serde_json::json!({"calibration_id": cal, "by": "test", "reason": reason}),
+                &serde_json::json!({"calibration_id": cal, "reason": reason}),
             )
             .await,
             200,

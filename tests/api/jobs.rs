@@ -197,7 +197,7 @@ async fn compensation_checks_targets_and_calibration_owner() {
     err_json(
         app.post_json(
             &format!("/robots/{robot_b}/activate"),
-            &json!({"calibration_id": cal, "by": "me", "reason": "r"}),
+            &json!({"calibration_id": cal, "reason": "r"}),
         )
         .await,
         422,

@@ -32,6 +32,7 @@ fn serve(dir: &std::path::Path, port: u16, args: &[&str], env: &[(&str, &str)]) 
         .stderr(Stdio::from(
             std::fs::File::create(dir.join("server.log")).unwrap(),
         ));
+    cmd.env("DRAWCAL_ADMIN_KEY", crate::helpers::TEST_ADMIN_KEY);
     for (k, v) in env {
         cmd.env(k, v);
     }
@@ -45,7 +46,7 @@ async fn run_once(args: &[&str], env: &[(&str, &str)]) -> (Vec<String>, String) 
     let port = free_port();
     let mut child = serve(&dir, port, args, env);
     let base = format!("http://127.0.0.1:{port}");
-    let client = reqwest::Client::new();
+    let client = crate::helpers::client_with_key(crate::helpers::TEST_ADMIN_KEY);
     let mut ready = false;
     for _ in 0..300 {
         if let Ok(r) = client.get(format!("{base}/ready")).send().await {

@@ -8,8 +8,10 @@
 #[path = "../engine/common.rs"]
 mod common;
 
+mod auth;
 mod bad_requests;
 mod compensate_backlash;
+mod compensate_bound;
 mod compensate_csv;
 mod compensate_payload;
 mod compensate_thermal;

@@ -41,10 +41,11 @@ async fn read_until_closed(tcp: &mut TcpStream, within: Duration) -> String {
 }
 
 /// The head of a `POST /rigs` announcing a JSON body of `length` bytes,
-/// with `extra` header lines.
-async fn post_rig_head(tcp: &mut TcpStream, length: usize, extra: &str) {
+/// with the app's admin key and `extra` header lines.
+async fn post_rig_head(app: &TestApp, tcp: &mut TcpStream, length: usize, extra: &str) {
     let head = format!(
-        "POST /rigs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: {length}\r\n{extra}\r\n"
+        "POST /rigs HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {}\r\nContent-Type: application/json\r\nContent-Length: {length}\r\n{extra}\r\n",
+        app.admin_key
     );
     tcp.write_all(head.as_bytes()).await.unwrap();
 }
@@ -96,7 +97,7 @@ async fn a_stalled_body_is_answered_408_and_stores_nothing() {
     let app = app().await;
     let body = r#"{"name": "stalled", "anchors_mm": [[0,0,0],[1000,0,0],[0,1000,0]], "r_mm": 10}"#;
     let mut tcp = connect(&app).await;
-    post_rig_head(&mut tcp, body.len(), "").await;
+    post_rig_head(&app, &mut tcp, body.len(), "").await;
     // Half the body, then nothing.
     tcp.write_all(&body.as_bytes()[..body.len() / 2])
         .await
@@ -128,7 +129,7 @@ async fn a_body_declared_too_large_is_refused_before_it_is_sent() {
     let mut tcp = connect(&app).await;
     // The client asks before sending: the answer is 413 at once, never
     // "100 Continue", and the body is never needed.
-    post_rig_head(&mut tcp, 5000, "Expect: 100-continue\r\n").await;
+    post_rig_head(&app, &mut tcp, 5000, "Expect: 100-continue\r\n").await;
     let mut got = vec![0u8; 4096];
     let n = tokio::time::timeout(Duration::from_secs(5), tcp.read(&mut got))
         .await
@@ -145,7 +146,7 @@ async fn a_trickled_body_is_cut_off_at_the_deadline() {
     let app = app().await;
     let mut tcp = connect(&app).await;
     let started = Instant::now();
-    post_rig_head(&mut tcp, 100_000, "").await;
+    post_rig_head(&app, &mut tcp, 100_000, "").await;
     // A byte every 300 ms never trips the 1 s idle timeout, but the whole
     // body is due within ten of them.
     let (mut rd, mut wr) = tcp.into_split();

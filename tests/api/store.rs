@@ -476,7 +476,7 @@ async fn service_runs_on_postgres() {
     ok_json(
         app.post_json(
             &format!("/robots/{robot}/activate"),
-            &json!({"calibration_id": cal, "by": "pg", "reason": "test"}),
+            &json!({"calibration_id": cal, "reason": "test"}),
         )
         .await,
         200,

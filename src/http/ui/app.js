@@ -31,8 +31,41 @@ class ApiErr extends Error {
   }
 }
 
+// The API key this tab uses (sessionStorage: gone when the tab closes),
+// sent as `Authorization: Bearer` on every call.
+const KEY_ITEM = "drawcal_key";
+function apiKey() { return sessionStorage.getItem(KEY_ITEM) || ""; }
+function authHeaders(extra) {
+  const h = Object.assign({}, extra || {});
+  if (apiKey()) h["authorization"] = "Bearer " + apiKey();
+  return h;
+}
+
+// The key form in the header: a key is asked for until one is given; a
+// 401 (unknown, expired, revoked) asks again.
+function keyBox(message) {
+  const box = $("#keybox");
+  box.innerHTML = apiKey()
+    ? `<span class="muted">API key ${esc(apiKey().slice(0, 12))}…</span> <button id="key-forget">forget key</button>`
+    : `<label>API key <input type="password" id="api-key" size="24" autocomplete="off"></label> <button id="key-use">use</button>${message ? ` <span class="error-inline">${esc(message)}</span>` : ""}`;
+  const use = $("#key-use"), forget = $("#key-forget");
+  if (use) use.onclick = () => { sessionStorage.setItem(KEY_ITEM, $("#api-key").value.trim()); keyBox(); route(); };
+  if (forget) forget.onclick = () => { sessionStorage.removeItem(KEY_ITEM); keyBox(); route(); };
+}
+
+// A file the API serves, downloaded with the key (a plain link could not
+// send it).
+async function download(path, name) {
+  const r = await fetch(path, {headers: authHeaders()});
+  if (!r.ok) throw new ApiErr(r.status, await r.json().catch(() => ({})));
+  const a = document.createElement("a");
+  a.href = URL.createObjectURL(await r.blob());
+  a.download = name;
+  a.click();
+}
+
 async function api(method, path, body, contentType) {
-  const opt = {method, headers: {}};
+  const opt = {method, headers: authHeaders()};
   if (body !== undefined) {
     opt.headers["content-type"] = contentType || "application/json";
     opt.body = typeof body === "string" ? body : JSON.stringify(body);
@@ -40,6 +73,10 @@ async function api(method, path, body, contentType) {
   const r = await fetch(path, opt);
   const ct = r.headers.get("content-type") || "";
   const data = ct.includes("json") ? await r.json() : await r.text();
+  if (r.status === 401) {
+    sessionStorage.removeItem(KEY_ITEM);
+    keyBox(data && data.message);
+  }
   if (!r.ok) throw new ApiErr(r.status, typeof data === "object" ? data : {message: data});
   return data;
 }
@@ -86,7 +123,7 @@ async function route() {
   }
 }
 window.addEventListener("hashchange", route);
-window.addEventListener("DOMContentLoaded", route);
+window.addEventListener("DOMContentLoaded", () => { keyBox(); route(); });
 
 async function all(path) {
   const sep = path.includes("?") ? "&" : "?";
@@ -226,7 +263,7 @@ async function robotView(id) {
       <label>name <input type="text" id="session-name" value="commissioning"></label>
       <button id="session-add">Create session</button><div id="session-msg"></div></fieldset>
     <fieldset><legend>Roll back</legend>
-      <label>by <input type="text" id="rb-by"></label><label>reason <input type="text" id="rb-reason" size="40"></label>
+      <label>reason <input type="text" id="rb-reason" size="40"></label> <span class="muted">(recorded under your key's name)</span>
       <button id="rollback">Roll back to the previous calibration</button><div id="rb-msg"></div></fieldset>
     <h3>Activations</h3><table id="activations"><tr><th>when</th><th>action</th><th>active after it</th><th>by</th><th>reason</th></tr>
     ${acts.items.map(a => `<tr><td>${esc(a.created_at)}</td><td>${esc(a.action)}</td><td>${a.calibration_id != null ? "#" + a.calibration_id : "nominal"}</td><td>${esc(a.actor)}</td><td>${esc(a.reason)}</td></tr>`).join("")}</table>`;
@@ -238,7 +275,7 @@ async function robotView(id) {
   };
   $("#rollback").onclick = async () => {
     try {
-      await api("POST", `/robots/${id}/rollback`, {by: $("#rb-by").value, reason: $("#rb-reason").value});
+      await api("POST", `/robots/${id}/rollback`, {reason: $("#rb-reason").value});
       route();
     } catch (e) { showError($("#rb-msg"), e); }
   };
@@ -363,22 +400,24 @@ async function calibrationView(id) {
   view().innerHTML = `<h2>Calibration #${c.id} v${c.version} of <a href="#/robot/${c.robot_id}">${esc(c.serial_number)}</a></h2>
     <p>${esc(c.created_at)}, method ${esc(c.method)}, ${c.n_poses} poses (${c.n_test} held out), session
     <a href="#/session/${c.session_id}">#${c.session_id}</a>; ${c.active ? "<b>active</b>" : "not active"}.
-    <a href="/calibrations/${c.id}" download="calibration-${c.id}.json">report JSON</a> ·
-    <a href="/calibrations/${c.id}/report.html" download="calibration-${c.id}.html">report HTML</a></p>
+    <a href="#" id="dl-json">report JSON</a> ·
+    <a href="#" id="dl-html">report HTML</a></p>
     ${warningsHtml(out.report && out.report.warnings)}
     <fieldset><legend>${c.active ? "Active for the robot" : "Activate for the robot"}</legend>
-      <label>by <input type="text" id="act-by"></label><label>reason <input type="text" id="act-reason" size="40"></label>
+      <label>reason <input type="text" id="act-reason" size="40"></label> <span class="muted">(recorded under your key's name)</span>
       ${c.active
         ? `<button id="rollback" title="the robot goes back to the calibration that was active before this one (or to nominal)">Roll back from this calibration</button>`
         : `<button id="activate">Activate</button>`}
       <div id="act-msg">${flash ? `<div class="ok" id="act-ok">${esc(flash)}</div>` : ""}</div></fieldset>
     <div id="report"><p class="muted">Loading the report…</p></div>`;
   flash = null;
+  $("#dl-json").onclick = e => { e.preventDefault(); download(`/calibrations/${c.id}`, `calibration-${c.id}.json`).catch(err => showError($("#act-msg"), err)); };
+  $("#dl-html").onclick = e => { e.preventDefault(); download(`/calibrations/${c.id}/report.html`, `calibration-${c.id}.html`).catch(err => showError($("#act-msg"), err)); };
   const act = $("#activate"), rb = $("#rollback");
   if (act) act.onclick = async () => {
     act.disabled = true;
     try {
-      await api("POST", `/robots/${c.robot_id}/activate`, {calibration_id: c.id, by: $("#act-by").value, reason: $("#act-reason").value});
+      await api("POST", `/robots/${c.robot_id}/activate`, {calibration_id: c.id, reason: $("#act-reason").value});
       flash = `Calibration #${c.id} is now active for ${c.serial_number}.`;
       route();
     } catch (e) { act.disabled = false; showError($("#act-msg"), e); }
@@ -386,7 +425,7 @@ async function calibrationView(id) {
   if (rb) rb.onclick = async () => {
     rb.disabled = true;
     try {
-      await api("POST", `/robots/${c.robot_id}/rollback`, {by: $("#act-by").value, reason: $("#act-reason").value});
+      await api("POST", `/robots/${c.robot_id}/rollback`, {reason: $("#act-reason").value});
       const robot = await api("GET", `/robots/${c.robot_id}`);
       flash = `Rolled back: ${c.serial_number} now runs ${robot.active_calibration_id != null ? `calibration #${robot.active_calibration_id}` : "the nominal model (no calibration)"}.`;
       route();
@@ -583,7 +622,7 @@ t1,10,-20,30,0,40,0</textarea><br>
       // compensated.csv as the API writes it (the same writer as the CLI),
       // from the calibration that gave the summary above.
       const csvReq = await fetch("/compensate", {method: "POST",
-        headers: {"content-type": "application/json", "accept": "text/csv"},
+        headers: authHeaders({"content-type": "application/json", "accept": "text/csv"}),
         body: JSON.stringify({...req, calibration_id: r.calibration_id})});
       const csv = await csvReq.text();
       if (!csvReq.ok) throw new ApiErr(csvReq.status, JSON.parse(csv));

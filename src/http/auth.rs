@@ -1,0 +1,254 @@
+//! API keys and roles: every request but `/health`, `/ready` and the
+//! browser page's own files needs `Authorization: Bearer <key>`.
+//!
+//! Roles are ordered, each holding the ones below it: `reader` (history,
+//! results, reports: every GET), `operator` (`POST /compensate`),
+//! `engineer` (models, rigs, robots, sessions, uploads, jobs: every other
+//! write), `admin` (activation, rollback, keys, the audit log). A key is
+//! random (`dck_` and 64 hex digits from the operating system's generator),
+//! shown once, stored as its SHA-256 with its first characters for
+//! telling keys apart. Missing, unknown, expired or revoked: 401; the
+//! wrong role: 403. What a key does is recorded under its name
+//! ([`Caller::name`]), never under a name the client sends.
+
+use std::fmt;
+use std::str::FromStr;
+
+use axum::extract::{MatchedPath, Request, State};
+use axum::http::Method;
+use axum::middleware::Next;
+use axum::response::Response;
+use sha2::{Digest, Sha256};
+
+use super::AppState;
+use super::error::ApiError;
+
+/// What a key may do; each role holds the ones before it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Role {
+    /// History, results, reports (every GET).
+    Reader,
+    /// Floor clients: `POST /compensate`.
+    Operator,
+    /// Models, rigs, robots, sessions, uploads, jobs.
+    Engineer,
+    /// Activation, rollback, keys, the audit log.
+    Admin,
+}
+
+impl Role {
+    /// Every role, lowest first.
+    pub const ALL: [Role; 4] = [Role::Reader, Role::Operator, Role::Engineer, Role::Admin];
+
+    /// The role's name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Role::Reader => "reader",
+            Role::Operator => "operator",
+            Role::Engineer => "engineer",
+            Role::Admin => "admin",
+        }
+    }
+}
+
+impl fmt::Display for Role {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Role {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Role, String> {
+        Role::ALL
+            .into_iter()
+            .find(|r| r.as_str() == s)
+            .ok_or_else(|| format!("'{s}' is not a role (reader, operator, engineer, admin)"))
+    }
+}
+
+/// Who is asking: the key's holder, as the middleware found it (handlers
+/// take it as `Extension<Caller>`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Caller {
+    /// The key's name: the actor recorded for what the request does.
+    pub name: String,
+    /// The key's role.
+    pub role: Role,
+}
+
+impl Caller {
+    /// The caller of a service run with `--insecure-no-auth`.
+    pub fn unauthenticated() -> Caller {
+        Caller {
+            name: "insecure-no-auth".into(),
+            role: Role::Admin,
+        }
+    }
+}
+
+/// A new key: the secret to show once, its prefix and its hash.
+pub struct NewSecret {
+    /// The key itself (`dck_` and 64 hex digits).
+    pub secret: String,
+    /// Its first 12 characters.
+    pub prefix: String,
+    /// SHA-256 of the key (hex), what is stored.
+    pub hash: String,
+}
+
+/// A fresh random key.
+pub fn new_secret() -> Result<NewSecret, String> {
+    let mut bytes = [0u8; 32];
+    getrandom::fill(&mut bytes).map_err(|e| format!("no randomness for a key: {e}"))?;
+    let secret = format!("dck_{}", hex(&bytes));
+    Ok(NewSecret {
+        prefix: secret[..12].to_string(),
+        hash: hash(&secret),
+        secret,
+    })
+}
+
+/// SHA-256 of a key (hex): keys are long random strings, so a plain hash
+/// (no salt, no stretching) is what lookup by hash needs and all a stolen
+/// table gives away.
+pub fn hash(secret: &str) -> String {
+    hex(&Sha256::digest(secret.as_bytes()))
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The role a route needs; `None` for the routes anyone may call.
+pub fn required_role(method: &Method, path: &str) -> Option<Role> {
+    match (method, path) {
+        (&Method::GET, "/health" | "/ready") => None,
+        (_, "/robots/{id}/activate" | "/robots/{id}/rollback" | "/audit") => Some(Role::Admin),
+        (_, p) if p == "/keys" || p.starts_with("/keys/") => Some(Role::Admin),
+        (&Method::POST, "/compensate") => Some(Role::Operator),
+        (&Method::GET | &Method::HEAD, _) => Some(Role::Reader),
+        _ => Some(Role::Engineer),
+    }
+}
+
+/// The middleware: the key checked against the route's role, the caller
+/// put in the request's extensions. Runs on matched API routes only (the
+/// browser page's files and the fallbacks are public).
+pub async fn require_key(
+    State(app): State<AppState>,
+    mut req: Request,
+    next: Next,
+) -> Result<Response, ApiError> {
+    let path = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map(|p| p.as_str().to_string())
+        .unwrap_or_else(|| req.uri().path().to_string());
+    let Some(needed) = required_role(req.method(), &path) else {
+        return Ok(next.run(req).await);
+    };
+    let caller = if app.insecure_no_auth {
+        Caller::unauthenticated()
+    } else {
+        // The header copied out: a `&Request` held across the lookup
+        // would make the future not `Send`.
+        let header = req
+            .headers()
+            .get(axum::http::header::AUTHORIZATION)
+            .map(|h| h.to_str().unwrap_or("").to_string());
+        let caller = authenticate(&app, header).await?;
+        if caller.role < needed {
+            return Err(ApiError::Forbidden(format!(
+                "the key '{}' has the role {}; {} {path} needs {needed}",
+                caller.name,
+                caller.role,
+                req.method()
+            )));
+        }
+        caller
+    };
+    req.extensions_mut().insert(caller);
+    Ok(next.run(req).await)
+}
+
+/// The caller of a request's `Authorization` header, or why there is none.
+async fn authenticate(app: &AppState, header: Option<String>) -> Result<Caller, ApiError> {
+    let header = header.ok_or_else(|| {
+        ApiError::Unauthorized("no API key: send Authorization: Bearer <key>".into())
+    })?;
+    let secret = header
+        .strip_prefix("Bearer ")
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .ok_or_else(|| {
+            ApiError::Unauthorized("the Authorization header is not `Bearer <key>`".into())
+        })?;
+    let unknown = || ApiError::Unauthorized("unknown API key".into());
+    let key = app
+        .store
+        .key_by_hash(&hash(secret))
+        .await?
+        .ok_or_else(unknown)?;
+    if let Some(at) = &key.revoked_at {
+        return Err(ApiError::Unauthorized(format!(
+            "the key '{}' was revoked at {at}",
+            key.name
+        )));
+    }
+    if let Some(at) = key
+        .expires_at
+        .as_deref()
+        .filter(|at| *at <= crate::store::now_rfc3339().as_str())
+    {
+        return Err(ApiError::Unauthorized(format!(
+            "the key '{}' expired at {at}",
+            key.name
+        )));
+    }
+    let role = key.role.parse().map_err(ApiError::Internal)?;
+    Ok(Caller {
+        name: key.name,
+        role,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn roles_by_route() {
+        let r = |m: Method, p: &str| required_role(&m, p);
+        assert_eq!(r(Method::GET, "/health"), None);
+        assert_eq!(r(Method::GET, "/ready"), None);
+        assert_eq!(r(Method::GET, "/calibrations"), Some(Role::Reader));
+        assert_eq!(r(Method::POST, "/compensate"), Some(Role::Operator));
+        assert_eq!(
+            r(Method::POST, "/sessions/{id}/poses"),
+            Some(Role::Engineer)
+        );
+        assert_eq!(r(Method::POST, "/jobs/{id}/cancel"), Some(Role::Engineer));
+        assert_eq!(r(Method::POST, "/robots/{id}/activate"), Some(Role::Admin));
+        assert_eq!(r(Method::POST, "/robots/{id}/rollback"), Some(Role::Admin));
+        assert_eq!(r(Method::GET, "/keys"), Some(Role::Admin));
+        assert_eq!(r(Method::DELETE, "/keys/{id}"), Some(Role::Admin));
+        assert_eq!(r(Method::GET, "/audit"), Some(Role::Admin));
+        assert!(Role::Reader < Role::Operator && Role::Engineer < Role::Admin);
+    }
+
+    #[test]
+    fn keys_are_random_and_stored_hashed() {
+        let (a, b) = (new_secret().unwrap(), new_secret().unwrap());
+        assert_ne!(a.secret, b.secret);
+        assert!(a.secret.starts_with("dck_") && a.secret.len() == 68);
+        assert!(a.secret.starts_with(&a.prefix));
+        assert_eq!(a.hash, hash(&a.secret));
+        assert!(!a.hash.contains(&a.secret[4..]));
+        // SHA-256 of "abc".
+        assert_eq!(
+            hash("abc"),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+    }
+}

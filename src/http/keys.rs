@@ -1,0 +1,252 @@
+//! Key management and the audit log (admin): create a key (its secret is in
+//! this answer only), list keys without their secrets, revoke one; who did
+//! what and when, as JSON or CSV.
+
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::http::header::CONTENT_TYPE;
+use axum::response::{IntoResponse, Response};
+use axum::{Extension, Json};
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
+
+use super::auth::{Caller, Role, new_secret};
+use super::calibrations::{Format, text_cell};
+use super::error::{ApiError, ErrorBody};
+use super::extract::{ApiJson, ApiQuery, Id};
+use super::{ApiResult, AppState, PageParams, Paged};
+use crate::store::{AuditRec, KeyRec, NewKey, Store};
+
+/// A key to create.
+#[derive(Debug, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreateKey {
+    /// Who will hold it (1 to 100 characters, unique): what it does is
+    /// recorded under this name.
+    pub name: String,
+    /// `reader`, `operator`, `engineer` or `admin`.
+    pub role: String,
+    /// When it stops working (RFC 3339, e.g. `2027-06-30T00:00:00Z`);
+    /// never when absent.
+    #[serde(default)]
+    pub expires_at: Option<String>,
+}
+
+/// A created key: the stored record and the key itself, shown this once.
+#[derive(Debug, Serialize, ToSchema)]
+pub struct CreatedKey {
+    /// The key as stored (without its secret).
+    pub key: KeyRec,
+    /// The key to send as `Authorization: Bearer <secret>`; not stored,
+    /// not shown again.
+    pub secret: String,
+}
+
+/// Create a key and record who did (the same checks as `drawcal keys
+/// create`).
+pub async fn create(
+    store: &Store,
+    actor: &str,
+    name: &str,
+    role: &str,
+    expires_at: Option<String>,
+) -> ApiResult<CreatedKey> {
+    let name = name.trim();
+    if name.is_empty() || name.chars().count() > 100 {
+        return Err(ApiError::invalid("name", "1 to 100 characters"));
+    }
+    let role: Role = role
+        .parse()
+        .map_err(|m: String| ApiError::invalid("role", m))?;
+    // Stored as the store writes times, so that it compares as text.
+    let expires_at = match expires_at {
+        Some(at) => Some(
+            crate::store::time::normalize_bound(&at, false).ok_or_else(|| {
+                ApiError::invalid(
+                    "expires_at",
+                    "a date (2027-06-30) or an RFC 3339 time (2027-06-30T00:00:00Z)",
+                )
+            })?,
+        ),
+        None => None,
+    };
+    let fresh = new_secret().map_err(ApiError::Internal)?;
+    let key = store
+        .create_key(&NewKey {
+            name: name.to_string(),
+            role: role.as_str().to_string(),
+            sites: String::new(),
+            prefix: fresh.prefix,
+            secret_hash: fresh.hash,
+            expires_at,
+        })
+        .await?;
+    store
+        .audit(
+            actor,
+            "create_key",
+            &format!("key {}", key.id),
+            &format!("{} ({role})", key.name),
+        )
+        .await?;
+    Ok(CreatedKey {
+        key,
+        secret: fresh.secret,
+    })
+}
+
+/// Make sure the admin key `secret` exists (a deployment's first key, from
+/// the environment): created, named `bootstrap-admin-<prefix>`, unless a
+/// key already has it; refused when shorter than 32 characters or revoked.
+pub async fn ensure_admin(
+    store: &Store,
+    secret: &str,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    if secret.chars().count() < 32 {
+        return Err("the bootstrap admin key must have at least 32 characters \
+                    (drawcal keys create prints one)"
+            .into());
+    }
+    let hash = super::auth::hash(secret);
+    match store.key_by_hash(&hash).await? {
+        Some(k) if k.revoked_at.is_some() => {
+            Err(format!("the bootstrap admin key ('{}') was revoked", k.name).into())
+        }
+        Some(_) => Ok(()),
+        None => {
+            let prefix: String = secret.chars().take(12).collect();
+            let key = store
+                .create_key(&NewKey {
+                    name: format!("bootstrap-admin-{prefix}"),
+                    role: Role::Admin.as_str().into(),
+                    sites: String::new(),
+                    prefix,
+                    secret_hash: hash,
+                    expires_at: None,
+                })
+                .await?;
+            store
+                .audit(
+                    "service start",
+                    "create_key",
+                    &format!("key {}", key.id),
+                    &key.name,
+                )
+                .await?;
+            tracing::info!(key = %key.name, "bootstrap admin key created");
+            Ok(())
+        }
+    }
+}
+
+/// Create an API key; its secret is in this answer only.
+#[utoipa::path(post, path = "/keys", tag = "keys",
+    request_body = CreateKey,
+    responses(
+        (status = 201, description = "Created", body = CreatedKey),
+        (status = 401, description = "No valid key", body = ErrorBody),
+        (status = 403, description = "Not an admin key", body = ErrorBody),
+        (status = 409, description = "Name taken", body = ErrorBody),
+        (status = 422, description = "Bad name, role or expiry", body = ErrorBody)))]
+pub async fn create_key(
+    State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    ApiJson(k): ApiJson<CreateKey>,
+) -> ApiResult<(StatusCode, Json<CreatedKey>)> {
+    let created = create(&app.store, &caller.name, &k.name, &k.role, k.expires_at).await?;
+    Ok((StatusCode::CREATED, Json(created)))
+}
+
+/// Every key, without its secret.
+#[utoipa::path(get, path = "/keys", tag = "keys",
+    responses(
+        (status = 200, description = "Keys, oldest first", body = Vec<KeyRec>),
+        (status = 401, description = "No valid key", body = ErrorBody),
+        (status = 403, description = "Not an admin key", body = ErrorBody)))]
+pub async fn list_keys(State(app): State<AppState>) -> ApiResult<Json<Vec<KeyRec>>> {
+    Ok(Json(app.store.list_keys().await?))
+}
+
+/// Revoke a key: from now on it is refused (401).
+#[utoipa::path(post, path = "/keys/{id}/revoke", tag = "keys",
+    params(("id" = i64, Path, description = "Key id")),
+    responses(
+        (status = 200, description = "Revoked", body = KeyRec),
+        (status = 401, description = "No valid key", body = ErrorBody),
+        (status = 403, description = "Not an admin key", body = ErrorBody),
+        (status = 404, description = "No such key", body = ErrorBody)))]
+pub async fn revoke_key(
+    State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Id(id): Id,
+) -> ApiResult<Json<KeyRec>> {
+    let key = app.store.revoke_key(id).await?;
+    app.store
+        .audit(&caller.name, "revoke_key", &format!("key {id}"), &key.name)
+        .await?;
+    Ok(Json(key))
+}
+
+/// Audit query.
+#[derive(Debug, Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct AuditParams {
+    /// Items per page, 1..=1000 (default 50; JSON only).
+    pub limit: Option<i64>,
+    /// Items to skip (default 0; JSON only).
+    pub offset: Option<i64>,
+    /// `json` (default) or `csv` (every entry).
+    pub format: Option<Format>,
+}
+
+/// Who did what and when, newest first: activations, rollbacks, job
+/// enqueues and cancels, uploads, key changes.
+#[utoipa::path(get, path = "/audit", tag = "keys",
+    params(AuditParams),
+    responses(
+        (status = 200, description = "Audit log", content((Paged<AuditRec> = "application/json"), (String = "text/csv"))),
+        (status = 400, description = "Bad query", body = ErrorBody),
+        (status = 401, description = "No valid key", body = ErrorBody),
+        (status = 403, description = "Not an admin key", body = ErrorBody)))]
+pub async fn list_audit(
+    State(app): State<AppState>,
+    ApiQuery(q): ApiQuery<AuditParams>,
+) -> ApiResult<Response> {
+    if q.format == Some(Format::Csv) {
+        let (rows, _) = app
+            .store
+            .list_audit(crate::store::Page {
+                limit: i64::MAX / 2,
+                offset: 0,
+            })
+            .await?;
+        let mut w = csv::WriterBuilder::new()
+            .terminator(csv::Terminator::Any(b'\n'))
+            .from_writer(Vec::new());
+        let err = |e: csv::Error| ApiError::Internal(e.to_string());
+        w.write_record(["id", "at", "actor", "action", "target", "detail"])
+            .map_err(err)?;
+        for r in rows {
+            w.write_record([
+                r.id.to_string(),
+                r.at,
+                text_cell(&r.actor),
+                r.action,
+                r.target,
+                text_cell(&r.detail),
+            ])
+            .map_err(err)?;
+        }
+        let bytes = w
+            .into_inner()
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        return Ok(([(CONTENT_TYPE, "text/csv")], bytes).into_response());
+    }
+    let page = PageParams {
+        limit: q.limit,
+        offset: q.offset,
+    }
+    .page()?;
+    let (items, total) = app.store.list_audit(page).await?;
+    Ok(Json(Paged::new(items, total, page)).into_response())
+}
