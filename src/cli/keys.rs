@@ -93,9 +93,8 @@ pub fn run(a: KeysArgs) -> Result<(), CliError> {
                 }
             }
             KeysAction::Revoke { id } => {
-                let k = store.revoke_key(id).await.map_err(|e| fail(e.into()))?;
-                store
-                    .audit(actor, "revoke_key", &format!("key {id}"), &k.name)
+                let k = store
+                    .revoke_key(id, actor)
                     .await
                     .map_err(|e| fail(e.into()))?;
                 eprintln!("key {id} '{}' revoked", k.name);

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use clap::builder::PossibleValue;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
+use nalgebra::Vector3;
 
 use crate::compensate::{Applied, Approach, Compensator, ConditionNames, Note, NoteKind};
 use crate::identify::{self, IdentifyOptions, Method, Progress};
@@ -420,64 +421,14 @@ fn write_compensated(out: Option<&Path>, dof: usize, rows: &[Compensated]) -> Re
     Ok(())
 }
 
+/// A pose's id and string readings (mm), and the point the nominal model
+/// puts T at, when known (which side of a plane of anchors it is on).
+type LocateInput = (Vec<(String, Vec<f64>)>, Vec<Option<Vector3<f64>>>);
+
 fn run_locate(a: LocateArgs) -> Result<(), CliError> {
     let rig = core(&a.rig, Rig::from_json(&read(&a.rig)?))?;
-    if rig.n_strings() == 0 {
-        // A tracker, CMM or camera rig: poses.csv has the points already.
-        return Err(CliError::Core {
-            path: a.rig.clone(),
-            source: crate::Error::field(
-                "anchors_mm",
-                "the rig has no strings: its poses.csv gives T's measured points                  (x_mm, y_mm, z_mm) already, so there is nothing to locate                  (identify takes them as they are)",
-            ),
-        });
-    }
-    let file = File::open(&a.poses).map_err(|source| CliError::Io {
-        path: a.poses.clone(),
-        source,
-    })?;
     let anchors: Vec<_> = (0..rig.n_strings()).map(|k| rig.anchor(k)).collect();
-    let (readings, hints) = match &a.robot {
-        Some(path) => {
-            let robot = core(path, Robot::from_json(&read(path)?))?;
-            if rig.base_in_rig.is_none() {
-                return Err(CliError::Core {
-                    path: a.rig.clone(),
-                    source: crate::Error::field(
-                        "base_in_rig",
-                        "--robot needs the rig's guess of where the robot base is",
-                    ),
-                });
-            }
-            let data = core(&a.poses, Dataset::from_csv(file, &robot, &rig))?;
-            let hints = identify::nominal_points(&robot, &rig, &data);
-            let readings = data
-                .poses
-                .into_iter()
-                .map(|p| match p.measurement {
-                    crate::model::Measurement::Strings(l) => Ok((p.id, l)),
-                    crate::model::Measurement::Point(_) => Err(CliError::Core {
-                        path: a.poses.clone(),
-                        source: crate::Error::field("l1_mm", "no string readings to locate from"),
-                    }),
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            (readings, hints)
-        }
-        None => {
-            let readings = core(
-                &a.poses,
-                crate::model::dataset::string_readings_from_csv(file, &rig),
-            )?;
-            if measure::coplanar(&anchors) {
-                eprintln!(
-                    "note: the anchors lie in one plane, so each point has a mirror image across it; every point is put on the side of the anchors' normal (give --robot to choose each point's side from the nominal model)"
-                );
-            }
-            let n = readings.len();
-            (readings, vec![None; n])
-        }
-    };
+    let (readings, hints) = locate_input(&a, &rig, &anchors)?;
     let mut located = Vec::with_capacity(readings.len());
     let mut w = csv::Writer::from_writer(Vec::new());
     let _ = w.write_record([
@@ -544,6 +495,73 @@ fn run_locate(a: LocateArgs) -> Result<(), CliError> {
         );
     }
     Ok(())
+}
+
+/// What `locate` locates: the readings of poses.csv, with the nominal
+/// model's points when `--robot` is given. A rig without strings is
+/// refused by name (its poses.csv holds measured points already).
+fn locate_input(
+    a: &LocateArgs,
+    rig: &Rig,
+    anchors: &[Vector3<f64>],
+) -> Result<LocateInput, CliError> {
+    if rig.n_strings() == 0 {
+        // A tracker, CMM or camera rig: poses.csv has the points already.
+        return Err(CliError::Core {
+            path: a.rig.clone(),
+            source: crate::Error::field(
+                "anchors_mm",
+                "the rig has no strings: its poses.csv gives T's measured points \
+                 (x_mm, y_mm, z_mm) already, so there is nothing to locate \
+                 (identify takes them as they are)",
+            ),
+        });
+    }
+    let file = File::open(&a.poses).map_err(|source| CliError::Io {
+        path: a.poses.clone(),
+        source,
+    })?;
+    match &a.robot {
+        Some(path) => {
+            let robot = core(path, Robot::from_json(&read(path)?))?;
+            if rig.base_in_rig.is_none() {
+                return Err(CliError::Core {
+                    path: a.rig.clone(),
+                    source: crate::Error::field(
+                        "base_in_rig",
+                        "--robot needs the rig's guess of where the robot base is",
+                    ),
+                });
+            }
+            let data = core(&a.poses, Dataset::from_csv(file, &robot, rig))?;
+            let hints = identify::nominal_points(&robot, rig, &data);
+            let readings = data
+                .poses
+                .into_iter()
+                .map(|p| match p.measurement {
+                    crate::model::Measurement::Strings(l) => Ok((p.id, l)),
+                    crate::model::Measurement::Point(_) => Err(CliError::Core {
+                        path: a.poses.clone(),
+                        source: crate::Error::field("l1_mm", "no string readings to locate from"),
+                    }),
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            Ok((readings, hints))
+        }
+        None => {
+            let readings = core(
+                &a.poses,
+                crate::model::dataset::string_readings_from_csv(file, rig),
+            )?;
+            if measure::coplanar(anchors) {
+                eprintln!(
+                    "note: the anchors lie in one plane, so each point has a mirror image across it; every point is put on the side of the anchors' normal (give --robot to choose each point's side from the nominal model)"
+                );
+            }
+            let n = readings.len();
+            Ok((readings, vec![None; n]))
+        }
+    }
 }
 
 /// A number within `range`, refused rather than clamped; `what` names the

@@ -4,6 +4,8 @@
 
 use std::sync::{Arc, OnceLock};
 
+use nalgebra::Vector3;
+
 use crate::error::{Error, Result};
 use crate::kinematics::Params;
 use crate::kinematics::chain::Chain;
@@ -47,13 +49,9 @@ impl Compensator {
             tolerance_mm: 1e-3,
             tolerance_rad: 1e-6,
             max_joint_change_deg: super::DEFAULT_MAX_JOINT_CHANGE_DEG,
-            tool_difference_mm: nominal
-                .tool_point_mm
-                .iter()
-                .zip(&calibrated.tool_point_mm)
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum::<f64>()
-                .sqrt(),
+            tool_difference_mm: (Vector3::from(nominal.tool_point_mm)
+                - Vector3::from(calibrated.tool_point_mm))
+            .norm(),
             max_iterations: 50,
         })
     }

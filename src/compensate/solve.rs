@@ -82,17 +82,8 @@ impl Compensator {
         let mut within = None;
         loop {
             for _ in 0..NEAREST_ITERATIONS {
-                let qe = self.effective(&q);
-                self.chain.point_jacobian(
-                    &self.calibrated.values,
-                    &qe,
-                    OutputFrame::Base,
-                    &mut jac,
-                );
-                let e_pos = pos - jac.point;
-                let e_rot = rot
-                    .map(|r| rotation_error(r, &jac.flange.r))
-                    .unwrap_or_else(Vector3::zeros);
+                let Evaluated { qe, e_pos, e_rot } =
+                    self.evaluate(Model::Calibrated, &q, pos, rot, &mut jac);
                 let err = e_pos.norm() + 1000.0 * e_rot.norm();
                 if err < best.0 {
                     best = (
@@ -130,7 +121,7 @@ impl Compensator {
                 let Some(a) = a.cholesky() else { break };
                 let step = a.solve(&(j.transpose() * e + toward * mu));
                 iterations += 1;
-                if !take_step(&mut q, &step, MAX_NEAREST_STEP_RAD) {
+                if !take_step(&mut q, &step, MAX_STEP_RAD) {
                     break;
                 }
                 if step.norm() < 1e-13 {
@@ -152,9 +143,84 @@ impl Compensator {
     }
 }
 
+impl Compensator {
+    /// A joint target's solve from its taught joints `q0`: the nearest
+    /// solution ([`Compensator::solve_nearest`]); where the branch through
+    /// the taught joints has none (a target beyond a stretched arm), damped
+    /// least squares in bounded steps, which may find one farther off for
+    /// the bound to refuse by name rather than as unreachable. Iterations
+    /// add up; a failure keeps the nearer of the two misses.
+    pub(super) fn solve_taught(
+        &self,
+        pos: &Vector3<f64>,
+        rot: Option<&Matrix3<f64>>,
+        q0: &[f64],
+    ) -> std::result::Result<Solution, NotConverged> {
+        let near = match self.solve_nearest(pos, rot, q0) {
+            Ok(sol) => return Ok(sol),
+            Err(near) => near,
+        };
+        match self.solve(pos, rot, q0, MAX_STEP_RAD) {
+            Ok(mut far) => {
+                far.iterations += near.iterations;
+                Ok(far)
+            }
+            Err(far) => {
+                let nearer = match (near.closest_mm, far.closest_mm) {
+                    (Some(a), Some(b)) if b < a => &far,
+                    (None, Some(_)) => &far,
+                    _ => &near,
+                };
+                Err(NotConverged {
+                    iterations: near.iterations + far.iterations,
+                    closest_mm: nearer.closest_mm,
+                    closest_deg: nearer.closest_deg,
+                })
+            }
+        }
+    }
+}
+
 /// Longest joint step (rad, Euclidean over the joints) of one iteration of
-/// the nearest-solution solve.
-const MAX_NEAREST_STEP_RAD: f64 = 0.2;
+/// a solve from taught joints (the nearest-solution solve, and damped least
+/// squares when it falls back).
+pub(super) const MAX_STEP_RAD: f64 = 0.2;
+
+/// One evaluation of a solve: the joints the model sees, T's position error
+/// (mm) and the flange's rotation error (rad; zero without an orientation),
+/// with the Jacobian filled in at them.
+struct Evaluated {
+    qe: Vec<f64>,
+    e_pos: Vector3<f64>,
+    e_rot: Vector3<f64>,
+}
+
+impl Compensator {
+    /// Evaluate `model` at the commanded joints `q` against the target
+    /// (`pos`, `rot`), filling `jac`.
+    fn evaluate(
+        &self,
+        model: Model,
+        q: &[f64],
+        pos: &Vector3<f64>,
+        rot: Option<&Matrix3<f64>>,
+        jac: &mut PointJacobian,
+    ) -> Evaluated {
+        let (params, qe) = match model {
+            Model::Calibrated => (&self.calibrated, self.effective(q)),
+            Model::Nominal => (&self.nominal, q.to_vec()),
+        };
+        self.chain
+            .point_jacobian(&params.values, &qe, OutputFrame::Base, jac);
+        Evaluated {
+            e_pos: pos - jac.point,
+            e_rot: rot
+                .map(|r| rotation_error(r, &jac.flange.r))
+                .unwrap_or_else(Vector3::zeros),
+            qe,
+        }
+    }
+}
 
 impl Compensator {
     /// Damped least squares on the calibrated model from `q0`, each step at
@@ -206,9 +272,9 @@ impl Compensator {
         max_step_rad: f64,
     ) -> std::result::Result<Solution, NotConverged> {
         let n = self.dof();
-        let (params, effective) = match model {
-            Model::Calibrated => (&self.calibrated, true),
-            Model::Nominal => (&self.nominal, false),
+        let params = match model {
+            Model::Calibrated => &self.calibrated,
+            Model::Nominal => &self.nominal,
         };
         let mut closest_mm = f64::INFINITY;
         let give_up = |iterations, closest_mm: f64| {
@@ -229,17 +295,7 @@ impl Compensator {
         let mut lambda: f64 = 1e-6;
         let mut prev_err = f64::INFINITY;
         for it in 0..=self.max_iterations {
-            let qe = if effective {
-                self.effective(&q)
-            } else {
-                q.clone()
-            };
-            self.chain
-                .point_jacobian(&params.values, &qe, OutputFrame::Base, &mut jac);
-            let e_pos = pos - jac.point;
-            let e_rot = rot
-                .map(|r| rotation_error(r, &jac.flange.r))
-                .unwrap_or_else(Vector3::zeros);
+            let Evaluated { qe, e_pos, e_rot } = self.evaluate(model, &q, pos, rot, &mut jac);
             closest_mm = closest_mm.min(e_pos.norm());
             let pos_ok = e_pos.norm() <= self.tolerance_mm;
             let rot_ok = e_rot.norm() <= self.tolerance_rad;

@@ -10,10 +10,6 @@ use crate::model::{Target, TargetKind};
 use crate::rng::Rng;
 
 use super::solve::Model;
-
-/// Longest joint step (rad, Euclidean over the joints) of one iteration of
-/// the damped least squares solve from taught joints.
-const MAX_STEP_RAD: f64 = 0.2;
 use super::{Compensated, CompensationStatus, Compensator};
 
 /// Where a target's solves start: T's wanted position, the flange's wanted
@@ -207,30 +203,11 @@ impl Compensator {
             {
                 continue;
             }
-            // Taught joints are where the answer should stay: theirs is
-            // the nearest solution; where the branch through them has none
-            // (a target beyond a stretched arm), damped least squares in
-            // bounded steps may find one farther off, which the bound then
-            // refuses by name rather than as unreachable.
+            // Taught joints are where the answer should stay.
             let solved = if cartesian {
                 self.solve(&pos, rot.as_ref(), &seed, f64::INFINITY)
             } else {
-                self.solve_nearest(&pos, rot.as_ref(), &seed)
-                    .or_else(|near| {
-                        self.solve(&pos, rot.as_ref(), &seed, MAX_STEP_RAD)
-                            .map(|mut far| {
-                                far.iterations += near.iterations;
-                                far
-                            })
-                            .map_err(|mut not| {
-                                not.iterations += near.iterations;
-                                if near.closest_mm < not.closest_mm || not.closest_mm.is_none() {
-                                    not.closest_mm = near.closest_mm;
-                                    not.closest_deg = near.closest_deg;
-                                }
-                                not
-                            })
-                    })
+                self.solve_taught(&pos, rot.as_ref(), &seed)
             };
             tried.push(seed);
             match solved {

@@ -1,15 +1,13 @@
 //! Calibrations, activation and fleet history.
 
-use axum::Extension;
-
-use super::auth::Caller;
-use axum::Json;
 use axum::extract::State;
 use axum::http::header::CONTENT_TYPE;
 use axum::response::{IntoResponse, Response};
+use axum::{Extension, Json};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
+use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, ApiQuery, Id};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
@@ -101,61 +99,72 @@ pub(super) fn text_cell(s: &str) -> String {
     }
 }
 
-fn csv_response(rows: &[CalibrationRec]) -> ApiResult<Response> {
+/// A `text/csv` answer: `header`, then one record per row.
+pub(super) fn csv_table(
+    header: &[&str],
+    rows: impl IntoIterator<Item = Vec<String>>,
+) -> ApiResult<Response> {
     let mut w = csv::WriterBuilder::new()
         .terminator(csv::Terminator::Any(b'\n'))
         .from_writer(Vec::new());
     let err = |e: csv::Error| ApiError::Internal(e.to_string());
-    w.write_record([
-        "calibration_id",
-        "robot_id",
-        "serial_number",
-        "model_id",
-        "site",
-        "line",
-        "cell",
-        "version",
-        "created_at",
-        "method",
-        "n_poses",
-        "n_test",
-        "test_rms_before_mm",
-        "test_rms_after_mm",
-        "train_rms_after_mm",
-        "effects",
-        "active",
-        "session_id",
-        "job_id",
-    ])
-    .map_err(err)?;
-    for c in rows {
-        w.write_record([
-            c.id.to_string(),
-            c.robot_id.to_string(),
-            text_cell(&c.serial_number),
-            c.model_id.to_string(),
-            text_cell(c.site.as_deref().unwrap_or_default()),
-            text_cell(c.line.as_deref().unwrap_or_default()),
-            text_cell(c.cell.as_deref().unwrap_or_default()),
-            c.version.to_string(),
-            c.created_at.clone(),
-            c.method.clone(),
-            c.n_poses.to_string(),
-            c.n_test.to_string(),
-            opt_num(c.test_rms_before_mm),
-            opt_num(c.test_rms_after_mm),
-            opt_num(c.train_rms_after_mm),
-            c.effects.replace(',', ";"),
-            c.active.to_string(),
-            c.session_id.to_string(),
-            c.job_id.to_string(),
-        ])
-        .map_err(err)?;
+    w.write_record(header).map_err(err)?;
+    for row in rows {
+        w.write_record(&row).map_err(err)?;
     }
     let bytes = w
         .into_inner()
         .map_err(|e| ApiError::Internal(e.to_string()))?;
     Ok(([(CONTENT_TYPE, "text/csv")], bytes).into_response())
+}
+
+fn csv_response(rows: &[CalibrationRec]) -> ApiResult<Response> {
+    csv_table(
+        &[
+            "calibration_id",
+            "robot_id",
+            "serial_number",
+            "model_id",
+            "site",
+            "line",
+            "cell",
+            "version",
+            "created_at",
+            "method",
+            "n_poses",
+            "n_test",
+            "test_rms_before_mm",
+            "test_rms_after_mm",
+            "train_rms_after_mm",
+            "effects",
+            "active",
+            "session_id",
+            "job_id",
+        ],
+        rows.iter().map(|c| {
+            vec![
+                c.id.to_string(),
+                c.robot_id.to_string(),
+                text_cell(&c.serial_number),
+                c.model_id.to_string(),
+                text_cell(c.site.as_deref().unwrap_or_default()),
+                text_cell(c.line.as_deref().unwrap_or_default()),
+                text_cell(c.cell.as_deref().unwrap_or_default()),
+                c.version.to_string(),
+                c.created_at.clone(),
+                c.method.clone(),
+                c.n_poses.to_string(),
+                c.n_test.to_string(),
+                opt_num(c.test_rms_before_mm),
+                opt_num(c.test_rms_after_mm),
+                opt_num(c.train_rms_after_mm),
+                c.effects.replace(',', ";"),
+                c.active.to_string(),
+                c.session_id.to_string(),
+                c.job_id.to_string(),
+            ]
+        }),
+    )
 }
 
 /// The fleet's calibrations, filtered by robot, model, site, line, date
@@ -396,16 +405,7 @@ pub async fn activate(
         )
         .await;
     forget_active(&app, id);
-    let rec = rec?;
-    app.store
-        .audit(
-            &caller.name,
-            "activate",
-            &format!("robot {id}"),
-            &format!("calibration {}: {}", a.calibration_id, a.reason.trim()),
-        )
-        .await?;
-    Ok(Json(rec))
+    Ok(Json(rec?))
 }
 
 /// Roll back to the calibration that was active before the current one
@@ -435,22 +435,7 @@ pub async fn rollback(
         .set_active(id, previous, "rollback", &caller.name, r.reason.trim())
         .await;
     forget_active(&app, id);
-    let rec = rec?;
-    app.store
-        .audit(
-            &caller.name,
-            "rollback",
-            &format!("robot {id}"),
-            &format!(
-                "to {}: {}",
-                previous.map_or("the nominal model".to_string(), |c| format!(
-                    "calibration {c}"
-                )),
-                r.reason.trim()
-            ),
-        )
-        .await?;
-    Ok(Json(rec))
+    Ok(Json(rec?))
 }
 
 /// A robot's activations and rollbacks, newest first.

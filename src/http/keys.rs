@@ -4,14 +4,13 @@
 
 use axum::extract::State;
 use axum::http::StatusCode;
-use axum::http::header::CONTENT_TYPE;
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
 use super::auth::{Caller, Role, new_secret};
-use super::calibrations::{Format, text_cell};
+use super::calibrations::{Format, csv_table, text_cell};
 use super::error::{ApiError, ErrorBody};
 use super::extract::{ApiJson, ApiQuery, Id};
 use super::{ApiResult, AppState, PageParams, Paged};
@@ -72,21 +71,16 @@ pub async fn create(
     };
     let fresh = new_secret().map_err(ApiError::Internal)?;
     let key = store
-        .create_key(&NewKey {
-            name: name.to_string(),
-            role: role.as_str().to_string(),
-            sites: String::new(),
-            prefix: fresh.prefix,
-            secret_hash: fresh.hash,
-            expires_at,
-        })
-        .await?;
-    store
-        .audit(
+        .create_key(
+            &NewKey {
+                name: name.to_string(),
+                role: role.as_str().to_string(),
+                sites: String::new(),
+                prefix: fresh.prefix,
+                secret_hash: fresh.hash,
+                expires_at,
+            },
             actor,
-            "create_key",
-            &format!("key {}", key.id),
-            &format!("{} ({role})", key.name),
         )
         .await?;
     Ok(CreatedKey {
@@ -116,21 +110,16 @@ pub async fn ensure_admin(
         None => {
             let prefix: String = secret.chars().take(12).collect();
             let key = store
-                .create_key(&NewKey {
-                    name: format!("bootstrap-admin-{prefix}"),
-                    role: Role::Admin.as_str().into(),
-                    sites: String::new(),
-                    prefix,
-                    secret_hash: hash,
-                    expires_at: None,
-                })
-                .await?;
-            store
-                .audit(
-                    "service start",
-                    "create_key",
-                    &format!("key {}", key.id),
-                    &key.name,
+                .create_key(
+                    &NewKey {
+                        name: format!("bootstrap-admin-{prefix}"),
+                        role: Role::Admin.as_str().into(),
+                        sites: String::new(),
+                        prefix,
+                        secret_hash: hash,
+                        expires_at: None,
+                    },
+                    "service start (DRAWCAL_ADMIN_KEY)",
                 )
                 .await?;
             tracing::info!(key = %key.name, "bootstrap admin key created");
@@ -180,11 +169,7 @@ pub async fn revoke_key(
     Extension(caller): Extension<Caller>,
     Id(id): Id,
 ) -> ApiResult<Json<KeyRec>> {
-    let key = app.store.revoke_key(id).await?;
-    app.store
-        .audit(&caller.name, "revoke_key", &format!("key {id}"), &key.name)
-        .await?;
-    Ok(Json(key))
+    Ok(Json(app.store.revoke_key(id, &caller.name).await?))
 }
 
 /// Audit query.
@@ -220,27 +205,19 @@ pub async fn list_audit(
                 offset: 0,
             })
             .await?;
-        let mut w = csv::WriterBuilder::new()
-            .terminator(csv::Terminator::Any(b'\n'))
-            .from_writer(Vec::new());
-        let err = |e: csv::Error| ApiError::Internal(e.to_string());
-        w.write_record(["id", "at", "actor", "action", "target", "detail"])
-            .map_err(err)?;
-        for r in rows {
-            w.write_record([
-                r.id.to_string(),
-                r.at,
-                text_cell(&r.actor),
-                r.action,
-                r.target,
-                text_cell(&r.detail),
-            ])
-            .map_err(err)?;
-        }
-        let bytes = w
-            .into_inner()
-            .map_err(|e| ApiError::Internal(e.to_string()))?;
-        return Ok(([(CONTENT_TYPE, "text/csv")], bytes).into_response());
+        return csv_table(
+            &["id", "at", "actor", "action", "target", "detail"],
+            rows.into_iter().map(|r| {
+                vec![
+                    r.id.to_string(),
+                    r.at,
+                    text_cell(&r.actor),
+                    r.action,
+                    r.target,
+                    text_cell(&r.detail),
+                ]
+            }),
+        );
     }
     let page = PageParams {
         limit: q.limit,

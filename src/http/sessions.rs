@@ -6,19 +6,17 @@
 //! with the poses already stored, before anything is written: one
 //! validation path, and a bad upload stores nothing.
 
-use axum::Extension;
-
-use super::auth::Caller;
 use std::collections::HashMap;
 
-use axum::Json;
 use axum::extract::State;
 use axum::http::header::{CONTENT_TYPE, LOCATION};
 use axum::http::{HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
+use axum::{Extension, Json};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
+use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json, without_bom};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};

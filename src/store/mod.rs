@@ -655,7 +655,8 @@ impl Store {
         dispatch!(self.list_calibrations(f, page))
     }
     /// Make `calibration_id` (which must belong to the robot; `None`: the
-    /// nominal model) the robot's active calibration and record it.
+    /// nominal model) the robot's active calibration and record it, in
+    /// the activation history and the audit log, as done by `actor`.
     pub async fn set_active(
         &self,
         robot_id: i64,
@@ -680,9 +681,10 @@ impl Store {
     ) -> Result<(Vec<ActivationRec>, i64)> {
         dispatch!(self.list_activations(robot_id, page))
     }
-    /// Store a new key (its secret's hash); a taken name is a conflict.
-    pub async fn create_key(&self, k: &NewKey) -> Result<KeyRec> {
-        dispatch!(self.create_key(k))
+    /// Store a new key (its secret's hash), with its audit entry by
+    /// `actor`; a taken name is a conflict.
+    pub async fn create_key(&self, k: &NewKey, actor: &str) -> Result<KeyRec> {
+        dispatch!(self.create_key(k, actor))
     }
     /// The key whose secret hashes to `secret_hash`, revoked or not.
     pub async fn key_by_hash(&self, secret_hash: &str) -> Result<Option<KeyRec>> {
@@ -692,11 +694,12 @@ impl Store {
     pub async fn list_keys(&self) -> Result<Vec<KeyRec>> {
         dispatch!(self.list_keys())
     }
-    /// Revoke a key (again: no change).
-    pub async fn revoke_key(&self, id: i64) -> Result<KeyRec> {
-        dispatch!(self.revoke_key(id))
+    /// Revoke a key (again: no change), with its audit entry by `actor`.
+    pub async fn revoke_key(&self, id: i64, actor: &str) -> Result<KeyRec> {
+        dispatch!(self.revoke_key(id, actor))
     }
-    /// Append to the audit log.
+    /// Append to the audit log (activations and key changes write theirs
+    /// in their own transaction).
     pub async fn audit(&self, actor: &str, action: &str, target: &str, detail: &str) -> Result<()> {
         dispatch!(self.audit(actor, action, target, detail))
     }

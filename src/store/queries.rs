@@ -712,6 +712,9 @@ impl Backend {
         .bind(&now)
         .fetch_one(&mut *tx)
         .await?;
+        let what = calibration_id.map_or("the nominal model".to_string(), |c| format!("calibration {c}"));
+        audit_in(&mut tx, actor, action, &format!("robot {robot_id}"), &format!("{what}: {reason}"))
+            .await?;
         tx.commit().await?;
         Ok(rec)
     }
@@ -764,10 +767,11 @@ impl Backend {
         Ok((items, total))
     }
 
-    pub async fn create_key(&self, k: &NewKey) -> Result<KeyRec> {
+    pub async fn create_key(&self, k: &NewKey, actor: &str) -> Result<KeyRec> {
+        let mut tx = self.begin_write().await?;
         let taken = sqlx::query_scalar::<_, i64>("SELECT id FROM api_keys WHERE name = $1")
             .bind(&k.name)
-            .fetch_optional(&self.pool)
+            .fetch_optional(&mut *tx)
             .await?;
         if taken.is_some() {
             return Err(StoreError::Conflict(format!(
@@ -775,7 +779,7 @@ impl Backend {
                 k.name
             )));
         }
-        Ok(sqlx::query_as::<_, KeyRec>(concat!(
+        let key = sqlx::query_as::<_, KeyRec>(concat!(
             "INSERT INTO api_keys (name, role, sites, prefix, secret_hash, created_at, expires_at) \
              VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING ",
             key_cols!()
@@ -787,8 +791,18 @@ impl Backend {
         .bind(&k.secret_hash)
         .bind(now_rfc3339())
         .bind(&k.expires_at)
-        .fetch_one(&self.pool)
-        .await?)
+        .fetch_one(&mut *tx)
+        .await?;
+        audit_in(
+            &mut tx,
+            actor,
+            "create_key",
+            &format!("key {}", key.id),
+            &format!("{} ({})", key.name, key.role),
+        )
+        .await?;
+        tx.commit().await?;
+        Ok(key)
     }
 
     pub async fn key_by_hash(&self, secret_hash: &str) -> Result<Option<KeyRec>> {
@@ -812,30 +826,31 @@ impl Backend {
         .await?)
     }
 
-    pub async fn revoke_key(&self, id: i64) -> Result<KeyRec> {
+    pub async fn revoke_key(&self, id: i64, actor: &str) -> Result<KeyRec> {
+        let mut tx = self.begin_write().await?;
         sqlx::query("UPDATE api_keys SET revoked_at = $1 WHERE id = $2 AND revoked_at IS NULL")
             .bind(now_rfc3339())
             .bind(id)
-            .execute(&self.pool)
+            .execute(&mut *tx)
             .await?;
-        sqlx::query_as::<_, KeyRec>(concat!("SELECT ", key_cols!(), " FROM api_keys WHERE id = $1"))
-            .bind(id)
-            .fetch_optional(&self.pool)
-            .await?
-            .ok_or(StoreError::NotFound { what: "key", id })
+        let key = sqlx::query_as::<_, KeyRec>(concat!(
+            "SELECT ",
+            key_cols!(),
+            " FROM api_keys WHERE id = $1"
+        ))
+        .bind(id)
+        .fetch_optional(&mut *tx)
+        .await?
+        .ok_or(StoreError::NotFound { what: "key", id })?;
+        audit_in(&mut tx, actor, "revoke_key", &format!("key {id}"), &key.name).await?;
+        tx.commit().await?;
+        Ok(key)
     }
 
     pub async fn audit(&self, actor: &str, action: &str, target: &str, detail: &str) -> Result<()> {
-        sqlx::query(
-            "INSERT INTO audit_log (at, actor, action, target, detail) VALUES ($1, $2, $3, $4, $5)",
-        )
-        .bind(now_rfc3339())
-        .bind(actor)
-        .bind(action)
-        .bind(target)
-        .bind(detail)
-        .execute(&self.pool)
-        .await?;
+        let mut tx = self.begin_write().await?;
+        audit_in(&mut tx, actor, action, target, detail).await?;
+        tx.commit().await?;
         Ok(())
     }
 
@@ -853,4 +868,24 @@ impl Backend {
             .await?;
         Ok((items, total))
     }
+}
+
+/// One entry of the audit log, inside the transaction of what it records
+/// (the action and its entry commit together or not at all).
+async fn audit_in(
+    tx: &mut sqlx::Transaction<'static, Db>,
+    actor: &str,
+    action: &str,
+    target: &str,
+    detail: &str,
+) -> Result<()> {
+    sqlx::query("INSERT INTO audit_log (at, actor, action, target, detail) VALUES ($1, $2, $3, $4, $5)")
+        .bind(now_rfc3339())
+        .bind(actor)
+        .bind(action)
+        .bind(target)
+        .bind(detail)
+        .execute(&mut **tx)
+        .await?;
+    Ok(())
 }

@@ -5,9 +5,13 @@
 
 use serde_json::{Value, json};
 
-use crate::helpers::{Options, TestApp, client_with_key, err_json, ok_json, read};
+use crate::helpers::{TestApp, client_with_key, err_json, ok_json, read};
 
 const DS: &str = "er3a_paper_like";
+
+async fn send(req: reqwest::RequestBuilder) -> reqwest::Response {
+    req.send().await.unwrap()
+}
 
 /// A key of `role` made through the API by the harness's admin.
 async fn key(app: &TestApp, name: &str, role: &str, expires_at: Option<&str>) -> (i64, String) {
@@ -33,7 +37,7 @@ async fn every_route_but_health_needs_a_key_of_the_right_role() {
     }
     // No key, a malformed header, an unknown key: 401 in the error shape.
     let e = err_json(
-        anon.get(app.url("/robots")).send().await.unwrap(),
+        send(anon.get(app.url("/robots"))).await,
         401,
         "unauthorized",
     )
@@ -47,24 +51,15 @@ async fn every_route_but_health_needs_a_key_of_the_right_role() {
         .unwrap();
     err_json(r, 401, "unauthorized").await;
     err_json(
-        client_with_key("dck_nope")
-            .get(app.url("/robots"))
-            .send()
-            .await
-            .unwrap(),
+        send(client_with_key("dck_nope").get(app.url("/robots"))).await,
         401,
         "unauthorized",
     )
     .await;
 
-    let (_, model_id, rig_id, session) = {
-        let (m, r, g, s) = app.setup(DS, "AUTH-1").await;
-        (m, r, g, s)
-    };
-    let _ = rig_id;
+    let (_, robot, _, session) = app.setup(DS, "AUTH-1").await;
     let done = app.identify_session(session, read(DS, "poses.csv")).await;
     let cal = done["calibration_id"].as_i64().unwrap();
-    let robot = 1;
 
     let (_, reader) = key(&app, "mes-dashboard", "reader", None).await;
     let (_, operator) = key(&app, "floor-cell-7", "operator", None).await;
@@ -78,18 +73,9 @@ async fn every_route_but_health_needs_a_key_of_the_right_role() {
         "target": {"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]}});
 
     // reader: every GET, nothing else.
-    ok_json(
-        reader.get(app.url("/calibrations")).send().await.unwrap(),
-        200,
-    )
-    .await;
+    ok_json(send(reader.get(app.url("/calibrations"))).await, 200).await;
     let e = err_json(
-        reader
-            .post(app.url("/compensate"))
-            .json(&target)
-            .send()
-            .await
-            .unwrap(),
+        send(reader.post(app.url("/compensate")).json(&target)).await,
         403,
         "forbidden",
     )
@@ -104,35 +90,20 @@ async fn every_route_but_health_needs_a_key_of_the_right_role() {
     );
     // operator: compensation, not the fleet's data.
     ok_json(
-        operator
-            .post(app.url("/compensate"))
-            .json(&target)
-            .send()
-            .await
-            .unwrap(),
+        send(operator.post(app.url("/compensate")).json(&target)).await,
         200,
     )
     .await;
     let robot_json: Value = serde_json::from_str(&read(DS, "robot.json")).unwrap();
     err_json(
-        operator
-            .post(app.url("/models"))
-            .json(&robot_json)
-            .send()
-            .await
-            .unwrap(),
+        send(operator.post(app.url("/models")).json(&robot_json)).await,
         403,
         "forbidden",
     )
     .await;
     // engineer: models and jobs, not activation or keys.
     ok_json(
-        engineer
-            .post(app.url("/models"))
-            .json(&robot_json)
-            .send()
-            .await
-            .unwrap(),
+        send(engineer.post(app.url("/models")).json(&robot_json)).await,
         201,
     )
     .await;
@@ -148,12 +119,7 @@ async fn every_route_but_health_needs_a_key_of_the_right_role() {
         "forbidden",
     )
     .await;
-    err_json(
-        engineer.get(app.url("/keys")).send().await.unwrap(),
-        403,
-        "forbidden",
-    )
-    .await;
+    err_json(send(engineer.get(app.url("/keys"))).await, 403, "forbidden").await;
 
     // admin: activation, recorded under the key's name; a name sent by the
     // client is refused, not recorded.
@@ -196,8 +162,10 @@ async fn every_route_but_health_needs_a_key_of_the_right_role() {
         csv.starts_with("id,at,actor,action,target,detail\n"),
         "{csv}"
     );
-    assert!(csv.contains(",test-admin,activate,robot 1,"), "{csv}");
-    let _ = model_id;
+    assert!(
+        csv.contains(&format!(",test-admin,activate,robot {robot},")),
+        "{csv}"
+    );
     app.stop().await;
 }
 
@@ -206,7 +174,7 @@ async fn revoked_and_expired_keys_stop_working() {
     let app = TestApp::spawn("authrevoke").await;
     let (id, secret) = key(&app, "temp", "reader", None).await;
     let client = client_with_key(&secret);
-    ok_json(client.get(app.url("/robots")).send().await.unwrap(), 200).await;
+    ok_json(send(client.get(app.url("/robots"))).await, 200).await;
     let listed = ok_json(app.get("/keys").await, 200).await;
     assert!(
         listed
@@ -223,7 +191,7 @@ async fn revoked_and_expired_keys_stop_working() {
     )
     .await;
     let e = err_json(
-        client.get(app.url("/robots")).send().await.unwrap(),
+        send(client.get(app.url("/robots"))).await,
         401,
         "unauthorized",
     )
@@ -231,11 +199,7 @@ async fn revoked_and_expired_keys_stop_working() {
     assert!(e["message"].as_str().unwrap().contains("revoked"), "{e}");
     let (_, old) = key(&app, "old", "reader", Some("2020-01-01")).await;
     let e = err_json(
-        client_with_key(&old)
-            .get(app.url("/robots"))
-            .send()
-            .await
-            .unwrap(),
+        send(client_with_key(&old).get(app.url("/robots"))).await,
         401,
         "unauthorized",
     )
@@ -281,5 +245,4 @@ async fn no_auth_is_refused_beyond_the_loopback() {
         Err(e) => e.to_string(),
     };
     assert!(err.contains("loopback"), "{err}");
-    let _ = Options::default();
 }

@@ -3,7 +3,9 @@
 
 use std::collections::BTreeSet;
 
-use drawcal::store::{CalibrationFilter, NewCalibration, NewRobot, Page, Store, StoreError};
+use drawcal::store::{
+    CalibrationFilter, NewCalibration, NewKey, NewRobot, Page, Store, StoreError,
+};
 
 use crate::helpers::{fresh_dir, read};
 
@@ -23,6 +25,51 @@ fn cal(rms: f64) -> NewCalibration {
         effects: "joint_compliance".into(),
         report_json: format!("{{\"rms\": {rms}}}"),
     }
+}
+
+/// Keys and the audit log: a taken name is a conflict; a key is found by
+/// its hash and revoked; activations (above) and key changes write their
+/// audit entry with themselves, newest first.
+async fn keys_and_audit(store: &Store) {
+    let new = |name: &str, hash: &str| NewKey {
+        name: name.into(),
+        role: "reader".into(),
+        sites: String::new(),
+        prefix: "dck_0123".into(),
+        secret_hash: hash.into(),
+        expires_at: None,
+    };
+    let k = store.create_key(&new("mes", "h1"), "ann").await.unwrap();
+    assert!(matches!(
+        store.create_key(&new("mes", "h2"), "ann").await,
+        Err(StoreError::Conflict(_))
+    ));
+    assert_eq!(store.key_by_hash("h1").await.unwrap().unwrap().id, k.id);
+    assert!(store.key_by_hash("h2").await.unwrap().is_none());
+    let revoked = store.revoke_key(k.id, "bob").await.unwrap();
+    assert!(revoked.revoked_at.is_some());
+    assert!(matches!(
+        store.revoke_key(9999, "bob").await,
+        Err(StoreError::NotFound { .. })
+    ));
+    let (log, total) = store.list_audit(PAGE).await.unwrap();
+    let seen: Vec<(&str, &str)> = log
+        .iter()
+        .map(|e| (e.actor.as_str(), e.action.as_str()))
+        .collect();
+    assert_eq!(
+        seen,
+        [
+            ("bob", "revoke_key"),
+            ("ann", "create_key"),
+            ("cy", "rollback"),
+            ("cy", "rollback"),
+            ("bob", "activate"),
+            ("ann", "activate"),
+        ],
+        "{log:?}"
+    );
+    assert_eq!(total, 6);
 }
 
 async fn suite(store: Store) {
@@ -326,6 +373,7 @@ async fn suite(store: Store) {
         .await,
         2
     );
+    keys_and_audit(&store).await;
     concurrent_claims(&store, s.id, r1.id).await;
     store.close().await;
 }
