@@ -25,6 +25,8 @@ COPY --from=build /src/target/release/drawcal /usr/local/bin/drawcal
 USER drawcal
 WORKDIR /data
 VOLUME ["/data"]
+# Clients that reach the container by a name other than localhost need it
+# allowed: docker run -e DRAWCAL_ALLOWED_HOST=calib.plant.example,10.0.0.5 ...
 ENV DATABASE_URL=sqlite:///data/drawcal.db \
     DRAWCAL_LISTEN=0.0.0.0:8080 \
     DRAWCAL_WORKERS=1 \

@@ -51,10 +51,38 @@ pub struct ServeArgs {
     /// has it. At least 32 characters.
     #[arg(long, env = "DRAWCAL_ADMIN_KEY_FILE")]
     pub admin_key_file: Option<std::path::PathBuf>,
+    /// A name clients reach the service by (repeat for several; `*`: any).
+    /// Requests whose Host header names another are refused (DNS
+    /// rebinding). Default: the --listen address, localhost, 127.0.0.1
+    /// and [::1]; listening on 0.0.0.0 (a container), give the names.
+    #[arg(
+        long = "allowed-host",
+        env = "DRAWCAL_ALLOWED_HOST",
+        value_delimiter = ','
+    )]
+    pub allowed_hosts: Vec<String>,
+    /// A web origin (`https://mes.example`) whose pages may call the API
+    /// from a browser (repeat for several). Default: none, no CORS.
+    #[arg(
+        long = "cors-origin",
+        env = "DRAWCAL_CORS_ORIGIN",
+        value_delimiter = ','
+    )]
+    pub cors_origins: Vec<String>,
     /// Job lease (seconds): a job whose process died runs again this long
     /// after its last heartbeat.
     #[arg(long, env = "DRAWCAL_JOB_LEASE_SECS", default_value_t = 15)]
     pub job_lease_secs: u64,
+    /// Runs of a job that may fail by themselves (the engine panicked, the
+    /// database failed) before it is given up; a refusal of its data ends
+    /// it at once.
+    #[arg(long, env = "DRAWCAL_JOB_MAX_ATTEMPTS", default_value_t = 3)]
+    pub job_max_attempts: i64,
+    /// Times a job's worker may stop under it (a killed process, a lost
+    /// lease) before the job is given up: restarts are not its attempts,
+    /// but a job that crashes its process every time must still end.
+    #[arg(long, env = "DRAWCAL_JOB_MAX_INTERRUPTIONS", default_value_t = 10)]
+    pub job_max_interruptions: i64,
     /// Seconds open requests get to finish after a shutdown signal, and
     /// then a running job before it is handed back to the queue.
     #[arg(long, env = "DRAWCAL_SHUTDOWN_GRACE_SECS", default_value_t = 10)]
@@ -132,6 +160,12 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
     if args.job_lease_secs == 0 {
         return usage("--job-lease-secs must be at least 1".into());
     }
+    if !(1..=100).contains(&args.job_max_attempts) {
+        return usage("--job-max-attempts must be from 1 to 100".into());
+    }
+    if !(1..=1000).contains(&args.job_max_interruptions) {
+        return usage("--job-max-interruptions must be from 1 to 1000".into());
+    }
     let admin_key = match (
         &args.admin_key_file,
         std::env::var("DRAWCAL_ADMIN_KEY").ok(),
@@ -157,10 +191,14 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
         max_joint_change_deg: args.max_joint_change_deg,
         insecure_no_auth: args.insecure_no_auth,
         bootstrap_admin_key: admin_key,
+        allowed_hosts: args.allowed_hosts.clone(),
+        cors_origins: args.cors_origins.clone(),
         jobs: JobConfig {
             workers: args.workers,
             lease: Duration::from_secs(args.job_lease_secs),
             shutdown_grace: Duration::from_secs(args.shutdown_grace_secs),
+            max_attempts: args.job_max_attempts,
+            max_interruptions: args.job_max_interruptions,
             ..JobConfig::default()
         },
     };
@@ -173,7 +211,7 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
     // Through the log (not eprintln) so that JSON logs are JSON throughout;
     // the runtime's own count of its worker threads.
     tracing::info!(
-        "drawcal serve: listen={} database={} workers={} runtime_threads={} max_upload_bytes={} client_timeout_secs={} idle_timeout_secs={} job_lease_secs={} shutdown_grace_secs={} log_format={}",
+        "drawcal serve: listen={} database={} workers={} runtime_threads={} max_upload_bytes={} client_timeout_secs={} idle_timeout_secs={} job_lease_secs={} job_max_attempts={} job_max_interruptions={} shutdown_grace_secs={} log_format={}",
         args.listen,
         redact(&args.database),
         args.workers,
@@ -182,6 +220,8 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
         args.client_timeout_secs,
         args.idle_timeout_secs,
         args.job_lease_secs,
+        args.job_max_attempts,
+        args.job_max_interruptions,
         args.shutdown_grace_secs,
         args.log_format
     );

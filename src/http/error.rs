@@ -26,6 +26,7 @@ pub struct ErrorBody {
     /// Machine-readable code: `bad_request`, `malformed_json`,
     /// `invalid_input`, `not_found`, `conflict`, `payload_too_large`,
     /// `request_timeout`, `unsupported_media_type`, `method_not_allowed`,
+    /// `unauthorized`, `forbidden`, `host_not_allowed`, `too_many_requests`,
     /// `unavailable`, `internal`.
     pub error: String,
     /// What went wrong, for a human.
@@ -80,6 +81,19 @@ pub enum ApiError {
     /// Wrong or missing `Content-Type`.
     #[error("{0}")]
     UnsupportedMediaType(String),
+    /// A `Host` header the service does not answer to (`--allowed-host`):
+    /// a DNS-rebinding page, or a name not configured.
+    #[error("{0}")]
+    HostNotAllowed(String),
+    /// Over a per-key rate or the job queue's bound: retry after
+    /// `retry_after_s` seconds (the `Retry-After` header).
+    #[error("{message}")]
+    TooManyRequests {
+        /// Which limit, and how to stay under it.
+        message: String,
+        /// Seconds until a retry can succeed.
+        retry_after_s: u64,
+    },
     /// Method not allowed on this path.
     #[error("method not allowed")]
     MethodNotAllowed,
@@ -115,6 +129,10 @@ impl ApiError {
             ApiError::RequestTimeout(_) => (StatusCode::REQUEST_TIMEOUT, "request_timeout"),
             ApiError::UnsupportedMediaType(_) => {
                 (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type")
+            }
+            ApiError::HostNotAllowed(_) => (StatusCode::MISDIRECTED_REQUEST, "host_not_allowed"),
+            ApiError::TooManyRequests { .. } => {
+                (StatusCode::TOO_MANY_REQUESTS, "too_many_requests")
             }
             ApiError::MethodNotAllowed => (StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed"),
             ApiError::Unavailable(_) => (StatusCode::SERVICE_UNAVAILABLE, "unavailable"),
@@ -188,6 +206,12 @@ impl IntoResponse for ApiError {
             row,
         };
         let mut response = (status, axum::Json(body)).into_response();
+        if let ApiError::TooManyRequests { retry_after_s, .. } = &self {
+            response.headers_mut().insert(
+                axum::http::header::RETRY_AFTER,
+                axum::http::HeaderValue::from(*retry_after_s),
+            );
+        }
         if matches!(
             self,
             ApiError::RequestTimeout(_) | ApiError::PayloadTooLarge(_)

@@ -19,6 +19,7 @@ pub mod compensate;
 pub mod compute;
 pub mod error;
 pub mod extract;
+pub mod guard;
 pub mod keys;
 pub mod ops;
 pub mod resources;
@@ -78,6 +79,13 @@ pub struct ServiceConfig {
     /// An admin key to create on start if no key has it (`DRAWCAL_ADMIN_KEY`,
     /// `--admin-key-file`): how a fresh deployment gets its first key.
     pub bootstrap_admin_key: Option<String>,
+    /// Names the `Host` header may give (`--allowed-host`; `*`: any);
+    /// empty: the listen address and the loopback names
+    /// ([`guard::BrowserPolicy::new`]).
+    pub allowed_hosts: Vec<String>,
+    /// Web origins allowed to call the API from a browser (`--cors-origin`);
+    /// empty: none.
+    pub cors_origins: Vec<String>,
 }
 
 /// The whole request body must arrive within this many client timeouts
@@ -104,6 +112,8 @@ pub struct App {
     pub compute: compute::ComputePool,
     /// No API keys asked ([`ServiceConfig::insecure_no_auth`]).
     pub insecure_no_auth: bool,
+    /// Which hosts and origins browsers are answered from.
+    pub browser: Arc<guard::BrowserPolicy>,
 }
 
 /// Threads for request-path numerical work: the number of cores.
@@ -291,7 +301,7 @@ pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration
     // The key check runs on the API's matched routes (after routing, so it
     // sees the route's template); the page's own files and the fallbacks
     // are public.
-    router
+    let router = router
         .route_layer(axum::middleware::from_fn_with_state(
             state.clone(),
             auth::require_key,
@@ -304,6 +314,15 @@ pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration
             idle_timeout: client_timeout,
             deadline: client_timeout * BODY_DEADLINE_FACTOR,
         }))
+        .layer(axum::middleware::from_fn_with_state(
+            state.browser.clone(),
+            guard::check,
+        ));
+    let router = match cors(&state.browser) {
+        Some(layer) => router.layer(layer),
+        None => router,
+    };
+    router
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(
             TraceLayer::new_for_http()
@@ -322,6 +341,29 @@ pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration
         )
         .layer(SetRequestIdLayer::x_request_id(ids))
         .with_state(state)
+}
+
+/// CORS answers for the configured origins only; none by default (then
+/// a preflight is answered 405 like any OPTIONS request).
+fn cors(policy: &guard::BrowserPolicy) -> Option<tower_http::cors::CorsLayer> {
+    use axum::http::{Method, header};
+    use tower_http::cors::{AllowOrigin, CorsLayer};
+    if policy.cors_origins.is_empty() {
+        return None;
+    }
+    let origins: Vec<HeaderValue> = policy
+        .cors_origins
+        .iter()
+        .filter_map(|o| HeaderValue::from_str(o).ok())
+        .collect();
+    Some(
+        CorsLayer::new()
+            .allow_origin(AllowOrigin::list(origins))
+            .allow_methods([Method::GET, Method::POST])
+            .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE, header::ACCEPT])
+            .expose_headers([header::RETRY_AFTER, header::LOCATION])
+            .max_age(Duration::from_secs(600)),
+    )
 }
 
 /// A started service: store connected and migrated, workers running,
@@ -358,6 +400,13 @@ impl Service {
         }
         let jobs = Jobs::start(store.clone(), cfg.jobs.clone(), job_fn);
         let listener = tokio::net::TcpListener::bind(cfg.listen).await?;
+        if cfg.listen.ip().is_unspecified() && cfg.allowed_hosts.is_empty() {
+            tracing::warn!(
+                "listening on {} but answering only the hosts localhost, 127.0.0.1 and [::1]: \
+                 give the names clients use with --allowed-host (DRAWCAL_ALLOWED_HOST)",
+                cfg.listen
+            );
+        }
         let addr = listener.local_addr()?;
         let state = AppState(Arc::new(App {
             store,
@@ -365,6 +414,11 @@ impl Service {
             cache: cache::CompensationCache::new(cfg.max_joint_change_deg),
             compute: compute::ComputePool::new(compute_threads()),
             insecure_no_auth: cfg.insecure_no_auth,
+            browser: Arc::new(guard::BrowserPolicy::new(
+                addr,
+                &cfg.allowed_hosts,
+                &cfg.cors_origins,
+            )),
         }));
         Ok(Service {
             addr,

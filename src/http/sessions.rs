@@ -582,7 +582,10 @@ pub async fn enqueue_job(
     };
     crate::identify::held(layout, &options.to_identify())?;
     let opts = serde_json::to_string(&options).map_err(|e| ApiError::Internal(e.to_string()))?;
-    let job = app.store.create_job(id, session.robot_id, &opts, 3).await?;
+    let job = app
+        .store
+        .create_job(id, session.robot_id, &opts, app.jobs.max_attempts())
+        .await?;
     app.jobs.wake();
     app.store
         .audit(

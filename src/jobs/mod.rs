@@ -10,8 +10,16 @@
 //! result is written together with the job's success in one transaction.
 //!
 //! At graceful shutdown a running job gets a grace period to finish; after
-//! that it is cancelled and handed back to the queue (the claim does not
-//! count as an attempt).
+//! that it is cancelled and handed back to the queue.
+//!
+//! What a job is allowed: `max_attempts` runs that fail by themselves in a
+//! way another run may not repeat (the engine panicked, the store failed);
+//! a refusal of the data fails it at once. A worker that stops under a
+//! job (a killed process, a lost lease) is an *interruption*, counted apart
+//! so that restarts of the service do not use up a job's attempts; after
+//! `max_interruptions` of them the job is given up, so that a job that
+//! crashes its process every time still ends, saying so. Leases are read
+//! and written on the database's clock, never a host's.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -178,8 +186,12 @@ pub struct JobConfig {
     /// How long a running job may go on after shutdown is asked before it is
     /// cancelled and handed back to the queue.
     pub shutdown_grace: Duration,
-    /// Claims allowed per job before it is given up.
+    /// Failed runs allowed per job before it is given up (stored with the
+    /// job when it is queued).
     pub max_attempts: i64,
+    /// Interruptions (its worker died or lost the lease) after which a job
+    /// is given up.
+    pub max_interruptions: i64,
 }
 
 impl Default for JobConfig {
@@ -190,6 +202,7 @@ impl Default for JobConfig {
             poll: Duration::from_millis(500),
             shutdown_grace: Duration::from_secs(10),
             max_attempts: 3,
+            max_interruptions: 10,
         }
     }
 }
@@ -227,6 +240,9 @@ pub enum JobError {
     /// Its inputs could not be read from the store.
     #[error("loading inputs: {0}")]
     Store(#[from] crate::store::StoreError),
+    /// Its calibration could not be written to the store.
+    #[error("storing the calibration: {0}")]
+    Saving(crate::store::StoreError),
     /// Its stored options do not parse.
     #[error("bad job options: {0}")]
     Options(serde_json::Error),
@@ -248,6 +264,18 @@ pub enum JobError {
     /// The engine panicked.
     #[error("internal error: the engine panicked")]
     Panicked,
+}
+
+impl JobError {
+    /// True for a failure another run may not repeat (the store, a panic
+    /// that may be a resource's): worth an attempt more. A refusal of the
+    /// data or the options is the same every time.
+    pub fn may_not_repeat(&self) -> bool {
+        matches!(
+            self,
+            JobError::Store(_) | JobError::Saving(_) | JobError::Panicked
+        )
+    }
 }
 
 /// Load a job's robot, rig and poses.
@@ -310,6 +338,7 @@ pub fn summarize(report: &Report, report_json: String) -> NewCalibration {
 /// The running pool: wake it on enqueue, stop it at shutdown.
 #[derive(Clone)]
 pub struct Jobs {
+    max_attempts: i64,
     notify: Arc<Notify>,
     shutdown: watch::Sender<bool>,
     handles: Arc<Mutex<Vec<tokio::task::JoinHandle<()>>>>,
@@ -334,10 +363,16 @@ impl Jobs {
             handles.push(tokio::spawn(w.run()));
         }
         Jobs {
+            max_attempts: cfg.max_attempts,
             notify,
             shutdown,
             handles: Arc::new(Mutex::new(handles)),
         }
+    }
+
+    /// Failed runs a job queued now is allowed ([`JobConfig::max_attempts`]).
+    pub fn max_attempts(&self) -> i64 {
+        self.max_attempts
     }
 
     /// A job was queued: wake an idle worker.
@@ -380,7 +415,11 @@ impl Worker {
                 break;
             }
             let lease_ms = self.cfg.lease.as_millis() as i64;
-            match self.store.claim_job(&self.name, now_ms(), lease_ms).await {
+            match self
+                .store
+                .claim_job(&self.name, lease_ms, self.cfg.max_interruptions)
+                .await
+            {
                 Ok(Some(job)) => {
                     let id = job.id;
                     let span = tracing::info_span!("job", job_id = id, worker = %self.name);
@@ -407,7 +446,11 @@ impl Worker {
 
     async fn run_job(&mut self, job: JobRec) {
         let id = job.id;
-        tracing::info!(attempt = job.attempts, "job claimed");
+        tracing::info!(
+            attempts = job.attempts,
+            interruptions = job.interruptions,
+            "job claimed"
+        );
         if job.cancel_requested {
             self.finish(id, "cancelled", None).await;
             return;
@@ -445,8 +488,8 @@ impl Worker {
                 r = &mut handle => break r,
                 _ = tokio::time::sleep(beat) => {
                     let (stage, frac) = progress.latest.lock().map(|l| l.clone()).unwrap_or_default();
-                    let until = now_ms() + self.cfg.lease.as_millis() as i64;
-                    match self.store.heartbeat(id, &self.name, until, Some(&stage), frac).await {
+                    let lease_ms = self.cfg.lease.as_millis() as i64;
+                    match self.store.heartbeat(id, &self.name, lease_ms, Some(&stage), frac).await {
                         Ok(Some(cancel)) => if cancel { progress.cancel.store(true, Ordering::Relaxed) },
                         Ok(None) => {
                             tracing::warn!("lease lost; abandoning the job");
@@ -477,13 +520,7 @@ impl Worker {
             && !handed_back
             && matches!(
                 self.store
-                    .heartbeat(
-                        id,
-                        &self.name,
-                        now_ms() + self.cfg.lease.as_millis() as i64,
-                        None,
-                        1.0
-                    )
+                    .heartbeat(id, &self.name, self.cfg.lease.as_millis() as i64, None, 1.0)
                     .await,
                 Ok(Some(true))
             );
@@ -507,7 +544,11 @@ impl Worker {
                     Ok(c) => {
                         tracing::info!(calibration_id = c.id, version = c.version, "job succeeded")
                     }
-                    Err(e) => tracing::error!(error = %e, "storing the calibration failed"),
+                    // Lost the lease meanwhile: the job is another worker's.
+                    Err(crate::store::StoreError::Conflict(m)) => {
+                        tracing::warn!(reason = %m, "calibration not stored")
+                    }
+                    Err(e) => self.fail(id, JobError::Saving(e)).await,
                 }
             }
             Ok(Err(crate::Error::Cancelled)) if handed_back => {
@@ -525,9 +566,23 @@ impl Worker {
         }
     }
 
-    /// End a job as failed, with why.
+    /// A run failed, with why: queued again if another run may not fail
+    /// the same way and attempts remain, else ended.
     async fn fail(&self, id: i64, why: JobError) {
-        self.finish(id, "failed", Some(&why.to_string())).await
+        let error = why.to_string();
+        match self
+            .store
+            .fail_job(id, &self.name, &error, why.may_not_repeat())
+            .await
+        {
+            Ok(Some(job)) if job.state == "queued" => {
+                tracing::warn!(%error, attempts = job.attempts, "job run failed; queued again");
+                self.notify.notify_one();
+            }
+            Ok(Some(job)) => tracing::info!(state = %job.state, %error, "job ended"),
+            Ok(None) => tracing::warn!(%error, "job failed after its lease was lost"),
+            Err(e) => tracing::error!(error = %e, "recording the job's failure failed"),
+        }
     }
 
     async fn finish(&self, id: i64, state: &str, error: Option<&str>) {

@@ -26,6 +26,11 @@ const SQLITE: &[File] = &[
         "api keys",
         include_str!("../../migrations/sqlite/0002_api_keys.sql"),
     ),
+    (
+        3,
+        "job interruptions",
+        include_str!("../../migrations/sqlite/0003_job_interruptions.sql"),
+    ),
 ];
 
 const POSTGRES: &[File] = &[
@@ -38,6 +43,11 @@ const POSTGRES: &[File] = &[
         2,
         "api keys",
         include_str!("../../migrations/postgres/0002_api_keys.sql"),
+    ),
+    (
+        3,
+        "job interruptions",
+        include_str!("../../migrations/postgres/0003_job_interruptions.sql"),
     ),
 ];
 

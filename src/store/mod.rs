@@ -202,10 +202,18 @@ record! {
         pub stage: Option<String>,
         /// Progress in [0, 1].
         pub progress: f64,
-        /// Times it was claimed by a worker.
+        /// Runs that failed by themselves (the engine panicked, the store
+        /// could not be read or written): such a failure runs the job again
+        /// until `max_attempts`. A refusal of the data ends it at once.
         pub attempts: i64,
-        /// Claims allowed before it is given up.
+        /// Failed runs allowed before it is given up.
         pub max_attempts: i64,
+        /// Times its worker stopped under it (the process died, or lost the
+        /// lease) before it finished: not attempts, since a restart is not
+        /// the job's fault; given up after the service's
+        /// `--job-max-interruptions`. A graceful shutdown's hand-back is
+        /// neither.
+        pub interruptions: i64,
         /// Worker holding the lease.
         #[serde(skip)]
         pub locked_by: Option<String>,
@@ -590,27 +598,42 @@ impl Store {
         dispatch!(self.request_cancel(id))
     }
     /// Claim the oldest runnable job (queued, or running with an expired
-    /// lease) for `worker` until `now_ms + lease_ms`. Jobs whose lease expired
-    /// after `max_attempts` claims are failed instead.
+    /// lease: an interruption) for `worker`, leased for `lease_ms` on the
+    /// database's clock. A job whose lease expired for the
+    /// `max_interruptions`-th time is failed instead ("abandoned").
     pub async fn claim_job(
         &self,
         worker: &str,
-        now_ms: i64,
         lease_ms: i64,
+        max_interruptions: i64,
     ) -> Result<Option<JobRec>> {
-        dispatch!(self.claim_job(worker, now_ms, lease_ms))
+        dispatch!(self.claim_job(worker, lease_ms, max_interruptions))
     }
-    /// Extend the lease and record progress. Returns `None` if the worker no
-    /// longer holds the job, else whether cancellation was requested.
+    /// Extend the lease by `lease_ms` from now (the database's clock) and
+    /// record progress. Returns `None` if the worker no longer holds the
+    /// job, else whether cancellation was requested.
     pub async fn heartbeat(
         &self,
         id: i64,
         worker: &str,
-        until_ms: i64,
+        lease_ms: i64,
         stage: Option<&str>,
         progress: f64,
     ) -> Result<Option<bool>> {
-        dispatch!(self.heartbeat(id, worker, until_ms, stage, progress))
+        dispatch!(self.heartbeat(id, worker, lease_ms, stage, progress))
+    }
+    /// A run of the job failed by itself: count the attempt and, when
+    /// `retry` (a failure another run may not repeat) and attempts remain,
+    /// queue it again; else end it failed. `error` is recorded either way.
+    /// `None` if the worker no longer holds the job.
+    pub async fn fail_job(
+        &self,
+        id: i64,
+        worker: &str,
+        error: &str,
+        retry: bool,
+    ) -> Result<Option<JobRec>> {
+        dispatch!(self.fail_job(id, worker, error, retry))
     }
     /// Record the calibration and mark the job succeeded, in one transaction.
     /// Fails with a conflict if the worker lost its lease.

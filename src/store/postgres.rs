@@ -4,6 +4,14 @@
 use sqlx::postgres::PgPoolOptions;
 
 // The shared queries (and the column-list macros the dialect strings use).
+/// The database's clock (epoch ms), which every lease is written and read
+/// on: replicas' own clocks may disagree.
+macro_rules! db_now_ms {
+    () => {
+        "CAST(EXTRACT(EPOCH FROM clock_timestamp()) * 1000 AS BIGINT)"
+    };
+}
+
 include!("queries.rs");
 
 type Db = sqlx::Postgres;
@@ -17,9 +25,13 @@ pub struct Backend {
 /// Claim the oldest runnable job; concurrent claimers skip rows another
 /// transaction has locked, so no two workers get the same job.
 const CLAIM_SQL: &str = concat!(
-    "UPDATE jobs SET state = 'running', locked_by = $1, locked_until_ms = $2, attempts = attempts + 1, \
+    "UPDATE jobs SET state = 'running', locked_by = $1, locked_until_ms = ",
+    db_now_ms!(),
+    " + $2, interruptions = interruptions + CASE WHEN state = 'running' THEN 1 ELSE 0 END, \
      started_at = $3, updated_at = $3 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' \
-     OR (state = 'running' AND locked_until_ms < $4 AND attempts < max_attempts) ORDER BY id LIMIT 1 \
+     OR (state = 'running' AND locked_until_ms < ",
+    db_now_ms!(),
+    " AND interruptions + 1 < $4) ORDER BY id LIMIT 1 \
      FOR UPDATE SKIP LOCKED) RETURNING ",
     job_cols!()
 );

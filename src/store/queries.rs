@@ -32,7 +32,7 @@ macro_rules! session_cols {
 macro_rules! job_cols {
     () => {
         "id, session_id, robot_id, options, state, stage, progress, attempts, max_attempts, \
-         locked_by, locked_until_ms, cancel_requested, error, calibration_id, created_at, \
+         interruptions, locked_by, locked_until_ms, cancel_requested, error, calibration_id, created_at, \
          updated_at, started_at, finished_at"
     };
 }
@@ -427,27 +427,34 @@ impl Backend {
     pub async fn claim_job(
         &self,
         worker: &str,
-        now_ms: i64,
         lease_ms: i64,
+        max_interruptions: i64,
     ) -> Result<Option<JobRec>> {
         let now = now_rfc3339();
-        // Give up on jobs whose workers died too often (a job that crashes
-        // its process must not crash every restart forever).
-        sqlx::query(
-            "UPDATE jobs SET state = 'failed', \
-             error = 'abandoned: the worker running it stopped before finishing too many times', \
-             locked_by = NULL, locked_until_ms = NULL, finished_at = $2, updated_at = $2 \
-             WHERE state = 'running' AND locked_until_ms < $1 AND attempts >= max_attempts",
-        )
-        .bind(now_ms)
+        // Give up on jobs whose workers stopped under them too often (a job
+        // that crashes its process must not crash every restart forever).
+        // Expiry is read on the database's clock, as the lease was written.
+        sqlx::query(concat!(
+            "UPDATE jobs SET state = 'failed', interruptions = interruptions + 1, error = $2, \
+             locked_by = NULL, locked_until_ms = NULL, finished_at = $3, updated_at = $3 \
+             WHERE state = 'running' AND locked_until_ms < ",
+            db_now_ms!(),
+            " AND interruptions + 1 >= $1"
+        ))
+        .bind(max_interruptions)
+        .bind(format!(
+            "abandoned: the worker running it stopped before finishing {max_interruptions} times \
+             (a job that crashes its process, or a service stopped without its shutdown grace \
+             that often while it ran)"
+        ))
         .bind(&now)
         .execute(&self.pool)
         .await?;
         Ok(sqlx::query_as::<_, JobRec>(CLAIM_SQL)
             .bind(worker)
-            .bind(now_ms + lease_ms)
+            .bind(lease_ms)
             .bind(&now)
-            .bind(now_ms)
+            .bind(max_interruptions)
             .fetch_optional(&self.pool)
             .await?)
     }
@@ -456,18 +463,20 @@ impl Backend {
         &self,
         id: i64,
         worker: &str,
-        until_ms: i64,
+        lease_ms: i64,
         stage: Option<&str>,
         progress: f64,
     ) -> Result<Option<bool>> {
-        Ok(sqlx::query_scalar::<_, bool>(
-            "UPDATE jobs SET locked_until_ms = $3, stage = COALESCE($4, stage), progress = $5, \
+        Ok(sqlx::query_scalar::<_, bool>(concat!(
+            "UPDATE jobs SET locked_until_ms = ",
+            db_now_ms!(),
+            " + $3, stage = COALESCE($4, stage), progress = $5, \
              updated_at = $6 WHERE id = $1 AND locked_by = $2 AND state = 'running' \
-             RETURNING cancel_requested",
-        )
+             RETURNING cancel_requested"
+        ))
         .bind(id)
         .bind(worker)
-        .bind(until_ms)
+        .bind(lease_ms)
         .bind(stage)
         .bind(progress)
         .bind(now_rfc3339())
@@ -560,10 +569,36 @@ impl Backend {
         Ok(r.rows_affected() == 1)
     }
 
+    pub async fn fail_job(
+        &self,
+        id: i64,
+        worker: &str,
+        error: &str,
+        retry: bool,
+    ) -> Result<Option<JobRec>> {
+        // `attempts` on the right is the value before this update.
+        Ok(sqlx::query_as::<_, JobRec>(concat!(
+            "UPDATE jobs SET attempts = attempts + 1, error = $3, locked_by = NULL, \
+             locked_until_ms = NULL, updated_at = $5, \
+             state = CASE WHEN $4 AND attempts + 1 < max_attempts THEN 'queued' ELSE 'failed' END, \
+             stage = CASE WHEN $4 AND attempts + 1 < max_attempts THEN 'queued again after a failure' ELSE stage END, \
+             finished_at = CASE WHEN $4 AND attempts + 1 < max_attempts THEN NULL ELSE $5 END \
+             WHERE id = $1 AND locked_by = $2 AND state = 'running' RETURNING ",
+            job_cols!()
+        ))
+        .bind(id)
+        .bind(worker)
+        .bind(error)
+        .bind(retry)
+        .bind(now_rfc3339())
+        .fetch_optional(&self.pool)
+        .await?)
+    }
+
     pub async fn requeue_job(&self, id: i64, worker: &str) -> Result<bool> {
         let r = sqlx::query(
             "UPDATE jobs SET state = 'queued', locked_by = NULL, locked_until_ms = NULL, \
-             attempts = attempts - 1, stage = 'requeued at shutdown', updated_at = $3 \
+             stage = 'requeued at shutdown', updated_at = $3 \
              WHERE id = $1 AND locked_by = $2 AND state = 'running'",
         )
         .bind(id)

@@ -8,6 +8,14 @@ use std::time::Duration;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 
 // The shared queries (and the column-list macros the dialect strings use).
+/// The database's clock (epoch ms), which every lease is written and read
+/// on: replicas' own clocks may disagree.
+macro_rules! db_now_ms {
+    () => {
+        "CAST((julianday('now') - 2440587.5) * 86400000.0 AS INTEGER)"
+    };
+}
+
 include!("queries.rs");
 
 type Db = sqlx::Sqlite;
@@ -21,10 +29,13 @@ pub struct Backend {
 /// Claim the oldest runnable job. SQLite has one writer at a time, so a
 /// single `UPDATE ... WHERE id = (SELECT ...)` is atomic.
 const CLAIM_SQL: &str = concat!(
-    "UPDATE jobs SET state = 'running', locked_by = $1, locked_until_ms = $2, attempts = attempts + 1, \
+    "UPDATE jobs SET state = 'running', locked_by = $1, locked_until_ms = ",
+    db_now_ms!(),
+    " + $2, interruptions = interruptions + CASE WHEN state = 'running' THEN 1 ELSE 0 END, \
      started_at = $3, updated_at = $3 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' \
-     OR (state = 'running' AND locked_until_ms < $4 AND attempts < max_attempts) ORDER BY id LIMIT 1) \
-     RETURNING ",
+     OR (state = 'running' AND locked_until_ms < ",
+    db_now_ms!(),
+    " AND interruptions + 1 < $4) ORDER BY id LIMIT 1) RETURNING ",
     job_cols!()
 );
 

@@ -239,6 +239,8 @@ async fn no_auth_is_refused_beyond_the_loopback() {
         max_joint_change_deg: 5.0,
         insecure_no_auth: true,
         bootstrap_admin_key: None,
+        allowed_hosts: Vec::new(),
+        cors_origins: Vec::new(),
     };
     let err = match drawcal::http::Service::start(&cfg, drawcal::jobs::engine_job_fn()).await {
         Ok(_) => panic!("served without keys on 0.0.0.0"),

@@ -67,6 +67,8 @@ pub struct Options {
     pub client_timeout: Duration,
     pub idle_timeout: Duration,
     pub max_joint_change_deg: f64,
+    /// `--cors-origin`s.
+    pub cors_origins: Vec<String>,
 }
 
 impl Default for Options {
@@ -80,6 +82,7 @@ impl Default for Options {
             client_timeout: Duration::from_secs(30),
             idle_timeout: Duration::from_secs(120),
             max_joint_change_deg: drawcal::compensate::DEFAULT_MAX_JOINT_CHANGE_DEG,
+            cors_origins: Vec::new(),
         }
     }
 }
@@ -105,12 +108,15 @@ impl TestApp {
             max_joint_change_deg: o.max_joint_change_deg,
             insecure_no_auth: false,
             bootstrap_admin_key: None,
+            allowed_hosts: Vec::new(),
+            cors_origins: o.cors_origins.clone(),
             jobs: JobConfig {
                 workers: o.workers,
                 lease: o.lease,
                 poll: Duration::from_millis(100),
                 shutdown_grace: o.grace,
                 max_attempts: 3,
+                max_interruptions: 10,
             },
         };
         let service = Service::start(&cfg, o.job_fn)

@@ -166,9 +166,37 @@ async fn shutdown_hands_a_running_job_back_and_restart_runs_it() {
     );
     assert_eq!(j["state"], "failed"); // the stand-in always ends in failure
     assert_eq!(
-        j["attempts"], 1,
-        "the handed-back claim did not count as an attempt: {j}"
+        (&j["attempts"], &j["interruptions"]),
+        (&serde_json::Value::from(1), &serde_json::Value::from(0)),
+        "the handed-back claim counted neither as an attempt nor as an interruption: {j}"
     );
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_job_that_panics_is_run_again_then_ends_saying_why() {
+    let runs = Arc::new(AtomicUsize::new(0));
+    let counted = runs.clone();
+    let app = TestApp::spawn_with(
+        "panics",
+        Options {
+            job_fn: Arc::new(move |_input, _progress| {
+                counted.fetch_add(1, Ordering::SeqCst);
+                panic!("a stand-in engine that always panics")
+            }),
+            ..Options::default()
+        },
+    )
+    .await;
+    let sid = session_with_poses(&app, "JOB-PANIC").await;
+    let job = enqueue(&app, sid).await;
+    let j = wait_state(&app, job, "failed").await;
+    // A panic may be a resource's, not the data's: run again until the
+    // attempts (3 in the test app, as by default) are used up.
+    assert_eq!(runs.load(Ordering::SeqCst), 3, "{j}");
+    assert_eq!((&j["attempts"], &j["max_attempts"]), (&json!(3), &json!(3)));
+    assert_eq!(j["interruptions"], 0, "{j}");
+    assert_eq!(j["error"], "internal error: the engine panicked", "{j}");
     app.stop().await;
 }
 

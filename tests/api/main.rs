@@ -10,6 +10,7 @@ mod common;
 
 mod auth;
 mod bad_requests;
+mod browser_safety;
 mod compensate_backlash;
 mod compensate_bound;
 mod compensate_csv;

@@ -44,7 +44,7 @@ async fn read_until_closed(tcp: &mut TcpStream, within: Duration) -> String {
 /// with the app's admin key and `extra` header lines.
 async fn post_rig_head(app: &TestApp, tcp: &mut TcpStream, length: usize, extra: &str) {
     let head = format!(
-        "POST /rigs HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {}\r\nContent-Type: application/json\r\nContent-Length: {length}\r\n{extra}\r\n",
+        "POST /rigs HTTP/1.1\r\nHost: localhost\r\nAuthorization: Bearer {}\r\nContent-Type: application/json\r\nContent-Length: {length}\r\n{extra}\r\n",
         app.admin_key
     );
     tcp.write_all(head.as_bytes()).await.unwrap();
@@ -64,7 +64,7 @@ async fn headers_sent_a_byte_at_a_time_are_cut_off() {
     let mut tcp = connect(&app).await;
     let started = Instant::now();
     // Half a request line, then a trickle that never completes the headers.
-    tcp.write_all(b"GET /health HTTP/1.1\r\nHost: x\r\n")
+    tcp.write_all(b"GET /health HTTP/1.1\r\nHost: localhost\r\n")
         .await
         .unwrap();
     let trickle = async {
@@ -187,7 +187,7 @@ async fn a_client_that_stops_reading_does_not_hold_up_the_shutdown() {
     socket.set_recv_buffer_size(4096).unwrap();
     let addr = app.base.trim_start_matches("http://").parse().unwrap();
     let mut tcp = socket.connect(addr).await.unwrap();
-    let request = b"GET / HTTP/1.1\r\nHost: x\r\n\r\n".repeat(2000);
+    let request = b"GET / HTTP/1.1\r\nHost: localhost\r\n\r\n".repeat(2000);
     tcp.write_all(&request).await.unwrap();
     tokio::time::sleep(Duration::from_millis(300)).await;
     let started = Instant::now();

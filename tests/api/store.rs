@@ -2,6 +2,7 @@
 //! a fresh database; and the two migration folders in lockstep.
 
 use std::collections::BTreeSet;
+use std::time::Duration;
 
 use drawcal::store::{
     CalibrationFilter, NewCalibration, NewKey, NewRobot, Page, Store, StoreError,
@@ -158,39 +159,56 @@ async fn suite(store: Store) {
         Err(StoreError::NotFound { .. })
     ));
 
-    // Jobs: claim, heartbeat, lease expiry, completion, versions.
+    // Jobs: claim, heartbeat, lease expiry, completion, versions. Leases
+    // are on the database's clock: short ones, and real waits.
+    const MAX_INTERRUPTIONS: i64 = 2;
     let j1 = store.create_job(s.id, r1.id, "{}", 2).await.unwrap();
     let j2 = store.create_job(s.id, r1.id, "{}", 2).await.unwrap();
-    let t0 = drawcal::store::now_ms();
-    let c1 = store.claim_job("w1", t0, 1000).await.unwrap().unwrap();
+    let c1 = store
+        .claim_job("w1", 60_000, MAX_INTERRUPTIONS)
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(
-        (c1.id, c1.state.as_str(), c1.attempts),
-        (j1.id, "running", 1)
+        (c1.id, c1.state.as_str(), c1.attempts, c1.interruptions),
+        (j1.id, "running", 0, 0)
     );
-    let c2 = store.claim_job("w2", t0, 1000).await.unwrap().unwrap();
+    let c2 = store
+        .claim_job("w2", 200, MAX_INTERRUPTIONS)
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(c2.id, j2.id, "a leased job is not claimed twice");
-    assert!(store.claim_job("w3", t0, 1000).await.unwrap().is_none());
+    assert!(
+        store
+            .claim_job("w3", 200, MAX_INTERRUPTIONS)
+            .await
+            .unwrap()
+            .is_none()
+    );
     assert_eq!(
         store
-            .heartbeat(j1.id, "w1", t0 + 2000, Some("lm"), 0.5)
+            .heartbeat(j1.id, "w1", 60_000, Some("lm"), 0.5)
             .await
             .unwrap(),
         Some(false)
     );
     assert_eq!(
         store
-            .heartbeat(j1.id, "w9", t0 + 2000, None, 0.5)
+            .heartbeat(j1.id, "w9", 60_000, None, 0.5)
             .await
             .unwrap(),
         None
     );
-    // w2's lease expires: w3 takes j2 over; w2 can no longer finish it.
+    // w2's lease expires: w3 takes j2 over, an interruption and not an
+    // attempt; w2 can no longer finish it.
+    tokio::time::sleep(Duration::from_millis(300)).await;
     let c3 = store
-        .claim_job("w3", t0 + 1500, 1000)
+        .claim_job("w3", 60_000, MAX_INTERRUPTIONS)
         .await
         .unwrap()
         .unwrap();
-    assert_eq!((c3.id, c3.attempts), (j2.id, 2));
+    assert_eq!((c3.id, c3.attempts, c3.interruptions), (j2.id, 0, 1));
     assert!(
         !store
             .finish_job(j2.id, "w2", "failed", Some("x"))
@@ -206,7 +224,7 @@ async fn suite(store: Store) {
     assert!(flagged.cancel_requested);
     assert_eq!(
         store
-            .heartbeat(j1.id, "w1", t0 + 3000, None, 0.6)
+            .heartbeat(j1.id, "w1", 60_000, None, 0.6)
             .await
             .unwrap(),
         Some(true)
@@ -223,20 +241,99 @@ async fn suite(store: Store) {
         store.request_cancel(j1.id).await,
         Err(StoreError::Conflict(_))
     ));
-    // After max_attempts expired leases a job is given up.
+    // After MAX_INTERRUPTIONS expired leases a job is given up, saying so;
+    // interruptions are not attempts (j3 is allowed one failed run, and
+    // is run again after its first interruption).
     let j3 = store.create_job(s.id, r1.id, "{}", 1).await.unwrap();
-    store.claim_job("w4", t0, 10).await.unwrap().unwrap();
-    assert!(store.claim_job("w5", t0 + 100, 10).await.unwrap().is_none());
+    store
+        .claim_job("w4", 50, MAX_INTERRUPTIONS)
+        .await
+        .unwrap()
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(120)).await;
+    let again = store
+        .claim_job("w5", 50, MAX_INTERRUPTIONS)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!((again.id, again.interruptions), (j3.id, 1));
+    tokio::time::sleep(Duration::from_millis(120)).await;
+    assert!(
+        store
+            .claim_job("w6", 50, MAX_INTERRUPTIONS)
+            .await
+            .unwrap()
+            .is_none()
+    );
     let given_up = store.get_job(j3.id).await.unwrap();
-    assert_eq!(given_up.state, "failed");
-    assert!(given_up.error.unwrap().contains("abandoned"));
-    // Requeue at shutdown does not count the claim.
+    assert_eq!(
+        (given_up.state.as_str(), given_up.interruptions),
+        ("failed", 2)
+    );
+    let why = given_up.error.unwrap_or_default();
+    assert!(why.contains("abandoned"), "{why}");
+    // A run that fails by itself: queued again while attempts remain (a
+    // failure that may not repeat), ended at once otherwise.
+    let j5 = store.create_job(s.id, r1.id, "{}", 2).await.unwrap();
+    store
+        .claim_job("w8", 60_000, MAX_INTERRUPTIONS)
+        .await
+        .unwrap()
+        .unwrap();
+    let retried = store
+        .fail_job(j5.id, "w8", "panicked", true)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!((retried.state.as_str(), retried.attempts), ("queued", 1));
+    store
+        .claim_job("w8", 60_000, MAX_INTERRUPTIONS)
+        .await
+        .unwrap()
+        .unwrap();
+    let ended = store
+        .fail_job(j5.id, "w8", "panicked", true)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!((ended.state.as_str(), ended.attempts), ("failed", 2));
+    assert!(
+        store
+            .fail_job(j5.id, "w8", "x", true)
+            .await
+            .unwrap()
+            .is_none()
+    );
+    let j6 = store.create_job(s.id, r1.id, "{}", 3).await.unwrap();
+    store
+        .claim_job("w8", 60_000, MAX_INTERRUPTIONS)
+        .await
+        .unwrap()
+        .unwrap();
+    let refused = store
+        .fail_job(j6.id, "w8", "bad poses", false)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!((refused.state.as_str(), refused.attempts), ("failed", 1));
+    // Requeue at shutdown counts neither.
     let j4 = store.create_job(s.id, r1.id, "{}", 3).await.unwrap();
-    store.claim_job("w6", t0, 1000).await.unwrap().unwrap();
+    store
+        .claim_job("w6", 60_000, MAX_INTERRUPTIONS)
+        .await
+        .unwrap()
+        .unwrap();
     assert!(store.requeue_job(j4.id, "w6").await.unwrap());
     let back = store.get_job(j4.id).await.unwrap();
-    assert_eq!((back.state.as_str(), back.attempts), ("queued", 0));
-    let again = store.claim_job("w7", t0, 1000).await.unwrap().unwrap();
+    assert_eq!(
+        (back.state.as_str(), back.attempts, back.interruptions),
+        ("queued", 0, 0)
+    );
+    let again = store
+        .claim_job("w7", 60_000, MAX_INTERRUPTIONS)
+        .await
+        .unwrap()
+        .unwrap();
     let b = store.complete_job(again.id, "w7", &cal(0.1)).await.unwrap();
     assert_eq!(b.version, 2, "versions count per robot");
     assert_eq!(
