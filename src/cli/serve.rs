@@ -69,6 +69,21 @@ pub struct ServeArgs {
         value_delimiter = ','
     )]
     pub cors_origins: Vec<String>,
+    /// Pose uploads one API key may make per minute (a burst of a minute's
+    /// worth, then at that rate); past it 429 with Retry-After.
+    #[arg(long, env = "DRAWCAL_MAX_UPLOADS_PER_MINUTE", default_value_t = 600,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_uploads_per_minute: u32,
+    /// Identification jobs one API key may submit per minute; past it 429
+    /// with Retry-After.
+    #[arg(long, env = "DRAWCAL_MAX_JOBS_PER_MINUTE", default_value_t = 60,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_jobs_per_minute: u32,
+    /// Jobs that may wait in the queue (all replicas together); a
+    /// submission past it is answered 429.
+    #[arg(long, env = "DRAWCAL_MAX_QUEUED_JOBS", default_value_t = 1000,
+          value_parser = clap::value_parser!(i64).range(1..))]
+    pub max_queued_jobs: i64,
     /// Job lease (seconds): a job whose process died runs again this long
     /// after its last heartbeat.
     #[arg(long, env = "DRAWCAL_JOB_LEASE_SECS", default_value_t = 15)]
@@ -193,6 +208,11 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
         bootstrap_admin_key: admin_key,
         allowed_hosts: args.allowed_hosts.clone(),
         cors_origins: args.cors_origins.clone(),
+        limits: crate::http::limits::LimitConfig {
+            uploads_per_minute: args.max_uploads_per_minute,
+            jobs_per_minute: args.max_jobs_per_minute,
+            max_queued_jobs: args.max_queued_jobs,
+        },
         jobs: JobConfig {
             workers: args.workers,
             lease: Duration::from_secs(args.job_lease_secs),

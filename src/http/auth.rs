@@ -11,8 +11,11 @@
 //! wrong role: 403. What a key does is recorded under its name
 //! ([`Caller::name`]), never under a name the client sends.
 
+use std::collections::HashMap;
 use std::fmt;
 use std::str::FromStr;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 use axum::extract::{MatchedPath, Request, State};
 use axum::http::Method;
@@ -22,6 +25,52 @@ use sha2::{Digest, Sha256};
 
 use super::AppState;
 use super::error::ApiError;
+use crate::store::KeyRec;
+
+/// How long a key read from the store is used without reading it again: a
+/// revocation or expiry through this process takes effect at once (the
+/// cache is emptied), through another replica within this time. The check
+/// of a request then costs a hash and a map lookup, not a query.
+pub const KEY_CACHE_TTL: Duration = Duration::from_secs(1);
+
+/// Most keys (known or not) the cache holds: past it, it starts afresh, so
+/// that a client trying random keys cannot grow it.
+const KEY_CACHE_MAX: usize = 4096;
+
+/// Keys by the SHA-256 of their secret, as last read (`None`: no such key).
+#[derive(Debug, Default)]
+pub struct KeyCache {
+    entries: Mutex<HashMap<String, (Instant, Option<KeyRec>)>>,
+}
+
+impl KeyCache {
+    /// The key with `hash`, from the cache if read within
+    /// [`KEY_CACHE_TTL`], else from the store.
+    async fn get(&self, app: &AppState, hash: String) -> Result<Option<KeyRec>, ApiError> {
+        if let Some((at, key)) = self.lock().get(&hash) {
+            if at.elapsed() < KEY_CACHE_TTL {
+                return Ok(key.clone());
+            }
+        }
+        let key = app.store.key_by_hash(&hash).await?;
+        let mut entries = self.lock();
+        if entries.len() >= KEY_CACHE_MAX {
+            entries.clear();
+        }
+        entries.insert(hash, (Instant::now(), key.clone()));
+        Ok(key)
+    }
+
+    /// Forget every key (after a key was created or revoked here).
+    pub fn clear(&self) {
+        self.lock().clear();
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<String, (Instant, Option<KeyRec>)>> {
+        // A panic while holding the lock leaves a map that is still whole.
+        self.entries.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
 
 /// What a key may do; each role holds the ones before it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -185,11 +234,7 @@ async fn authenticate(app: &AppState, header: Option<String>) -> Result<Caller, 
             ApiError::Unauthorized("the Authorization header is not `Bearer <key>`".into())
         })?;
     let unknown = || ApiError::Unauthorized("unknown API key".into());
-    let key = app
-        .store
-        .key_by_hash(&hash(secret))
-        .await?
-        .ok_or_else(unknown)?;
+    let key = app.keys.get(app, hash(secret)).await?.ok_or_else(unknown)?;
     if let Some(at) = &key.revoked_at {
         return Err(ApiError::Unauthorized(format!(
             "the key '{}' was revoked at {at}",

@@ -143,6 +143,7 @@ pub async fn create_key(
     ApiJson(k): ApiJson<CreateKey>,
 ) -> ApiResult<(StatusCode, Json<CreatedKey>)> {
     let created = create(&app.store, &caller.name, &k.name, &k.role, k.expires_at).await?;
+    app.keys.clear();
     Ok((StatusCode::CREATED, Json(created)))
 }
 
@@ -169,7 +170,9 @@ pub async fn revoke_key(
     Extension(caller): Extension<Caller>,
     Id(id): Id,
 ) -> ApiResult<Json<KeyRec>> {
-    Ok(Json(app.store.revoke_key(id, &caller.name).await?))
+    let key = app.store.revoke_key(id, &caller.name).await?;
+    app.keys.clear();
+    Ok(Json(key))
 }
 
 /// Audit query.

@@ -21,6 +21,7 @@ pub mod error;
 pub mod extract;
 pub mod guard;
 pub mod keys;
+pub mod limits;
 pub mod ops;
 pub mod resources;
 pub mod sessions;
@@ -86,6 +87,8 @@ pub struct ServiceConfig {
     /// Web origins allowed to call the API from a browser (`--cors-origin`);
     /// empty: none.
     pub cors_origins: Vec<String>,
+    /// Per-key rates and the job queue's bound.
+    pub limits: limits::LimitConfig,
 }
 
 /// The whole request body must arrive within this many client timeouts
@@ -114,6 +117,10 @@ pub struct App {
     pub insecure_no_auth: bool,
     /// Which hosts and origins browsers are answered from.
     pub browser: Arc<guard::BrowserPolicy>,
+    /// API keys as last read ([`auth::KEY_CACHE_TTL`]).
+    pub keys: auth::KeyCache,
+    /// Per-key rates and the job queue's bound.
+    pub limits: limits::Limits,
 }
 
 /// Threads for request-path numerical work: the number of cores.
@@ -414,6 +421,8 @@ impl Service {
             cache: cache::CompensationCache::new(cfg.max_joint_change_deg),
             compute: compute::ComputePool::new(compute_threads()),
             insecure_no_auth: cfg.insecure_no_auth,
+            keys: auth::KeyCache::default(),
+            limits: limits::Limits::new(cfg.limits),
             browser: Arc::new(guard::BrowserPolicy::new(
                 addr,
                 &cfg.allowed_hosts,

@@ -19,6 +19,7 @@ use utoipa::{IntoParams, ToSchema};
 use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json, without_bom};
+use super::limits::Action;
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
 use crate::jobs::{JobOptions, session_csv};
 use crate::model::{Dataset, Rig, Robot};
@@ -338,6 +339,7 @@ async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot
         (status = 400, description = "Malformed JSON or bad id", body = ErrorBody),
         (status = 404, description = "No such session", body = ErrorBody),
         (status = 409, description = "Another upload was stored meanwhile, or the session's stored model or rig no longer passes validation (stored by an earlier version)", body = ErrorBody),
+        (status = 429, description = "The key is over its uploads a minute (`--max-uploads-per-minute`): error `too_many_requests`, `Retry-After` in seconds", body = ErrorBody, headers(("Retry-After" = u64, description = "Seconds until a retry can succeed"))),
         (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
         (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Neither text/csv nor application/json", body = ErrorBody),
@@ -348,6 +350,7 @@ pub async fn upload_poses(
     Id(id): Id,
     body: RawBody,
 ) -> ApiResult<Json<UploadResult>> {
+    app.limits.take(&caller.name, Action::Upload)?;
     let session = app.store.get_session(id).await?;
     let table = upload_table(&body)?;
     // Columns: the first batch fixes them; later batches must match (in any order).
@@ -530,6 +533,7 @@ pub async fn get_poses(State(app): State<AppState>, Id(id): Id) -> ApiResult<Res
         (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
         (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 409, description = "The session's stored model or rig no longer passes validation (stored by an earlier version)", body = ErrorBody),
+        (status = 429, description = "The key is over its jobs a minute (`--max-jobs-per-minute`), or the queue is full (`--max-queued-jobs`): error `too_many_requests`, `Retry-After` in seconds", body = ErrorBody, headers(("Retry-After" = u64, description = "Seconds until a retry can succeed"))),
         (status = 415, description = "Body not JSON", body = ErrorBody),
         (status = 422, description = "Bad options, or the session has no poses", body = ErrorBody)))]
 pub async fn enqueue_job(
@@ -581,6 +585,21 @@ pub async fn enqueue_job(
         n_strings: rig.n_strings(),
     };
     crate::identify::held(layout, &options.to_identify())?;
+    // Counted after the request is known good: a refused request costs
+    // the key nothing.
+    app.limits.take(&caller.name, Action::Job)?;
+    let (_, queued) = app
+        .store
+        .list_jobs(
+            None,
+            Some("queued"),
+            crate::store::Page {
+                limit: 1,
+                offset: 0,
+            },
+        )
+        .await?;
+    app.limits.check_queue(queued)?;
     let opts = serde_json::to_string(&options).map_err(|e| ApiError::Internal(e.to_string()))?;
     let job = app
         .store

@@ -241,6 +241,7 @@ async fn no_auth_is_refused_beyond_the_loopback() {
         bootstrap_admin_key: None,
         allowed_hosts: Vec::new(),
         cors_origins: Vec::new(),
+        limits: Default::default(),
     };
     let err = match drawcal::http::Service::start(&cfg, drawcal::jobs::engine_job_fn()).await {
         Ok(_) => panic!("served without keys on 0.0.0.0"),

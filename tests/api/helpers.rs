@@ -69,6 +69,8 @@ pub struct Options {
     pub max_joint_change_deg: f64,
     /// `--cors-origin`s.
     pub cors_origins: Vec<String>,
+    /// Rates and the queue's bound.
+    pub limits: drawcal::http::limits::LimitConfig,
 }
 
 impl Default for Options {
@@ -83,6 +85,7 @@ impl Default for Options {
             idle_timeout: Duration::from_secs(120),
             max_joint_change_deg: drawcal::compensate::DEFAULT_MAX_JOINT_CHANGE_DEG,
             cors_origins: Vec::new(),
+            limits: Default::default(),
         }
     }
 }
@@ -110,6 +113,7 @@ impl TestApp {
             bootstrap_admin_key: None,
             allowed_hosts: Vec::new(),
             cors_origins: o.cors_origins.clone(),
+            limits: o.limits,
             jobs: JobConfig {
                 workers: o.workers,
                 lease: o.lease,

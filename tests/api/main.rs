@@ -20,6 +20,7 @@ mod deploy;
 mod e2e;
 mod helpers;
 mod jobs;
+mod limits;
 mod logs;
 mod openapi;
 mod requires;
