@@ -104,13 +104,19 @@ pub fn run<'a>(
     opts: &Options,
     progress: &dyn Progress,
 ) -> Result<Run<'a>> {
-    let obs = Observations::new(robot, rig, data, &opts.identify)?;
+    let mut obs = Observations::new(robot, rig, data, &opts.identify)?;
     let checked = warnings::check_input(&obs);
     if let (Some(evidence), false) = (&checked.in_radians, opts.force) {
         return Err(Error::field("poses", InputCheck::refusal(evidence)));
     }
     let mut warnings = checked.warnings;
     let geo = identify::geometric(&obs, &opts.identify, progress)?;
+    // With the anchors identified, T is located with them from here on:
+    // the robot's part of the fit holds for those points, and every figure
+    // after (the physics analysis, the held-out errors) is of them.
+    if let Some(r) = &geo.rig {
+        obs.set_anchors(r.calibrated())?;
+    }
     warnings.extend(identify::few_poses_warning(&obs, &geo, &opts.identify));
     let physics = physics_step(&obs, &geo, opts, progress)?;
     Ok(Run {
