@@ -130,7 +130,10 @@ pub fn report(
                 ..opts.clone()
             },
         )
-        .len(),
+        .iter()
+        // The anchors' shape modes are counted in `rig_anchors`.
+        .filter(|&&k| k < l.len())
+        .count(),
         n_identified: model
             .selection
             .map(|s| s.free.len())

@@ -607,9 +607,9 @@ pub struct RigAnchors {
 impl RigAnchors {
     /// The gauge, as the report states it.
     pub const GAUGE: &str = "corrections orthogonal to the six rigid motions of rig.json's \
-        anchors (sum of corrections 0, sum of anchor x correction 0): the best rigid fit of the \
-        calibrated anchors onto rig.json's is the identity, and the rigid part of any anchor \
-        error is in base_in_rig";
+        anchors (the corrections sum to zero, and so do their moments A x dA): the best rigid \
+        fit of the calibrated anchors onto rig.json's is the identity, and the rigid part of \
+        any anchor error is in base_in_rig";
 
     /// The largest correction of any anchor (mm) and that anchor.
     pub fn largest(&self) -> Option<(&AnchorCorrection, f64)> {

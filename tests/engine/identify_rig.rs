@@ -193,3 +193,39 @@ fn refused_on_three_strings_and_on_points_naming_the_option() {
     let three = rig::refusal(3).unwrap();
     assert!(three.contains("3 strings"), "{three}");
 }
+
+/// The figures docs/CLI.md quotes, over ten seeds: held-out RMS against
+/// the exact rig's with and without the option, and the worst anchor
+/// coordinate's distance from the truth in sigmas (off and exact rigs).
+#[test]
+#[ignore = "a sweep for the documentation: --ignored --nocapture"]
+fn sweep_of_ten_sessions() {
+    for seed in 1..=10u64 {
+        let (nominal, off, robot, truth) = session(seed, &BUMPS);
+        let (_, exact, _, exact_anchors) = session(seed, &[[0.0; 3]; 4]);
+        let floor = calibrate(&robot, &nominal, &exact, false)
+            .stats
+            .test
+            .after
+            .rms_mm;
+        let plain = calibrate(&robot, &nominal, &off, false)
+            .stats
+            .test
+            .after
+            .rms_mm;
+        let with = calibrate(&robot, &nominal, &off, true);
+        let z = worst_z(&with, &nominal, &truth);
+        let z_exact = worst_z(
+            &calibrate(&robot, &nominal, &exact, true),
+            &nominal,
+            &exact_anchors,
+        );
+        let w = with.stats.test.after.rms_mm;
+        println!(
+            "seed {seed}: held out floor {floor:.4} mm, without {plain:.4} ({:.2}x), with \
+             {w:.4} ({:.3}x); worst z {z:.2}, on the exact rig {z_exact:.2}",
+            plain / floor,
+            w / floor
+        );
+    }
+}
