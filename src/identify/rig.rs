@@ -331,6 +331,88 @@ pub fn coordinate_sines(
         .collect()
 }
 
+/// What a constant error of rig.json's anchors would explain of a fit made
+/// with them: [`probe`]'s answer.
+#[derive(Debug, Clone)]
+pub struct Probe {
+    /// Held-out 3-D RMS (mm, robot base frame) with the anchors fitted with
+    /// the robot: T located again with them at every test pose.
+    pub test_rms_mm: f64,
+    /// The largest anchor correction (mm) and its anchor (0-based).
+    pub largest_mm: f64,
+    /// Which anchor that is.
+    pub largest_anchor: usize,
+    /// Residual scale of the train readings with the anchors fitted (mm):
+    /// the string noise, when the anchors explain the strings.
+    pub sigma_mm: f64,
+}
+
+/// Refit `values` (the geometric fit over `free`, on `obs`'s train poses)
+/// with the anchors' shape modes free too, and measure the held-out error
+/// with the anchors so found: whether the strings disagree the way a
+/// constant anchor error explains (the pipeline then proposes
+/// `--rig-anchors`). `None` with fewer than [`MIN_STRINGS`] strings, no
+/// test poses, or a fit that does not converge.
+pub fn probe(obs: &super::Observations, values: &[f64], free: &[usize]) -> Option<Probe> {
+    let l = obs.chain.layout;
+    if l.n_strings < MIN_STRINGS || obs.test.is_empty() || values.len() != l.len() {
+        return None;
+    }
+    let modes = AnchorModes::new(&obs.anchors).ok()?;
+    let mut full = values.to_vec();
+    full.extend(std::iter::repeat_n(0.0, modes.len()));
+    let mut f = free.to_vec();
+    f.extend((0..modes.len()).map(|j| l.anchor_mode(j)));
+    let problem = super::problem::CalibrationProblem::new(
+        obs.chain,
+        obs.anchors.clone(),
+        obs.train_poses(),
+        full,
+        f,
+    )
+    .with_anchor_modes(modes.clone());
+    let fit = super::lm::minimize(
+        &problem,
+        &problem.x0(),
+        &super::lm::LmSettings::default(),
+        |_, _| true,
+    )
+    .ok()?;
+    let p = problem.expand(&fit.x);
+    let n = super::lm::LeastSquares::n_residuals(&problem) as f64;
+    let sigma_mm = (2.0 * fit.cost / (n - fit.x.len() as f64).max(1.0)).sqrt();
+    let z = &p[l.len()..];
+    let anchors = modes.anchors(z);
+    let b = l.base();
+    let rb = crate::kinematics::rpy_matrix(p[b + 3], p[b + 4], p[b + 5]);
+    let mut errors = Vec::with_capacity(obs.test.len());
+    for &i in &obs.test {
+        let crate::model::Measurement::Strings(readings) = &obs.data.poses[i].measurement else {
+            return None;
+        };
+        let dist: Vec<f64> = readings.iter().map(|v| v + obs.rig.r_mm).collect();
+        let at = crate::measure::locate(&anchors, &dist, Some(&obs.measured[i])).ok()?;
+        let (_, t) = obs.chain.point(
+            &p,
+            &obs.data.poses[i].q_rad,
+            crate::kinematics::chain::OutputFrame::Rig,
+        );
+        errors.push(rb.transpose() * (t - at.point));
+    }
+    let (largest_anchor, largest_mm) = anchors
+        .iter()
+        .zip(&modes.nominal)
+        .map(|(a, n)| (a - n).norm())
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    Some(Probe {
+        test_rms_mm: crate::stats::rms_norm(&errors),
+        largest_mm,
+        largest_anchor,
+        sigma_mm,
+    })
+}
+
 /// Whether a sine of [`coordinate_sines`] marks an anchor as determined.
 pub fn identified(sine: f64) -> bool {
     sine > identifiability::DEFAULT_TOLERANCE

@@ -127,6 +127,17 @@ fn anchors_off_by_a_millimetre_are_identified_and_the_held_out_error_recovers() 
     );
     assert!(rms_with <= 1.1 * floor, "{rms_with} vs floor {floor}");
     assert!(rms_plain > 1.5 * floor, "{rms_plain} vs floor {floor}");
+    // Without the option the analysis names nothing and says what to do.
+    assert!(plain.findings.is_empty(), "{:?}", plain.findings);
+    assert!(
+        plain
+            .warnings
+            .iter()
+            .any(|w| w.contains("re-run with --rig-anchors")),
+        "{:?}",
+        plain.warnings
+    );
+    assert!(with.warnings.is_empty(), "{:?}", with.warnings);
     let z = worst_z(&with, &nominal, &truth);
     assert!(
         z < 3.0,
@@ -168,6 +179,7 @@ fn on_a_rig_as_measured_the_option_changes_nothing_significant() {
         z < 3.5,
         "a correction {z:.2} sigma from zero on an exact rig"
     );
+    assert!(plain.warnings.is_empty(), "{:?}", plain.warnings);
     let (a, b) = (plain.stats.test.after.rms_mm, with.stats.test.after.rms_mm);
     eprintln!("held out: rig.json's anchors {a:.4} mm, --rig-anchors {b:.4} mm");
     assert!(b < 1.05 * a && b > 0.9 * a, "{a} {b}");
