@@ -241,3 +241,33 @@ fn sweep_of_ten_sessions() {
         );
     }
 }
+
+/// The proposal does not displace what the catalogue names: a string's
+/// zero offset and an anchor that moved part-way through the session (the
+/// effects a constant anchor error most resembles) keep their names, and
+/// nothing says to re-run with --rig-anchors.
+#[test]
+fn catalogue_string_effects_keep_their_names() {
+    for (effect, seed) in [
+        ("sensor_offset", 3),
+        ("anchor_step", 5),
+        ("sensor_scale", 8),
+    ] {
+        let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
+            "robot": "er3a",
+            "n_poses": 150,
+            "seed": seed,
+            "effects": [{"effect": effect, "sensor": 2, "size_x_noise": 5}]
+        }))
+        .unwrap();
+        let sim = simulate::generate(&spec).unwrap();
+        let rep = calibrate(&sim.robot, &sim.rig, &sim.dataset, false);
+        let named: Vec<&str> = rep.findings.iter().map(|f| f.effect.as_str()).collect();
+        assert!(named.contains(&effect), "{effect}: {named:?}");
+        assert!(
+            !rep.warnings.iter().any(|w| w.contains("--rig-anchors")),
+            "{effect}: {:?}",
+            rep.warnings
+        );
+    }
+}
