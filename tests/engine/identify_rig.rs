@@ -202,8 +202,26 @@ fn refused_on_three_strings_and_on_points_naming_the_option() {
         err.contains("rig_anchors") && err.contains("measured points"),
         "{err}"
     );
-    let three = rig::refusal(3).unwrap();
-    assert!(three.contains("3 strings"), "{three}");
+    // A three-string session, through the pipeline.
+    let three = Rig::from_json(
+        &std::fs::read_to_string(crate::common::dir("rigs").join("three_strings.json")).unwrap(),
+    )
+    .unwrap();
+    let sim = simulate::generate_with(
+        &spec(3),
+        simulate::SpecFiles {
+            robot: None,
+            rig: Some(three.clone()),
+        },
+    )
+    .unwrap();
+    let err = pipeline::calibrate(&sim.robot, &three, &sim.dataset, &opts, &NoProgress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("rig_anchors") && err.contains("3 strings"),
+        "{err}"
+    );
 }
 
 /// The figures docs/CLI.md quotes, over ten seeds: held-out RMS against
