@@ -104,7 +104,7 @@ impl<'a> Observations<'a> {
             None
         };
         let hints = nominal_points(robot, rig, data);
-        let (measured, located) = locate_all(data, &anchors, rig.r_mm, &hints)?;
+        let (measured, located) = locate_all(data, &anchors, rig.r_mm, &[], &hints)?;
         let q_trig = data.poses.iter().map(|p| joint_trig(&p.q_rad)).collect();
         Ok(Observations {
             anchor_modes,
@@ -144,13 +144,18 @@ impl<'a> Observations<'a> {
         }
     }
 
-    /// Use `anchors` from now on (the rig's, identified): every pose's T
-    /// located again with them, from where it was located before (which
-    /// side of a plane of anchors it is on does not change by a
-    /// millimetre's correction).
-    pub fn set_anchors(&mut self, anchors: Vec<Vector3<f64>>) -> Result<()> {
+    /// Use `anchors` from now on (the rig's, identified), with the string
+    /// zero offsets `offsets_mm` fitted beside them (zeros when they were
+    /// not identified): every pose's T located again, from where it was
+    /// located before (which side of a plane of anchors it is on does not
+    /// change by a millimetre's correction). The offsets count here because
+    /// the anchors were fitted with them: where the two trade (an anchor
+    /// moved along its string against that string's offset), the anchors
+    /// alone would locate T inconsistently with the fit.
+    pub fn set_anchors(&mut self, anchors: Vec<Vector3<f64>>, offsets_mm: &[f64]) -> Result<()> {
         let hints: Vec<Option<Vector3<f64>>> = self.measured.iter().copied().map(Some).collect();
-        let (measured, located) = locate_all(self.data, &anchors, self.rig.r_mm, &hints)?;
+        let (measured, located) =
+            locate_all(self.data, &anchors, self.rig.r_mm, offsets_mm, &hints)?;
         self.anchors = anchors;
         self.measured = measured;
         self.located = located;
@@ -317,12 +322,14 @@ impl<'a> Observations<'a> {
 }
 
 /// T at every pose of `data` (the rig frame): located from the strings
-/// with `anchors` and `r_mm` (on the side of each `hints` point), or as
-/// measured; and the multilateration results of string poses.
-fn locate_all(
+/// with `anchors`, `r_mm` and each string's zero offset (`offsets_mm`; none
+/// given count zero), on the side of each `hints` point, or as measured;
+/// and the multilateration results of string poses.
+pub(crate) fn locate_all(
     data: &Dataset,
     anchors: &[Vector3<f64>],
     r_mm: f64,
+    offsets_mm: &[f64],
     hints: &[Option<Vector3<f64>>],
 ) -> Result<(Vec<Vector3<f64>>, Vec<Located>)> {
     let mut measured = Vec::with_capacity(data.poses.len());
@@ -330,7 +337,11 @@ fn locate_all(
     for (pose, hint) in data.poses.iter().zip(hints) {
         match &pose.measurement {
             Measurement::Strings(l) => {
-                let dist: Vec<f64> = l.iter().map(|v| v + r_mm).collect();
+                let dist: Vec<f64> = l
+                    .iter()
+                    .enumerate()
+                    .map(|(k, v)| v + r_mm + offsets_mm.get(k).copied().unwrap_or(0.0))
+                    .collect();
                 let loc = measure::locate(anchors, &dist, hint.as_ref())
                     .map_err(|e| Error::field("poses", format!("pose {}: {e}", pose.id)))?;
                 measured.push(loc.point);

@@ -390,7 +390,13 @@ pub fn probe(obs: &super::Observations, values: &[f64], free: &[usize]) -> Optio
         let crate::model::Measurement::Strings(readings) = &obs.data.poses[i].measurement else {
             return None;
         };
-        let dist: Vec<f64> = readings.iter().map(|v| v + obs.rig.r_mm).collect();
+        // With the string offsets fitted beside the anchors, as the
+        // pipeline locates T after a rig calibration.
+        let dist: Vec<f64> = readings
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v + obs.rig.r_mm + p[l.string_offset(k)])
+            .collect();
         let at = crate::measure::locate(&anchors, &dist, Some(&obs.measured[i])).ok()?;
         let (_, t) = obs.chain.point(
             &p,

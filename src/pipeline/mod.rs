@@ -115,7 +115,9 @@ pub fn run<'a>(
     // the robot's part of the fit holds for those points, and every figure
     // after (the physics analysis, the held-out errors) is of them.
     if let Some(r) = &geo.rig {
-        obs.set_anchors(r.calibrated())?;
+        let l = obs.chain.layout;
+        let offsets = geo.after.values[l.string_offset(0)..l.r()].to_vec();
+        obs.set_anchors(r.calibrated(), &offsets)?;
     }
     warnings.extend(identify::few_poses_warning(&obs, &geo, &opts.identify));
     let physics = physics_step(&obs, &geo, opts, progress)?;

@@ -143,6 +143,26 @@ fn anchors_off_by_a_millimetre_are_identified_and_the_held_out_error_recovers() 
         z < 3.0,
         "worst anchor coordinate {z:.2} sigma from the truth"
     );
+    // With the string offsets identified too (anchors and offsets trade
+    // along a string): T is located with both, and the error still recovers.
+    let both = pipeline::calibrate(
+        &robot,
+        &nominal,
+        &off,
+        &pipeline::Options {
+            identify: IdentifyOptions {
+                rig_anchors: true,
+                identify_string_offsets: true,
+                ..IdentifyOptions::default()
+            },
+            ..Default::default()
+        },
+        &NoProgress,
+    )
+    .unwrap();
+    let rms_both = both.stats.test.after.rms_mm;
+    eprintln!("with the string offsets too: {rms_both:.4} mm");
+    assert!(rms_both <= 1.1 * floor, "{rms_both} vs floor {floor}");
     let ra = with.rig_anchors.as_ref().unwrap();
     assert_eq!((ra.n_modes, ra.n_identified), (6, 6));
     assert!(ra.anchors.iter().all(|a| a.identified));
