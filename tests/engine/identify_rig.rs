@@ -39,7 +39,15 @@ fn session(
     seed: u64,
     bumps: &[[f64; 3]],
 ) -> (Rig, Dataset, drawcal::model::Robot, Vec<Vector3<f64>>) {
-    let nominal = simulate::preset("er3a").unwrap().1;
+    session_on(simulate::preset("er3a").unwrap().1, seed, bumps)
+}
+
+/// [`session`] on the rig `nominal`.
+fn session_on(
+    nominal: Rig,
+    seed: u64,
+    bumps: &[[f64; 3]],
+) -> (Rig, Dataset, drawcal::model::Robot, Vec<Vector3<f64>>) {
     let mut truth = nominal.clone();
     for (a, b) in truth.anchors_mm.iter_mut().zip(bumps) {
         for c in 0..3 {
@@ -308,4 +316,35 @@ fn catalogue_string_effects_keep_their_names() {
             rep.warnings
         );
     }
+}
+
+/// Five strings (one anchor out of the plane): nine shape modes, all
+/// identified, the anchors within 3 sigma and the held-out error back to
+/// the exact rig's.
+#[test]
+fn five_strings_too() {
+    let five = Rig::from_json(
+        &std::fs::read_to_string(crate::common::dir("rigs").join("five_strings.json")).unwrap(),
+    )
+    .unwrap();
+    let mut bumps = BUMPS.to_vec();
+    bumps.push([0.6, -0.8, -1.1]);
+    let (nominal, off, robot, truth) = session_on(five.clone(), 5, &bumps);
+    let (_, exact, _, _) = session_on(five, 5, &[[0.0; 3]; 5]);
+    let floor = calibrate(&robot, &nominal, &exact, false)
+        .stats
+        .test
+        .after
+        .rms_mm;
+    let with = calibrate(&robot, &nominal, &off, true);
+    let rms = with.stats.test.after.rms_mm;
+    eprintln!("five strings: floor {floor:.4} mm, --rig-anchors {rms:.4} mm");
+    assert!(rms <= 1.1 * floor, "{rms} vs floor {floor}");
+    let ra = with.rig_anchors.as_ref().unwrap();
+    assert_eq!((ra.n_modes, ra.n_identified), (9, 9));
+    let z = worst_z(&with, &nominal, &truth);
+    assert!(
+        z < 3.0,
+        "worst anchor coordinate {z:.2} sigma from the truth"
+    );
 }
