@@ -181,6 +181,16 @@ pub struct IdentifyArgs {
     /// separated report names (`--hold j5.a,j5.d`).
     #[arg(long, value_delimiter = ',')]
     pub hold: Vec<String>,
+    /// Also identify the rig's anchor coordinates (four strings or more),
+    /// less the rigid motion the base pose takes; the report gets each
+    /// anchor's correction and `calibrated_rig`, the rig.json of the next
+    /// session.
+    #[arg(long)]
+    pub rig_anchors: bool,
+    /// Where to write the calibrated rig (rig.json form) found with
+    /// --rig-anchors.
+    #[arg(long, requires = "rig_anchors")]
+    pub out_rig: Option<PathBuf>,
 }
 
 /// `drawcal compensate`.
@@ -287,7 +297,19 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
         identifiability_tolerance: a.identifiability_tolerance,
         undetermined_z: a.undetermined_z,
         hold: a.hold.clone(),
+        rig_anchors: a.rig_anchors,
     };
+    // What --rig-anchors cannot do is the option's fault, not the files'.
+    if a.rig_anchors {
+        let why = identify::rig::refusal(data.n_strings).or_else(|| {
+            (opts.method == Method::Paper).then(|| {
+                "the paper's method identifies the robot alone; use --method lm".to_string()
+            })
+        });
+        if let Some(why) = why {
+            return Err(CliError::Usage(format!("--rig-anchors: {why}")));
+        }
+    }
     let bar = ProgressBar::new(100);
     bar.set_style(
         ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}%")
@@ -335,6 +357,14 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
             source,
         })?;
         to_stdout(&format!("report written to {}\n", out.display()));
+    }
+    if let (Some(out), Some(rig)) = (&a.out_rig, &report.calibrated_rig) {
+        let text = serde_json::to_string_pretty(rig).map_err(CliError::Json)?;
+        std::fs::write(out, text + "\n").map_err(|source| CliError::Io {
+            path: out.clone(),
+            source,
+        })?;
+        to_stdout(&format!("calibrated rig written to {}\n", out.display()));
     }
     Ok(())
 }

@@ -34,6 +34,7 @@ pub fn render(r: &Report, input: &Input, verbose: bool) -> String {
     header(&mut s, r, input);
     accuracy(&mut s, r);
     method(&mut s, r, verbose);
+    rig(&mut s, r, verbose);
     precision(&mut s, r, verbose);
     error_table(&mut s, r);
     outliers(&mut s, r);
@@ -212,6 +213,54 @@ fn method(s: &mut String, r: &Report, verbose: bool) {
                 4,
             );
         }
+    }
+}
+
+/// The rig's anchors, when identified (`--rig-anchors`): one line, the
+/// largest correction and the largest sigma; with `verbose`, every
+/// anchor's correction.
+fn rig(s: &mut String, r: &Report, verbose: bool) {
+    let Some(ra) = &r.rig_anchors else {
+        return;
+    };
+    let Some((big, norm)) = ra.largest() else {
+        return;
+    };
+    let worst = ra
+        .anchors
+        .iter()
+        .flat_map(|a| a.correction_mm_sigma)
+        .fold(0.0, f64::max);
+    let mut text = format!(
+        "rig anchors identified ({} of {} shape modes): largest correction {norm:.3} mm ({}), \
+         1-sigma <= {worst:.3} mm",
+        ra.n_identified, ra.n_modes, big.anchor
+    );
+    let weak: Vec<&str> = ra
+        .anchors
+        .iter()
+        .filter(|a| !a.identified)
+        .map(|a| a.anchor.as_str())
+        .collect();
+    if !weak.is_empty() {
+        let _ = write!(text, "; not determined: {}", weak.join(" "));
+    }
+    line(s, &text, 2);
+    if verbose {
+        for a in &ra.anchors {
+            let c = a.correction_mm;
+            let sd = a.correction_mm_sigma;
+            line(
+                s,
+                &format!(
+                    "  {}: dx {:.3} ± {:.3}, dy {:.3} ± {:.3}, dz {:.3} ± {:.3} mm; \
+                     identifiability {:.3}",
+                    a.anchor, c[0], sd[0], c[1], sd[1], c[2], sd[2], a.identifiability
+                ),
+                4,
+            );
+        }
+        line(s, &format!("  (gauge: {})", ra.gauge), 4);
     }
 }
 

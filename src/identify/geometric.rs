@@ -7,7 +7,7 @@ use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::lm::{self, LmResult, LmSettings};
 use super::problem::CalibrationProblem;
-use super::{IdentifyOptions, Method, Observations, Progress, identifiability};
+use super::{IdentifyOptions, Method, Observations, Progress, identifiability, rig};
 use crate::error::{Error, Result};
 use crate::kinematics::chain::OutputFrame;
 use crate::kinematics::{JointParam, Layout, Params};
@@ -64,6 +64,10 @@ pub struct Geometric {
     /// see [`Observations::flange_orientation_sigma`]), from the fit before the
     /// undetermined parameters were held.
     pub flange_orientation_sigma_rad: Option<f64>,
+    /// The rig's anchors, when they were identified with the robot
+    /// (`rig_anchors`): the rest of this fit is then the robot's part (see
+    /// [`rig::reduce`]), and holds for T located with these anchors.
+    pub rig: Option<rig::RigFit>,
 }
 
 /// The parameters `opts.hold` names (for a robot and rig of layout `l`), as
@@ -141,6 +145,12 @@ pub fn candidates(l: Layout, opts: &IdentifyOptions) -> Vec<usize> {
     if opts.identify_string_offsets && l.n_strings > 0 {
         c.extend((0..l.n_strings).map(|k| l.string_offset(k)));
     }
+    // Last: where the rig's shape and the robot's geometry cannot be told
+    // apart, the robot keeps the parameter and the hand-measured rig
+    // stands.
+    if opts.rig_anchors && l.n_strings >= rig::MIN_STRINGS {
+        c.extend((0..3 * l.n_strings - 6).map(|j| l.anchor_mode(j)));
+    }
     c.retain(|&k| !opts.hold.contains(&l.name(k)));
     c
 }
@@ -155,9 +165,16 @@ pub fn geometric(
     progress: &dyn Progress,
 ) -> Result<Geometric> {
     let before = fit_base_and_tool(obs, progress)?;
-    let mut selection = select_parameters(obs, &before, opts)?;
+    let l = obs.chain.layout;
+    // With the anchors identified, their shape modes follow the layout's
+    // parameters, from rig.json's anchors (zero).
+    let mut start = before.clone();
+    if let (Some(m), true) = (&obs.anchor_modes, opts.rig_anchors) {
+        start.values.extend(std::iter::repeat_n(0.0, m.len()));
+    }
+    let mut selection = select_parameters(obs, &start, opts)?;
     progress.update("identifying", 0.0);
-    let mut problem = obs.problem(before.values.clone(), selection.free.clone());
+    let mut problem = obs.problem(start.values.clone(), selection.free.clone());
     let mut result = run_lm(&problem, progress, "identifying")?;
     if opts.robust {
         result = reweight_robustly(&mut problem, result, progress)?;
@@ -174,7 +191,7 @@ pub fn geometric(
     hold_undetermined(
         obs,
         opts,
-        &before,
+        &start,
         &mut selection,
         &mut problem,
         &mut result,
@@ -184,7 +201,19 @@ pub fn geometric(
     let mut after = before.clone();
     after.values = problem.expand(&result.x);
     let sigma = residual_scale(&problem, &result);
+    let rig = match &obs.anchor_modes {
+        Some(m) if after.values.len() > l.len() => Some(rig::reduce(
+            l,
+            m,
+            &mut after.values,
+            &mut selection,
+            &mut result,
+            sigma,
+        )),
+        _ => None,
+    };
     Ok(Geometric {
+        rig,
         before,
         after,
         selection,

@@ -7,6 +7,8 @@
 //!   by Levenberg-Marquardt ([`lm`]) on the raw readings
 //!   ([`problem`]), the parameters the data cannot separate held at nominal
 //!   ([`identifiability`]);
+//! - [`rig`]: the rig's anchors identified with the robot (`rig_anchors`),
+//!   less the rigid motion the base pose takes;
 //! - [`paper`]: the paper's one-step method beside it; [`warnings`]: input
 //!   that parses but looks wrong.
 //!
@@ -19,6 +21,7 @@ pub mod lm;
 pub mod observations;
 pub mod paper;
 pub mod problem;
+pub mod rig;
 pub mod warnings;
 
 pub use geometric::{
@@ -63,6 +66,10 @@ pub struct IdentifyOptions {
     /// `s1.offset`), e.g. to compare with a calibration in the same
     /// parametrisation.
     pub hold: Vec<String>,
+    /// Also identify the rig's anchor coordinates (four strings or more,
+    /// not with measured points nor the paper's method), less the rigid
+    /// motion the base pose takes: see [`rig`].
+    pub rig_anchors: bool,
 }
 
 impl Default for IdentifyOptions {
@@ -76,6 +83,7 @@ impl Default for IdentifyOptions {
             identifiability_tolerance: identifiability::DEFAULT_TOLERANCE,
             undetermined_z: identifiability::UNDETERMINED_Z,
             hold: vec![],
+            rig_anchors: false,
         }
     }
 }

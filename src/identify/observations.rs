@@ -6,6 +6,7 @@ use nalgebra::{DMatrix, Vector3};
 use super::IdentifyOptions;
 use super::geometric::unit_covariance;
 use super::problem::CalibrationProblem;
+use super::rig::{self, AnchorModes};
 use crate::error::{Error, Result};
 use crate::kinematics::Params;
 use crate::kinematics::chain::{Chain, OutputFrame, PointJacobian, joint_trig};
@@ -37,6 +38,10 @@ pub struct Observations<'a> {
     pub located: Vec<Located>,
     /// Sines and cosines of every pose's joint angles, computed once.
     pub q_trig: Vec<Vec<(f64, f64)>>,
+    /// rig.json's anchors' shape modes, when the anchors are identified
+    /// with the robot (`rig_anchors`); a problem whose parameter vector
+    /// runs past the layout moves the anchors by them.
+    pub anchor_modes: Option<AnchorModes>,
 }
 
 impl<'a> Observations<'a> {
@@ -68,6 +73,18 @@ impl<'a> Observations<'a> {
                 ),
             ));
         }
+        if opts.rig_anchors {
+            if let Some(why) = rig::refusal(m) {
+                return Err(Error::field("rig_anchors", why));
+            }
+            if opts.method == super::Method::Paper {
+                return Err(Error::field(
+                    "rig_anchors",
+                    "the paper's method identifies the robot alone; identify the anchors with \
+                     the default method (lm)",
+                ));
+            }
+        }
         let chain = Chain::new(robot.convention, n, m);
         let anchors: Vec<Vector3<f64>> = if m > 0 {
             (0..m).map(|k| rig.anchor(k)).collect()
@@ -81,23 +98,16 @@ impl<'a> Observations<'a> {
                 train.len()
             )));
         }
+        let anchor_modes = if opts.rig_anchors {
+            Some(AnchorModes::new(&anchors)?)
+        } else {
+            None
+        };
         let hints = nominal_points(robot, rig, data);
-        let mut measured = Vec::with_capacity(data.poses.len());
-        let mut located = Vec::new();
-        for (pose, hint) in data.poses.iter().zip(&hints) {
-            match &pose.measurement {
-                Measurement::Strings(l) => {
-                    let dist: Vec<f64> = l.iter().map(|v| v + rig.r_mm).collect();
-                    let loc = measure::locate(&anchors, &dist, hint.as_ref())
-                        .map_err(|e| Error::field("poses", format!("pose {}: {e}", pose.id)))?;
-                    measured.push(loc.point);
-                    located.push(loc);
-                }
-                Measurement::Point(p) => measured.push(*p),
-            }
-        }
+        let (measured, located) = locate_all(data, &anchors, rig.r_mm, &[], &hints)?;
         let q_trig = data.poses.iter().map(|p| joint_trig(&p.q_rad)).collect();
         Ok(Observations {
+            anchor_modes,
             q_trig,
             robot,
             rig,
@@ -116,15 +126,40 @@ impl<'a> Observations<'a> {
         self.train.iter().map(|&i| &self.data.poses[i]).collect()
     }
 
-    /// A problem over the train poses.
+    /// A problem over the train poses; one whose `full` runs past the
+    /// layout moves the anchors by their shape modes (see
+    /// [`Observations::anchor_modes`]).
     pub fn problem(&self, full: Vec<f64>, free: Vec<usize>) -> CalibrationProblem<'a> {
-        CalibrationProblem::new(
+        let with_modes = full.len() > self.chain.layout.len();
+        let p = CalibrationProblem::new(
             self.chain,
             self.anchors.clone(),
             self.train_poses(),
             full,
             free,
-        )
+        );
+        match (&self.anchor_modes, with_modes) {
+            (Some(m), true) => p.with_anchor_modes(m.clone()),
+            _ => p,
+        }
+    }
+
+    /// Use `anchors` from now on (the rig's, identified), with the string
+    /// zero offsets `offsets_mm` fitted beside them (zeros when they were
+    /// not identified): every pose's T located again, from where it was
+    /// located before (which side of a plane of anchors it is on does not
+    /// change by a millimetre's correction). The offsets count here because
+    /// the anchors were fitted with them: where the two trade (an anchor
+    /// moved along its string against that string's offset), the anchors
+    /// alone would locate T inconsistently with the fit.
+    pub fn set_anchors(&mut self, anchors: Vec<Vector3<f64>>, offsets_mm: &[f64]) -> Result<()> {
+        let hints: Vec<Option<Vector3<f64>>> = self.measured.iter().copied().map(Some).collect();
+        let (measured, located) =
+            locate_all(self.data, &anchors, self.rig.r_mm, offsets_mm, &hints)?;
+        self.anchors = anchors;
+        self.measured = measured;
+        self.located = located;
+        Ok(())
     }
 
     /// Errors (model minus measured T, robot base frame) of `p` at poses `idx`.
@@ -284,6 +319,38 @@ impl<'a> Observations<'a> {
             opts.seed
         )
     }
+}
+
+/// T at every pose of `data` (the rig frame): located from the strings
+/// with `anchors`, `r_mm` and each string's zero offset (`offsets_mm`; none
+/// given count zero), on the side of each `hints` point, or as measured;
+/// and the multilateration results of string poses.
+pub(crate) fn locate_all(
+    data: &Dataset,
+    anchors: &[Vector3<f64>],
+    r_mm: f64,
+    offsets_mm: &[f64],
+    hints: &[Option<Vector3<f64>>],
+) -> Result<(Vec<Vector3<f64>>, Vec<Located>)> {
+    let mut measured = Vec::with_capacity(data.poses.len());
+    let mut located = Vec::new();
+    for (pose, hint) in data.poses.iter().zip(hints) {
+        match &pose.measurement {
+            Measurement::Strings(l) => {
+                let dist: Vec<f64> = l
+                    .iter()
+                    .enumerate()
+                    .map(|(k, v)| v + r_mm + offsets_mm.get(k).copied().unwrap_or(0.0))
+                    .collect();
+                let loc = measure::locate(anchors, &dist, hint.as_ref())
+                    .map_err(|e| Error::field("poses", format!("pose {}: {e}", pose.id)))?;
+                measured.push(loc.point);
+                located.push(loc);
+            }
+            Measurement::Point(p) => measured.push(*p),
+        }
+    }
+    Ok((measured, located))
 }
 
 /// Most poses [`Observations::flange_orientation_sigma`] looks at: an RMS over

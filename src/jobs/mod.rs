@@ -67,6 +67,10 @@ pub struct JobOptions {
     /// false: such a job fails, saying why).
     #[serde(default)]
     pub force: Option<bool>,
+    /// Also identify the rig's anchor coordinates (four strings or more;
+    /// default false): the report gets `rig_anchors` and `calibrated_rig`.
+    #[serde(default)]
+    pub rig_anchors: Option<bool>,
 }
 
 /// Identification method.
@@ -133,6 +137,9 @@ impl JobOptions {
         }
         if let Some(h) = &self.hold {
             o.hold = h.clone();
+        }
+        if let Some(r) = self.rig_anchors {
+            o.rig_anchors = r;
         }
         o
     }

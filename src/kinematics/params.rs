@@ -96,11 +96,20 @@ impl Layout {
                 0
             }
     }
+    /// Shape mode j of the anchors (mm), when the rig's anchors are
+    /// identified (`identify::rig`): past the rest, so that a vector without
+    /// them is an ordinary one.
+    pub fn anchor_mode(&self, j: usize) -> usize {
+        self.len() + j
+    }
+    /// How the report names an anchor shape mode (`rig.mode1`...).
+    pub const ANCHOR_MODE_PREFIX: &'static str = "rig.mode";
     /// Never empty: a robot has a joint.
     pub fn is_empty(&self) -> bool {
         false
     }
-    /// Report name of parameter i (`j2.theta`, `base.x`, `tool.z`, `s3.offset`, `r`).
+    /// Report name of parameter i (`j2.theta`, `base.x`, `tool.z`, `s3.offset`, `r`,
+    /// `rig.mode2`).
     pub fn name(&self, i: usize) -> String {
         let g = self.n_geometric();
         if i < 5 * self.n_joints {
@@ -119,8 +128,10 @@ impl Layout {
             ["tool.x", "tool.y", "tool.z"][i - self.tool()].to_string()
         } else if i < g + self.n_strings {
             format!("s{}.offset", i - g + 1)
-        } else {
+        } else if i < self.len() {
             "r".to_string()
+        } else {
+            format!("{}{}", Self::ANCHOR_MODE_PREFIX, i - self.len() + 1)
         }
     }
     /// True if parameter i is an angle (rad internally).
@@ -279,5 +290,6 @@ mod tests {
         }
         assert_eq!(l.name(l.joint(2, JointParam::D)), "j3.d");
         assert_eq!(l.name(l.r()), "r");
+        assert_eq!(l.name(l.anchor_mode(1)), "rig.mode2");
     }
 }

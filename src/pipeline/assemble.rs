@@ -11,11 +11,12 @@ use crate::identify::{
     self, Geometric, IdentifyOptions, Method, Observations, identifiability, paper,
 };
 use crate::kinematics::{JointParam, Params};
+use crate::model::Rig;
 use crate::model::{Measurement, Split};
 use crate::physics::{self, Analysis, Context, EffectModel};
 use crate::report::{
-    Convergence, Finding, Identifiability, JointDeviation, Outlier, ParamEstimate, PoseResidual,
-    REPORT_FORMAT, Report,
+    AnchorCorrection, Convergence, Finding, Identifiability, JointDeviation, Outlier,
+    ParamEstimate, PoseResidual, REPORT_FORMAT, Report, RigAnchors,
 };
 use crate::stats;
 
@@ -129,7 +130,10 @@ pub fn report(
                 ..opts.clone()
             },
         )
-        .len(),
+        .iter()
+        // The anchors' shape modes are counted in `rig_anchors`.
+        .filter(|&&k| k < l.len())
+        .count(),
         n_identified: model
             .selection
             .map(|s| s.free.len())
@@ -138,7 +142,13 @@ pub fn report(
         fixed: model.selection.map(|s| s.fixed.clone()).unwrap_or_default(),
     };
     let (deviations, parameters) = deviations_and_estimates(obs, geo, &model);
+    let (rig_anchors, calibrated_rig) = match rig_report(obs, geo, after) {
+        Some((a, r)) => (Some(a), Some(r)),
+        None => (None, None),
+    };
     Ok(Report {
+        rig_anchors,
+        calibrated_rig,
         format: REPORT_FORMAT.into(),
         method: model.method.into(),
         robust: opts.robust,
@@ -185,6 +195,43 @@ pub fn report(
         physics_notes,
         warnings,
     })
+}
+
+/// The anchors' corrections and the calibrated rig (rig.json's, with the
+/// identified anchors and the final model's base pose), when the anchors
+/// were identified.
+fn rig_report(obs: &Observations, geo: &Geometric, after: &Params) -> Option<(RigAnchors, Rig)> {
+    let fit = geo.rig.as_ref()?;
+    let modes = obs.anchor_modes.as_ref()?;
+    let arr = |v: &Vector3<f64>| [v.x, v.y, v.z];
+    let anchors = fit
+        .anchors
+        .iter()
+        .zip(&modes.nominal)
+        .enumerate()
+        .map(|(k, (a, nominal))| AnchorCorrection {
+            anchor: obs.rig.sensor_name(k),
+            nominal_mm: arr(nominal),
+            calibrated_mm: arr(&a.calibrated_mm),
+            correction_mm: arr(&a.correction_mm),
+            correction_mm_sigma: arr(&a.sigma_mm),
+            identifiability: a.identifiability,
+            identified: identify::rig::identified(a.identifiability),
+        })
+        .collect();
+    let mut rig = obs.rig.clone();
+    rig.anchors_mm = fit.anchors.iter().map(|a| arr(&a.calibrated_mm)).collect();
+    rig.base_in_rig = Some(after.base());
+    Some((
+        RigAnchors {
+            gauge: RigAnchors::GAUGE.into(),
+            n_modes: fit.n_modes,
+            n_identified: fit.n_identified,
+            held: fit.held.clone(),
+            anchors,
+        },
+        rig,
+    ))
 }
 
 /// Per joint, the deviations from nominal with their 1-sigma; and every

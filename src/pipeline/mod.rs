@@ -104,15 +104,24 @@ pub fn run<'a>(
     opts: &Options,
     progress: &dyn Progress,
 ) -> Result<Run<'a>> {
-    let obs = Observations::new(robot, rig, data, &opts.identify)?;
+    let mut obs = Observations::new(robot, rig, data, &opts.identify)?;
     let checked = warnings::check_input(&obs);
     if let (Some(evidence), false) = (&checked.in_radians, opts.force) {
         return Err(Error::field("poses", InputCheck::refusal(evidence)));
     }
     let mut warnings = checked.warnings;
     let geo = identify::geometric(&obs, &opts.identify, progress)?;
+    // With the anchors identified, T is located with them from here on:
+    // the robot's part of the fit holds for those points, and every figure
+    // after (the physics analysis, the held-out errors) is of them.
+    if let Some(r) = &geo.rig {
+        let l = obs.chain.layout;
+        let offsets = geo.after.values[l.string_offset(0)..l.r()].to_vec();
+        obs.set_anchors(r.calibrated(), &offsets)?;
+    }
     warnings.extend(identify::few_poses_warning(&obs, &geo, &opts.identify));
     let physics = physics_step(&obs, &geo, opts, progress)?;
+    warnings.extend(physics.advice.clone());
     Ok(Run {
         obs,
         geo,
@@ -130,6 +139,9 @@ pub struct PhysicsOutcome {
     pub analysis: Option<Analysis>,
     /// Why it did not run (beginning with [`PhysicsRun::NOTE_PREFIX`]).
     pub why_not: Option<String>,
+    /// What to do instead of trusting the analysis, when its findings were
+    /// set aside ([`propose_rig_anchors`]): a warning of the report.
+    pub advice: Option<String>,
 }
 
 impl PhysicsOutcome {
@@ -155,6 +167,7 @@ pub fn physics_step(
         run,
         analysis: None,
         why_not: Some(format!("{}{why}", PhysicsRun::NOTE_PREFIX)),
+        advice: None,
     };
     if !opts.physics {
         return Ok(not_run(PhysicsRun::Off, " (physics off)".into()));
@@ -177,9 +190,114 @@ pub fn physics_step(
         ));
     }
     progress.update("physics analysis", 0.0);
+    let mut analysis = physics::analyse(obs, geo, progress)?;
+    let advice = if opts.identify.rig_anchors {
+        None
+    } else {
+        propose_rig_anchors(obs, geo, &mut analysis)
+    };
     Ok(PhysicsOutcome {
         run: PhysicsRun::Ran,
-        analysis: Some(physics::analyse(obs, geo, progress)?),
+        analysis: Some(analysis),
         why_not: None,
+        advice,
     })
+}
+
+/// The analysis's final held-out RMS, over what an exact model would show,
+/// beyond which a constant anchor error is looked for: below it the
+/// analysis has explained the recording and nothing is tried.
+pub const RIG_PROBE_ABOVE_EXPECTED: f64 = 1.3;
+
+/// A constant anchor error explains the recording when, with the anchors
+/// fitted, the held-out RMS is within this factor of what an exact model
+/// would show...
+pub const RIG_PROBE_EXPLAINS: f64 = 1.3;
+
+/// ...and at most this fraction of the analysis's own final held-out RMS.
+pub const RIG_PROBE_GAIN: f64 = 0.8;
+
+/// When the strings disagree the way a constant error of rig.json's anchors
+/// explains, and the analysis did not explain them, set its findings aside
+/// and say to re-run with `--rig-anchors`: a wrong rig shows as string
+/// offsets, anchor steps and rig moves that describe no part that moved
+/// (misnaming is the worst failure of a diagnosis), and the geometry fitted
+/// around a wrong rig is no calibration to use either. Returns the advice.
+///
+/// Tried only on string rigs of four or more (where the anchors are
+/// identifiable) when the analysis found something or ended well above
+/// what an exact model would show ([`RIG_PROBE_ABOVE_EXPECTED`]); it then
+/// fires only when the geometric fit with the anchors free explains
+/// essentially everything (its held-out RMS within [`RIG_PROBE_EXPLAINS`]
+/// of what an exact model shows at the residual scale it leaves) and
+/// clearly beats the analysis ([`RIG_PROBE_GAIN`]). A catalogue effect the
+/// analysis named reaches the noise already, so it is not displaced, and
+/// an effect-free session does not get this far. Not proven: an effect
+/// outside the catalogue that a constant anchor error largely mimics could
+/// be proposed as one; the re-run's report shows whether the anchors
+/// explain it.
+pub fn propose_rig_anchors(
+    obs: &Observations,
+    geo: &Geometric,
+    analysis: &mut Analysis,
+) -> Option<String> {
+    if obs.anchors.len() < identify::rig::MIN_STRINGS || analysis.test_errors.is_empty() {
+        return None;
+    }
+    let expected_with = |sigma: f64| {
+        obs.expected_test_rms(
+            &geo.after.values,
+            &geo.selection.free,
+            &geo.result.jtj,
+            Some(sigma),
+        )
+    };
+    let ended = crate::stats::rms_norm(&analysis.test_errors);
+    // The strings' redundancy includes the disagreement a wrong rig makes,
+    // so the noise it gives is no reference here: anything found, or an
+    // end above even that, is reason to look.
+    let sigma = obs.string_sigma().unwrap_or(geo.sigma);
+    let above = expected_with(sigma).is_some_and(|e| ended > RIG_PROBE_ABOVE_EXPECTED * e);
+    if analysis.findings.is_empty() && !above {
+        return None;
+    }
+    let probe = identify::rig::probe(obs, &geo.after.values, &geo.selection.free)?;
+    let p = probe.test_rms_mm;
+    // With the anchors fitted, what an exact model would show at the
+    // residual scale that fit leaves.
+    let expected = expected_with(probe.sigma_mm)?;
+    if !(p <= RIG_PROBE_EXPLAINS * expected && p <= RIG_PROBE_GAIN * ended) {
+        return None;
+    }
+    let names: Vec<String> = analysis
+        .findings
+        .iter()
+        .map(|f| match f.sensor {
+            Some(k) => format!("{} (sensor {k})", f.effect),
+            None => f.effect.clone(),
+        })
+        .collect();
+    let advice = format!(
+        "the strings disagree the way a constant error of rig.json's anchors explains: with the \
+         anchors fitted the held-out RMS would be {p:.4} mm (an exact model: about \
+         {expected:.4} mm) against {ended:.4} mm here, the largest correction {:.2} mm at \
+         anchor {}; re-run with --rig-anchors (a job's rig_anchors) to calibrate the rig",
+        probe.largest_mm,
+        obs.rig.sensor_name(probe.largest_anchor)
+    );
+    if !names.is_empty() {
+        analysis.notes.push(format!(
+            "set aside, as a constant anchor error explains the recording better: {}",
+            names.join(", ")
+        ));
+    }
+    analysis.notes.push(advice.clone());
+    // The geometric model stands, without the findings a wrong rig made.
+    let all: Vec<usize> = obs.test.clone();
+    analysis.test_errors = obs.errors(&geo.after.values, &all);
+    analysis.findings.clear();
+    analysis.effects.clear();
+    analysis.final_params = geo.after.clone();
+    analysis.final_sigmas = None;
+    Some(advice)
 }

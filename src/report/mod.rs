@@ -8,7 +8,7 @@ pub mod verdict;
 
 use nalgebra::Vector3;
 
-use crate::model::{BasePose, Robot};
+use crate::model::{BasePose, Rig, Robot};
 use effect::{EffectModel, Kind};
 
 /// A number this crate wrote: JSON has no NaN or infinity, so serde_json
@@ -561,6 +561,65 @@ pub struct EvidencePoint {
     pub model: f64,
 }
 
+/// One anchor's correction, identified with the robot (`rig_anchors`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AnchorCorrection {
+    /// The anchor's name (rig.json's `anchor_names`, else `s1`, `s2`...).
+    pub anchor: String,
+    /// rig.json's coordinates (mm, rig frame).
+    pub nominal_mm: [f64; 3],
+    /// Identified coordinates (mm, rig frame).
+    pub calibrated_mm: [f64; 3],
+    /// `calibrated_mm - nominal_mm` (mm), in the gauge of [`RigAnchors::gauge`].
+    pub correction_mm: [f64; 3],
+    /// 1-sigma of each coordinate of the correction (mm), the robot's
+    /// parameters' uncertainty included.
+    pub correction_mm_sigma: [f64; 3],
+    /// How well the data separate this anchor's moves from everything else
+    /// fitted, as a sine (1: nothing else mimics them; under 0.001, the
+    /// identifiability tolerance, not determined): the smallest over x, y,
+    /// z (see `identify::rig::coordinate_sines`).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub identifiability: f64,
+    /// Whether the data determine the anchor (`identifiability` above the
+    /// tolerance).
+    pub identified: bool,
+}
+
+/// The rig's anchors identified with the robot (`--rig-anchors`, a job's
+/// `rig_anchors`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RigAnchors {
+    /// How the rigid motion no string length sees was removed.
+    pub gauge: String,
+    /// Shape modes of the anchor set (`3m - 6`) and how many the data
+    /// determine (the others held at rig.json's, named in `held`).
+    pub n_modes: usize,
+    /// Shape modes identified.
+    pub n_identified: usize,
+    /// Shape modes held at rig.json's, with what they are aliased with.
+    #[serde(default)]
+    pub held: Vec<FixedParam>,
+    /// Per anchor, in rig.json's order.
+    pub anchors: Vec<AnchorCorrection>,
+}
+
+impl RigAnchors {
+    /// The gauge, as the report states it.
+    pub const GAUGE: &str = "corrections orthogonal to the six rigid motions of rig.json's \
+        anchors (the corrections sum to zero, and so do their moments A x dA): the best rigid \
+        fit of the calibrated anchors onto rig.json's is the identity, and the rigid part of \
+        any anchor error is in base_in_rig";
+
+    /// The largest correction of any anchor (mm) and that anchor.
+    pub fn largest(&self) -> Option<(&AnchorCorrection, f64)> {
+        self.anchors
+            .iter()
+            .map(|a| (a, Vector3::from(a.correction_mm).norm()))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+    }
+}
+
 /// Whether the physics analysis ran on a calibration, and if not, why.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -686,6 +745,15 @@ pub struct Report {
     /// suspect; reports written before it existed read as empty.
     #[serde(default)]
     pub warnings: Vec<String>,
+    /// The rig's anchors, when identified with the robot (`--rig-anchors`):
+    /// each anchor's correction with its 1-sigma and identifiability.
+    /// Absent otherwise (and in reports written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig_anchors: Option<RigAnchors>,
+    /// The rig with the identified anchors and base pose, in rig.json form:
+    /// the rig.json of the next session. Present with `rig_anchors`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibrated_rig: Option<Rig>,
 }
 
 impl Report {

@@ -882,3 +882,66 @@ fn the_summary_fits_a_terminal_and_keeps_the_detail_for_verbose() {
         "{long}"
     );
 }
+
+/// `--rig-anchors`: one summary line (within the width), the calibrated
+/// rig written by `--out-rig` as a rig.json that reads back; refused on
+/// tracker points naming the option; `--out-rig` alone is a usage error.
+#[test]
+fn rig_anchors_on_the_command_line() {
+    let dir = scratch("rig");
+    let rig_out = dir.join("rig_calibrated.json");
+    let report = dir.join("report.json");
+    let out = identify_files(
+        &data("robot.json"),
+        &data("rig.json"),
+        &data("poses.csv"),
+        &[
+            "--rig-anchors",
+            "--out-rig",
+            rig_out.to_str().unwrap(),
+            "--out",
+            report.to_str().unwrap(),
+        ],
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.starts_with("rig anchors identified (6 of 6 shape modes)"))
+        .collect();
+    assert_eq!(lines.len(), 1, "{stdout}");
+    assert!(stdout.lines().all(|l| l.chars().count() <= 100), "{stdout}");
+    let rig = drawcal::model::Rig::from_json(&std::fs::read_to_string(&rig_out).unwrap()).unwrap();
+    let rep =
+        drawcal::report::Report::from_json(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(Some(&rig), rep.calibrated_rig.as_ref());
+    assert_eq!(rep.rig_anchors.unwrap().anchors.len(), 4);
+
+    let points = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/xcheck_bump_points_j2");
+    let out = identify_files(
+        &points.join("robot.json"),
+        &points.join("rig.json"),
+        &points.join("poses.csv"),
+        &["--rig-anchors"],
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("--rig-anchors: the poses carry measured points"),
+        "{stderr}"
+    );
+
+    let out = identify_files(
+        &data("robot.json"),
+        &data("rig.json"),
+        &data("poses.csv"),
+        &["--out-rig", rig_out.to_str().unwrap()],
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--rig-anchors"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

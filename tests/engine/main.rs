@@ -13,6 +13,7 @@ mod compensate_ik;
 mod fuzz_parsers;
 mod fuzz_physics;
 mod identify_datasets;
+mod identify_rig;
 mod identify_small;
 mod identify_synthetic;
 mod identify_warnings;
