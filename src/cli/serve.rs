@@ -69,6 +69,18 @@ pub struct ServeArgs {
         value_delimiter = ','
     )]
     pub cors_origins: Vec<String>,
+    /// Connections served at once; past it a new one is answered 503 and
+    /// closed. Default: the descriptor limit (raised to its hard limit at
+    /// start) less 128, at most 16384.
+    #[arg(long, env = "DRAWCAL_MAX_CONNECTIONS",
+          value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub max_connections: Option<u64>,
+    /// Bytes that answers of 256 KiB or more (pose files, reports) may hold
+    /// in memory together while their clients read them; past it such a
+    /// request is answered 503 with Retry-After.
+    #[arg(long, env = "DRAWCAL_MAX_ANSWER_BYTES_IN_FLIGHT", default_value_t = 512 * 1024 * 1024,
+          value_parser = clap::value_parser!(u64).range(1024 * 1024..))]
+    pub max_answer_bytes_in_flight: u64,
     /// Pose uploads one API key may make per minute (a burst of a minute's
     /// worth, then at that rate); past it 429 with Retry-After.
     #[arg(long, env = "DRAWCAL_MAX_UPLOADS_PER_MINUTE", default_value_t = 600,
@@ -208,6 +220,8 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
         bootstrap_admin_key: admin_key,
         allowed_hosts: args.allowed_hosts.clone(),
         cors_origins: args.cors_origins.clone(),
+        max_connections: args.max_connections.map(|n| n as usize),
+        max_answer_bytes_in_flight: args.max_answer_bytes_in_flight,
         limits: crate::http::limits::LimitConfig {
             uploads_per_minute: args.max_uploads_per_minute,
             jobs_per_minute: args.max_jobs_per_minute,

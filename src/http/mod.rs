@@ -17,6 +17,7 @@ pub mod cache;
 pub mod calibrations;
 pub mod compensate;
 pub mod compute;
+pub mod conn;
 pub mod error;
 pub mod extract;
 pub mod guard;
@@ -89,6 +90,12 @@ pub struct ServiceConfig {
     pub cors_origins: Vec<String>,
     /// Per-key rates and the job queue's bound.
     pub limits: limits::LimitConfig,
+    /// Connections served at once (`--max-connections`); `None`: under
+    /// the descriptor limit ([`conn::default_max_connections`]).
+    pub max_connections: Option<usize>,
+    /// Bytes large answers may hold in memory together
+    /// (`--max-answer-bytes-in-flight`, [`conn::AnswerBudget`]).
+    pub max_answer_bytes_in_flight: u64,
 }
 
 /// The whole request body must arrive within this many client timeouts
@@ -299,6 +306,21 @@ fn is_plain_request_id(s: &str) -> bool {
 
 /// The application, ready to serve.
 pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration) -> Router {
+    router_with_budget(
+        state,
+        max_upload_bytes,
+        client_timeout,
+        conn::AnswerBudget::new(1 << 30),
+    )
+}
+
+/// [`router`] with the budget of large answers in flight.
+pub fn router_with_budget(
+    state: AppState,
+    max_upload_bytes: usize,
+    client_timeout: Duration,
+    budget: conn::AnswerBudget,
+) -> Router {
     let client_timeout = client_timeout.min(MAX_TIMEOUT);
     let (router, _) = api().split_for_parts();
     let ids = CounterId {
@@ -321,6 +343,7 @@ pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration
             idle_timeout: client_timeout,
             deadline: client_timeout * BODY_DEADLINE_FACTOR,
         }))
+        .layer(axum::middleware::from_fn_with_state(budget, conn::budget))
         .layer(axum::middleware::from_fn_with_state(
             state.browser.clone(),
             guard::check,
@@ -384,6 +407,8 @@ pub struct Service {
     client_timeout: Duration,
     idle_timeout: Duration,
     drain_timeout: Duration,
+    max_connections: usize,
+    budget: conn::AnswerBudget,
 }
 
 impl Service {
@@ -406,6 +431,15 @@ impl Service {
             keys::ensure_admin(&store, secret).await?;
         }
         let jobs = Jobs::start(store.clone(), cfg.jobs.clone(), job_fn);
+        let descriptors = conn::raise_descriptor_limit();
+        let max_connections = cfg
+            .max_connections
+            .unwrap_or_else(|| conn::default_max_connections(descriptors));
+        tracing::info!(
+            descriptor_limit = descriptors.unwrap_or(0),
+            max_connections,
+            "connections capped"
+        );
         let listener = tokio::net::TcpListener::bind(cfg.listen).await?;
         if cfg.listen.ip().is_unspecified() && cfg.allowed_hosts.is_empty() {
             tracing::warn!(
@@ -437,6 +471,8 @@ impl Service {
             client_timeout: cfg.client_timeout,
             idle_timeout: cfg.idle_timeout.min(MAX_TIMEOUT),
             drain_timeout: cfg.jobs.shutdown_grace,
+            max_connections,
+            budget: conn::AnswerBudget::new(cfg.max_answer_bytes_in_flight),
         })
     }
 
@@ -454,17 +490,22 @@ impl Service {
         self,
         shutdown: impl std::future::Future<Output = ()> + Send + 'static,
     ) -> std::io::Result<()> {
-        let app = router(
+        let app = router_with_budget(
             self.state.clone(),
             self.max_upload_bytes,
             self.client_timeout,
+            self.budget.clone(),
         );
         tracing::info!(addr = %self.addr, url = %format!("http://{}/", self.addr), "listening");
         serve_connections(
             self.listener,
             app,
-            self.idle_timeout,
-            self.drain_timeout,
+            Timeouts {
+                idle: self.idle_timeout,
+                write: self.client_timeout.min(MAX_TIMEOUT),
+                drain: self.drain_timeout,
+            },
+            self.max_connections,
             shutdown,
         )
         .await;
@@ -491,10 +532,16 @@ impl Service {
 async fn serve_connections(
     listener: tokio::net::TcpListener,
     app: Router,
-    idle_timeout: Duration,
-    drain_timeout: Duration,
+    timeouts: Timeouts,
+    max_connections: usize,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) {
+    let Timeouts {
+        idle: idle_timeout,
+        write: write_timeout,
+        drain: drain_timeout,
+    } = timeouts;
+    let slots = Arc::new(tokio::sync::Semaphore::new(max_connections));
     use hyper_util::rt::{TokioIo, TokioTimer};
     use hyper_util::server::graceful::GracefulShutdown;
     use hyper_util::service::TowerToHyperService;
@@ -524,12 +571,19 @@ async fn serve_connections(
         // headers and body flushed apart) must not wait on Nagle for the
         // client's delayed ACK (up to 40 ms).
         let _ = tcp.set_nodelay(true);
+        let Ok(slot) = slots.clone().try_acquire_owned() else {
+            tracing::warn!(%peer, max_connections, "connection refused: at the cap");
+            tokio::spawn(conn::refuse(tcp, max_connections));
+            continue;
+        };
+        let io = conn::WriteTimeout::new(tcp, write_timeout);
         let conn = hyper::server::conn::http1::Builder::new()
             .timer(TokioTimer::new())
             .header_read_timeout(idle_timeout)
-            .serve_connection(TokioIo::new(tcp), TowerToHyperService::new(app.clone()));
+            .serve_connection(TokioIo::new(io), TowerToHyperService::new(app.clone()));
         let conn = graceful.watch(conn);
         tokio::spawn(async move {
+            let _slot = slot;
             match conn.await {
                 Ok(()) => {}
                 Err(e) if e.is_timeout() => {
@@ -550,6 +604,16 @@ async fn serve_connections(
             drain_timeout.as_secs()
         );
     }
+}
+
+/// How long a connection may wait for its client.
+struct Timeouts {
+    /// Without a complete request header.
+    idle: Duration,
+    /// With an answer the client does not read.
+    write: Duration,
+    /// After the shutdown signal.
+    drain: Duration,
 }
 
 /// Accept errors that concern one connection only.

@@ -242,6 +242,8 @@ async fn no_auth_is_refused_beyond_the_loopback() {
         allowed_hosts: Vec::new(),
         cors_origins: Vec::new(),
         limits: Default::default(),
+        max_connections: None,
+        max_answer_bytes_in_flight: 1 << 30,
     };
     let err = match drawcal::http::Service::start(&cfg, drawcal::jobs::engine_job_fn()).await {
         Ok(_) => panic!("served without keys on 0.0.0.0"),

@@ -71,6 +71,10 @@ pub struct Options {
     pub cors_origins: Vec<String>,
     /// Rates and the queue's bound.
     pub limits: drawcal::http::limits::LimitConfig,
+    /// `--max-connections`.
+    pub max_connections: Option<usize>,
+    /// `--max-answer-bytes-in-flight`.
+    pub max_answer_bytes_in_flight: u64,
 }
 
 impl Default for Options {
@@ -86,6 +90,8 @@ impl Default for Options {
             max_joint_change_deg: drawcal::compensate::DEFAULT_MAX_JOINT_CHANGE_DEG,
             cors_origins: Vec::new(),
             limits: Default::default(),
+            max_connections: None,
+            max_answer_bytes_in_flight: 1 << 30,
         }
     }
 }
@@ -114,6 +120,8 @@ impl TestApp {
             allowed_hosts: Vec::new(),
             cors_origins: o.cors_origins.clone(),
             limits: o.limits,
+            max_connections: o.max_connections,
+            max_answer_bytes_in_flight: o.max_answer_bytes_in_flight,
             jobs: JobConfig {
                 workers: o.workers,
                 lease: o.lease,

@@ -197,3 +197,88 @@ async fn a_client_that_stops_reading_does_not_hold_up_the_shutdown() {
     assert!(started.elapsed() < Duration::from_secs(5));
     drop(tcp);
 }
+
+/// A client that connects with a tiny receive buffer (so that the server's
+/// writes block soon), sends `request` and never reads.
+async fn non_reader(app: &TestApp, request: &[u8]) -> TcpStream {
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.set_recv_buffer_size(4096).unwrap();
+    let addr = app.base.trim_start_matches("http://").parse().unwrap();
+    let mut tcp = socket.connect(addr).await.unwrap();
+    tcp.write_all(request).await.unwrap();
+    tcp
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_stops_reading_is_cut_off_and_frees_its_answer() {
+    let app = TestApp::spawn_with(
+        "nonreader",
+        Options {
+            client_timeout: TIMEOUT,
+            max_upload_bytes: 4 << 20,
+            // Room for one large answer at a time.
+            max_answer_bytes_in_flight: 1 << 20,
+            ..Options::default()
+        },
+    )
+    .await;
+    let ds = "real_ur10_ipa_grid";
+    let (_, _, _, sid) = app.setup(ds, "NONREADER-1").await;
+    app.upload_poses(sid, crate::helpers::read(ds, "poses.csv"))
+        .await;
+    let path = format!("/sessions/{sid}/poses");
+    let request = format!(
+        "GET {path} HTTP/1.1\r\nHost: localhost\r\nAuthorization: Bearer {}\r\n\r\n",
+        app.admin_key
+    )
+    .repeat(8);
+    let mut stalled = non_reader(&app, request.as_bytes()).await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    // While it holds the budget, another large answer is refused at once
+    // (memory stays bounded), and small ones are served.
+    let r = app.get(&path).await;
+    assert_eq!(r.status(), 503, "the budget held by the stalled client");
+    assert_eq!(app.get("/health").await.status(), 200);
+    // Past the write timeout the stalled connection is closed: it got a
+    // fraction of its eight answers.
+    tokio::time::sleep(TIMEOUT * 3).await;
+    let got = read_until_closed(&mut stalled, Duration::from_secs(5)).await;
+    assert!(
+        got.matches("HTTP/1.1 200").count() < 8,
+        "the server kept writing to a client that did not read"
+    );
+    // And the budget is free again.
+    let r = app.get(&path).await;
+    assert_eq!(r.status(), 200);
+    assert!(r.text().await.unwrap().len() > 1 << 20);
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn past_the_connection_cap_a_new_connection_is_refused_cleanly() {
+    let app = TestApp::spawn_with(
+        "conncap",
+        Options {
+            max_connections: Some(4),
+            ..Options::default()
+        },
+    )
+    .await;
+    let mut idle = Vec::new();
+    for _ in 0..4 {
+        idle.push(connect(&app).await);
+    }
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let mut fifth = connect(&app).await;
+    let answer = read_until_closed(&mut fifth, Duration::from_secs(3)).await;
+    assert!(answer.starts_with("HTTP/1.1 503"), "{answer}");
+    assert!(
+        answer.contains("\"error\":\"unavailable\"") && answer.contains("--max-connections"),
+        "{answer}"
+    );
+    // Idle connections that go free their slots.
+    drop(idle);
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    assert_eq!(app.get("/health").await.status(), 200);
+    app.stop().await;
+}

@@ -1,0 +1,328 @@
+//! What connections may take, so that abusive clients cannot take the
+//! service down for the others:
+//!
+//! - **the descriptor limit** is raised to its hard limit at start
+//!   ([`raise_descriptor_limit`]), and the connections served at once are
+//!   capped below it ([`default_max_connections`], `--max-connections`);
+//!   past the cap a new connection is answered 503 `unavailable` at once
+//!   and closed ([`refuse`]), instead of failing `accept` and leaving
+//!   every client waiting;
+//! - **a write timeout** ([`WriteTimeout`]): a connection whose client
+//!   stops reading its answer for longer than the client timeout is
+//!   closed, and the answer it held is freed;
+//! - **a budget of large answers in flight** ([`AnswerBudget`]): answers
+//!   over [`LARGE_ANSWER_BYTES`] together hold at most
+//!   `--max-answer-bytes-in-flight`; past it a request for another is
+//!   answered 503 with `Retry-After`, so that clients that request large
+//!   pose files and never read them cannot pin the machine's memory.
+
+use std::future::Future;
+use std::io;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::task::{Context, Poll};
+use std::time::Duration;
+
+use axum::body::{Body, Bytes, HttpBody};
+use axum::extract::{Request, State};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, ReadBuf};
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
+
+use super::ApiError;
+
+/// Descriptors kept for the database pool, the log and the listener.
+const RESERVED_DESCRIPTORS: u64 = 128;
+
+/// Raise the soft limit on open descriptors to the hard limit; the soft
+/// limit after it (`None` where it cannot be read).
+pub fn raise_descriptor_limit() -> Option<u64> {
+    #[cfg(unix)]
+    {
+        let mut lim = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        // SAFETY: getrlimit/setrlimit write/read the struct passed, nothing else.
+        unsafe {
+            if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) != 0 {
+                return None;
+            }
+            if lim.rlim_cur < lim.rlim_max {
+                let raised = libc::rlimit {
+                    rlim_cur: lim.rlim_max,
+                    rlim_max: lim.rlim_max,
+                };
+                if libc::setrlimit(libc::RLIMIT_NOFILE, &raised) == 0 {
+                    lim.rlim_cur = lim.rlim_max;
+                }
+            }
+        }
+        Some(lim.rlim_cur as u64)
+    }
+    #[cfg(not(unix))]
+    {
+        None
+    }
+}
+
+/// The default connection cap under a descriptor limit of `limit`: all
+/// but the reserved descriptors, at most 16,384 (idle connections cost a
+/// few kilobytes each; the budget bounds what answers hold).
+pub fn default_max_connections(limit: Option<u64>) -> usize {
+    let limit = limit.unwrap_or(1024);
+    limit.saturating_sub(RESERVED_DESCRIPTORS).clamp(16, 16_384) as usize
+}
+
+/// Answer a connection past the cap: 503 with a JSON body, then close,
+/// without reading its request (it may never send one).
+pub async fn refuse(mut tcp: tokio::net::TcpStream, max_connections: usize) {
+    let body = format!(
+        r#"{{"error":"unavailable","message":"the service is serving its {max_connections} connections at most (--max-connections); retry shortly"}}"#
+    );
+    let answer = format!(
+        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\nretry-after: 1\r\nconnection: close\r\ncontent-length: {}\r\n\r\n{body}",
+        body.len()
+    );
+    let _ = tokio::time::timeout(Duration::from_secs(1), async {
+        let _ = tcp.write_all(answer.as_bytes()).await;
+        let _ = tcp.shutdown().await;
+    })
+    .await;
+}
+
+/// An I/O stream whose writes fail with `TimedOut` when the peer has
+/// accepted nothing for `timeout` (it stopped reading): hyper then closes
+/// the connection and drops what it was sending.
+pub struct WriteTimeout<S> {
+    inner: S,
+    timeout: Duration,
+    stalled: Option<Pin<Box<tokio::time::Sleep>>>,
+}
+
+impl<S> WriteTimeout<S> {
+    /// `inner` with writes that may stall for at most `timeout`.
+    pub fn new(inner: S, timeout: Duration) -> Self {
+        WriteTimeout {
+            inner,
+            timeout,
+            stalled: None,
+        }
+    }
+
+    /// The write is pending: since when (a timer armed at the first
+    /// pending poll since the last progress), and has that been too long.
+    fn pending<T>(&mut self, cx: &mut Context<'_>) -> Poll<io::Result<T>> {
+        let timeout = self.timeout;
+        let timer = self
+            .stalled
+            .get_or_insert_with(|| Box::pin(tokio::time::sleep(timeout)));
+        match timer.as_mut().poll(cx) {
+            Poll::Ready(()) => Poll::Ready(Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                "the client stopped reading its answer",
+            ))),
+            Poll::Pending => Poll::Pending,
+        }
+    }
+
+    fn progress<T>(&mut self, r: Poll<io::Result<T>>, cx: &mut Context<'_>) -> Poll<io::Result<T>> {
+        match r {
+            Poll::Ready(v) => {
+                self.stalled = None;
+                Poll::Ready(v)
+            }
+            Poll::Pending => self.pending(cx),
+        }
+    }
+}
+
+impl<S: AsyncRead + Unpin> AsyncRead for WriteTimeout<S> {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.get_mut().inner).poll_read(cx, buf)
+    }
+}
+
+impl<S: AsyncWrite + Unpin> AsyncWrite for WriteTimeout<S> {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_write(cx, buf);
+        this.progress(r, cx)
+    }
+
+    fn poll_write_vectored(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[io::IoSlice<'_>],
+    ) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_write_vectored(cx, bufs);
+        this.progress(r, cx)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.inner.is_write_vectored()
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_flush(cx);
+        this.progress(r, cx)
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        let r = Pin::new(&mut this.inner).poll_shutdown(cx);
+        this.progress(r, cx)
+    }
+}
+
+/// Answers at least this large draw on the [`AnswerBudget`].
+pub const LARGE_ANSWER_BYTES: u64 = 256 * 1024;
+
+/// The bytes large answers may hold in memory together, in KiB permits.
+#[derive(Debug, Clone)]
+pub struct AnswerBudget {
+    kib: Arc<Semaphore>,
+    total_bytes: u64,
+}
+
+impl AnswerBudget {
+    /// A budget of `total_bytes`.
+    pub fn new(total_bytes: u64) -> Self {
+        let kib = (total_bytes / 1024).clamp(1, Semaphore::MAX_PERMITS as u64 / 2);
+        AnswerBudget {
+            kib: Arc::new(Semaphore::new(kib as usize)),
+            total_bytes,
+        }
+    }
+
+    /// Hold `bytes` of the budget until the permit is dropped, if there is
+    /// room for them.
+    fn take(&self, bytes: u64) -> Option<OwnedSemaphorePermit> {
+        let kib = (bytes.div_ceil(1024)).min(self.total_bytes / 1024).max(1) as u32;
+        self.kib.clone().try_acquire_many_owned(kib).ok()
+    }
+}
+
+/// The middleware: a large answer holds its share of the budget until it
+/// has been sent (or its connection closed); with no room, 503.
+pub async fn budget(State(budget): State<AnswerBudget>, req: Request, next: Next) -> Response {
+    let response = next.run(req).await;
+    let size = response.body().size_hint().exact().unwrap_or(0);
+    if size < LARGE_ANSWER_BYTES {
+        return response;
+    }
+    match budget.take(size) {
+        Some(permit) => {
+            let (parts, body) = response.into_parts();
+            Response::from_parts(
+                parts,
+                Body::new(Budgeted {
+                    body,
+                    rest: Bytes::new(),
+                    _permit: permit,
+                }),
+            )
+        }
+        None => {
+            let mut refused = ApiError::Unavailable(format!(
+                "the service is sending as many large answers as it holds at once \
+                 ({} MiB, --max-answer-bytes-in-flight); retry shortly",
+                budget.total_bytes >> 20
+            ))
+            .into_response();
+            refused.headers_mut().insert(
+                axum::http::header::RETRY_AFTER,
+                axum::http::HeaderValue::from_static("1"),
+            );
+            refused
+        }
+    }
+}
+
+/// A body holding its share of the budget while it lives, handed to hyper
+/// in slices: hyper asks for the next one only once it has written the
+/// ones before, so the last slice (and the permit) goes when the answer
+/// is nearly all sent, not when hyper has buffered it.
+struct Budgeted {
+    body: Body,
+    rest: Bytes,
+    _permit: OwnedSemaphorePermit,
+}
+
+/// The slices a budgeted answer is handed over in.
+const SLICE_BYTES: usize = 64 * 1024;
+
+impl HttpBody for Budgeted {
+    type Data = Bytes;
+    type Error = axum::Error;
+
+    fn poll_frame(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<http_body::Frame<Bytes>, axum::Error>>> {
+        let this = self.get_mut();
+        loop {
+            if !this.rest.is_empty() {
+                let n = this.rest.len().min(SLICE_BYTES);
+                return Poll::Ready(Some(Ok(http_body::Frame::data(this.rest.split_to(n)))));
+            }
+            match Pin::new(&mut this.body).poll_frame(cx) {
+                Poll::Ready(Some(Ok(frame))) => match frame.into_data() {
+                    Ok(data) => this.rest = data,
+                    Err(other) => return Poll::Ready(Some(Ok(other))),
+                },
+                other => return other,
+            }
+        }
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.rest.is_empty() && self.body.is_end_stream()
+    }
+
+    fn size_hint(&self) -> http_body::SizeHint {
+        let inner = self.body.size_hint();
+        let rest = self.rest.len() as u64;
+        let mut hint = http_body::SizeHint::new();
+        hint.set_lower(inner.lower() + rest);
+        if let Some(upper) = inner.upper() {
+            hint.set_upper(upper + rest);
+        }
+        hint
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cap_stays_under_the_descriptor_limit() {
+        assert_eq!(default_max_connections(Some(1024)), 896);
+        assert_eq!(default_max_connections(Some(1 << 20)), 16_384);
+        assert_eq!(default_max_connections(Some(100)), 16);
+        assert_eq!(default_max_connections(None), 896);
+    }
+
+    #[test]
+    fn the_budget_refuses_past_its_total_and_frees_on_drop() {
+        let b = AnswerBudget::new(1 << 20);
+        let first = b.take(700 * 1024).expect("room");
+        assert!(b.take(400 * 1024).is_none(), "1,100 KiB > 1 MiB");
+        drop(first);
+        assert!(b.take(400 * 1024).is_some());
+        // One answer larger than the whole budget still goes, alone.
+        assert!(b.take(5 << 20).is_some());
+    }
+}
