@@ -81,6 +81,18 @@ pub struct ServeArgs {
     #[arg(long, env = "DRAWCAL_MAX_ANSWER_BYTES_IN_FLIGHT", default_value_t = 512 * 1024 * 1024,
           value_parser = clap::value_parser!(u64).range(1024 * 1024..))]
     pub max_answer_bytes_in_flight: u64,
+    /// Largest correction of a joint's alpha, theta offset or beta (deg) a
+    /// calibration may make to be activated.
+    #[arg(long, env = "DRAWCAL_MAX_ANGLE_CORRECTION_DEG", default_value_t = 2.0)]
+    pub max_angle_correction_deg: f64,
+    /// Largest correction of a joint's a or d (mm) a calibration may make
+    /// to be activated.
+    #[arg(long, env = "DRAWCAL_MAX_LENGTH_CORRECTION_MM", default_value_t = 10.0)]
+    pub max_length_correction_mm: f64,
+    /// Largest distance (mm) between robot.json's tool point and the
+    /// calibrated one for a calibration to be activated.
+    #[arg(long, env = "DRAWCAL_MAX_TOOL_CORRECTION_MM", default_value_t = 25.0)]
+    pub max_tool_correction_mm: f64,
     /// Pose uploads one API key may make per minute (a burst of a minute's
     /// worth, then at that rate); past it 429 with Retry-After.
     #[arg(long, env = "DRAWCAL_MAX_UPLOADS_PER_MINUTE", default_value_t = 600,
@@ -187,6 +199,15 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
     if args.job_lease_secs == 0 {
         return usage("--job-lease-secs must be at least 1".into());
     }
+    for (flag, v) in [
+        ("--max-angle-correction-deg", args.max_angle_correction_deg),
+        ("--max-length-correction-mm", args.max_length_correction_mm),
+        ("--max-tool-correction-mm", args.max_tool_correction_mm),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return usage(format!("{flag} must be a positive number, got {v}"));
+        }
+    }
     if !(1..=100).contains(&args.job_max_attempts) {
         return usage("--job-max-attempts must be from 1 to 100".into());
     }
@@ -221,6 +242,11 @@ pub fn run(args: ServeArgs) -> Result<(), CliError> {
         allowed_hosts: args.allowed_hosts.clone(),
         cors_origins: args.cors_origins.clone(),
         max_connections: args.max_connections.map(|n| n as usize),
+        activation_bounds: crate::report::activation::ActivationBounds {
+            angle_deg: args.max_angle_correction_deg,
+            length_mm: args.max_length_correction_mm,
+            tool_mm: args.max_tool_correction_mm,
+        },
         max_answer_bytes_in_flight: args.max_answer_bytes_in_flight,
         limits: crate::http::limits::LimitConfig {
             uploads_per_minute: args.max_uploads_per_minute,

@@ -11,6 +11,7 @@ use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, ApiQuery, Id};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
+use crate::report::Report;
 use crate::store::time::normalize_bound;
 use crate::store::{ActivationRec, CalibrationFilter, CalibrationRec, Page};
 
@@ -366,7 +367,7 @@ fn check_reason(reason: &str) -> ApiResult<()> {
         (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
         (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
         (status = 415, description = "Not JSON", body = ErrorBody),
-        (status = 422, description = "Unknown calibration, another robot's, or missing reason", body = ErrorBody)))]
+        (status = 422, description = "Unknown calibration, another robot's, a missing reason, or a calibration that may not drive the robot: its held-out RMS not below the nominal model's (or no held-out poses), or a correction beyond the service's bounds (`--max-angle-correction-deg`, `--max-length-correction-mm`, `--max-tool-correction-mm`); the message names each rule broken, its bound and by how much", body = ErrorBody)))]
 pub async fn activate(
     State(app): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -393,6 +394,24 @@ pub async fn activate(
             ));
         }
         Ok(_) => {}
+    }
+    let text = app.store.calibration_report(a.calibration_id).await?;
+    let bounds = app.activation_bounds;
+    let refused = tokio::task::spawn_blocking(move || {
+        Report::from_json(&text).map(|r| crate::report::activation::refusals(&r, &bounds))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(format!("activation check task: {e}")))?
+    .map_err(|e| ApiError::Internal(format!("stored report: {e}")))?;
+    if !refused.is_empty() {
+        return Err(ApiError::invalid(
+            "calibration_id",
+            format!(
+                "calibration {} may not drive the robot: {}",
+                a.calibration_id,
+                refused.join("; ")
+            ),
+        ));
     }
     let rec = app
         .store

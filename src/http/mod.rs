@@ -96,6 +96,8 @@ pub struct ServiceConfig {
     /// Bytes large answers may hold in memory together
     /// (`--max-answer-bytes-in-flight`, [`conn::AnswerBudget`]).
     pub max_answer_bytes_in_flight: u64,
+    /// The largest corrections a calibration may make to be activated.
+    pub activation_bounds: crate::report::activation::ActivationBounds,
 }
 
 /// The whole request body must arrive within this many client timeouts
@@ -128,6 +130,8 @@ pub struct App {
     pub keys: auth::KeyCache,
     /// Per-key rates and the job queue's bound.
     pub limits: limits::Limits,
+    /// The largest corrections an activated calibration may make.
+    pub activation_bounds: crate::report::activation::ActivationBounds,
 }
 
 /// Threads for request-path numerical work: the number of cores.
@@ -457,6 +461,7 @@ impl Service {
             insecure_no_auth: cfg.insecure_no_auth,
             keys: auth::KeyCache::default(),
             limits: limits::Limits::new(cfg.limits),
+            activation_bounds: cfg.activation_bounds,
             browser: Arc::new(guard::BrowserPolicy::new(
                 addr,
                 &cfg.allowed_hosts,

@@ -3,6 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
+pub mod activation;
 pub mod effect;
 pub mod verdict;
 

@@ -244,6 +244,7 @@ async fn no_auth_is_refused_beyond_the_loopback() {
         limits: Default::default(),
         max_connections: None,
         max_answer_bytes_in_flight: 1 << 30,
+        activation_bounds: Default::default(),
     };
     let err = match drawcal::http::Service::start(&cfg, drawcal::jobs::engine_job_fn()).await {
         Ok(_) => panic!("served without keys on 0.0.0.0"),

@@ -435,3 +435,43 @@ async fn poses_in_json_and_csv_batches_are_one_session() {
     assert_eq!(e["field"], "pose", "{e}");
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_calibration_with_a_correction_beyond_the_bounds_is_not_activated() {
+    // Poses whose joint 2 was recorded 3 deg off (tampered, or another
+    // robot's): the calibration takes it up as joint 2's offset, and fits
+    // as well as the genuine one, but may not drive the robot.
+    let app = TestApp::spawn("activation-bounds").await;
+    let ds = "er3a_paper_like";
+    let (_, robot, _, sid) = app.setup(ds, "BOUNDS-1").await;
+    let poses = read(ds, "poses.csv");
+    let mut lines = poses.lines();
+    let mut shifted = format!("{}\n", lines.next().unwrap());
+    for line in lines {
+        let mut cells: Vec<String> = line.split(',').map(String::from).collect();
+        let q2: f64 = cells[2].parse().unwrap();
+        cells[2] = format!("{:.6}", q2 + 3.0);
+        shifted.push_str(&cells.join(","));
+        shifted.push('\n');
+    }
+    let done = app.identify_session(sid, shifted).await;
+    let cal = done["calibration_id"].as_i64().unwrap();
+    let r = app
+        .post_json(
+            &format!("/robots/{robot}/activate"),
+            &json!({"calibration_id": cal, "reason": "try"}),
+        )
+        .await;
+    let e = err_json(r, 422, "invalid_input").await;
+    let m = e["message"].as_str().unwrap();
+    assert!(
+        m.contains("may not drive the robot")
+            && m.contains("j2.theta is corrected by -3.")
+            && m.contains("--max-angle-correction-deg"),
+        "{m}"
+    );
+    assert_eq!(e["field"], "calibration_id");
+    let r: Value = ok_json(app.get(&format!("/robots/{robot}")).await, 200).await;
+    assert!(r["active_calibration_id"].is_null(), "{r}");
+    app.stop().await;
+}

@@ -122,6 +122,7 @@ impl TestApp {
             limits: o.limits,
             max_connections: o.max_connections,
             max_answer_bytes_in_flight: o.max_answer_bytes_in_flight,
+            activation_bounds: Default::default(),
             jobs: JobConfig {
                 workers: o.workers,
                 lease: o.lease,

@@ -3,6 +3,7 @@
 //! `tests/data` and on simulated recordings; `cli` runs the built binary.
 //! The service's tests are the other binary, `tests/api`.
 
+mod activation;
 mod common;
 
 mod architecture;
