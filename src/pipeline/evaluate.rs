@@ -186,7 +186,11 @@ pub fn run_case(
     let obs = Observations::new(&sim.robot, &sim.rig, &sim.dataset, &opts)?;
     let geo = identify::geometric(&obs, &opts, &NoProgress)?;
     let t = std::time::Instant::now();
-    let analysis = physics::analyse(&obs, &geo, &NoProgress)?;
+    let mut analysis = physics::analyse(&obs, &geo, &NoProgress)?;
+    // As the pipeline does: a constant anchor error proposed in place of
+    // the findings is a finding of its own (a false alarm where the
+    // simulation put none).
+    let rig_proposed = super::propose_rig_anchors(&obs, &geo, &mut analysis).is_some();
     let seconds = t.elapsed().as_secs_f64();
     let rms = crate::stats::rms_norm;
     let test_geometric_mm = rms(&obs.errors(&geo.after.values, &obs.test));
@@ -203,6 +207,7 @@ pub fn run_case(
             };
             slot(&f.effect, harmonic, f.joint, f.sensor)
         })
+        .chain(rig_proposed.then(|| slot("rig_anchors", None, None, None)))
         .collect();
     let worse_3d = analysis
         .findings

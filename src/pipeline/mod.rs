@@ -74,13 +74,7 @@ pub fn calibrate(
     progress: &dyn Progress,
 ) -> Result<Report> {
     let run = run(robot, rig, data, opts, progress)?;
-    assemble::report(
-        &run.obs,
-        &run.geo,
-        &opts.identify,
-        run.physics,
-        run.warnings,
-    )
+    assemble::report(&run.obs, &run.geo, &run.identify, run.physics, run.warnings)
 }
 
 /// Steps 1-3, whose results the report is assembled from: for callers
@@ -94,6 +88,10 @@ pub struct Run<'a> {
     pub physics: PhysicsOutcome,
     /// Warnings about the input.
     pub warnings: Vec<String>,
+    /// The identification options the run used: those asked, with
+    /// `rig_anchors` turned on when the recording showed a constant anchor
+    /// error ([`propose_rig_anchors`]).
+    pub identify: IdentifyOptions,
 }
 
 /// Steps 1-3 of the pipeline (see [`calibrate`]).
@@ -121,12 +119,29 @@ pub fn run<'a>(
     }
     warnings.extend(identify::few_poses_warning(&obs, &geo, &opts.identify));
     let physics = physics_step(&obs, &geo, opts, progress)?;
-    warnings.extend(physics.advice.clone());
+    if let Some(advice) = &physics.advice {
+        // Modelled like any effect the held-out readings support: the
+        // calibration is made again with the anchors identified, and says
+        // so (it cannot propose the rig again: the anchors are free).
+        let mut with_rig = opts.clone();
+        with_rig.identify.rig_anchors = true;
+        let mut again = run(robot, rig, data, &with_rig, progress)?;
+        again.warnings.insert(
+            0,
+            format!(
+                "{advice}: the anchors were identified with the robot (as --rig-anchors, \
+                 a job's rig_anchors, asks), and this report is that calibration; put its \
+                 calibrated_rig in rig.json for the next session"
+            ),
+        );
+        return Ok(again);
+    }
     Ok(Run {
         obs,
         geo,
         physics,
         warnings,
+        identify: opts.identify.clone(),
     })
 }
 
@@ -219,7 +234,7 @@ pub const RIG_PROBE_GAIN: f64 = 0.8;
 
 /// When the strings disagree the way a constant error of rig.json's anchors
 /// explains, and the analysis did not explain them, set its findings aside
-/// and say to re-run with `--rig-anchors`: a wrong rig shows as string
+/// and say why (then [`run`] calibrates again with the anchors free): a wrong rig shows as string
 /// offsets, anchor steps and rig moves that describe no part that moved
 /// (misnaming is the worst failure of a diagnosis), and the geometry fitted
 /// around a wrong rig is no calibration to use either. Returns the advice.
@@ -281,7 +296,7 @@ pub fn propose_rig_anchors(
         "the strings disagree the way a constant error of rig.json's anchors explains: with the \
          anchors fitted the held-out RMS would be {p:.4} mm (an exact model: about \
          {expected:.4} mm) against {ended:.4} mm here, the largest correction {:.2} mm at \
-         anchor {}; re-run with --rig-anchors (a job's rig_anchors) to calibrate the rig",
+         anchor {}",
         probe.largest_mm,
         obs.rig.sensor_name(probe.largest_anchor)
     );
