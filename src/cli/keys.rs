@@ -38,6 +38,10 @@ pub enum KeysAction {
         /// When it stops working (2027-06-30 or an RFC 3339 time).
         #[arg(long)]
         expires_at: Option<String>,
+        /// A site the key is limited to (repeat for several): it reaches
+        /// only the robots there. Default: every site.
+        #[arg(long = "site")]
+        sites: Vec<String>,
     },
     /// List the keys (never their secrets).
     List,
@@ -66,8 +70,9 @@ pub fn run(a: KeysArgs) -> Result<(), CliError> {
                 name,
                 role,
                 expires_at,
+                sites,
             } => {
-                let created = keys::create(&store, actor, &name, &role, expires_at)
+                let created = keys::create(&store, actor, &name, &role, expires_at, &sites)
                     .await
                     .map_err(fail)?;
                 eprintln!(

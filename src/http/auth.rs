@@ -124,6 +124,9 @@ pub struct Caller {
     pub name: String,
     /// The key's role.
     pub role: Role,
+    /// The sites the key is limited to (empty: every site): it reaches only
+    /// the robots at them, and what belongs to those robots.
+    pub sites: Vec<String>,
 }
 
 impl Caller {
@@ -132,7 +135,65 @@ impl Caller {
         Caller {
             name: "insecure-no-auth".into(),
             role: Role::Admin,
+            sites: Vec::new(),
         }
+    }
+
+    /// Refused (403) unless the key reaches `site`, where `what` (`robot
+    /// 7`) is.
+    pub fn check_site(&self, what: &str, site: Option<&str>) -> Result<(), ApiError> {
+        if self.sites.is_empty() || site.is_some_and(|s| self.sites.iter().any(|k| k == s)) {
+            return Ok(());
+        }
+        Err(ApiError::Forbidden(format!(
+            "the key '{}' is limited to the sites {}; {what} is {}",
+            self.name,
+            self.sites.join(", "),
+            match site {
+                Some(s) => format!("at the site {s:?}"),
+                None => "at no site".to_string(),
+            }
+        )))
+    }
+
+    /// Refused (403) unless the key reaches the robot `robot_id` (read
+    /// only for a key limited to sites); an unknown robot is 404.
+    pub async fn check_robot(&self, app: &AppState, robot_id: i64) -> Result<(), ApiError> {
+        if self.sites.is_empty() {
+            return Ok(());
+        }
+        let robot = app.store.get_robot(robot_id).await?;
+        self.check_site(&format!("robot {robot_id}"), robot.site.as_deref())
+    }
+
+    /// The site filter of a list for this key: the one asked if the key
+    /// reaches it, the key's only site if none was asked; refused when the
+    /// key has several sites and none was asked.
+    pub fn site_filter(&self, asked: Option<String>) -> Result<Option<String>, ApiError> {
+        match (asked, self.sites.as_slice()) {
+            (asked, []) => Ok(asked),
+            (Some(s), _) => self
+                .check_site("the list asked", Some(&s))
+                .map(|()| Some(s)),
+            (None, [only]) => Ok(Some(only.clone())),
+            (None, many) => Err(ApiError::Forbidden(format!(
+                "the key '{}' is limited to the sites {}: give site= one of them",
+                self.name,
+                many.join(", ")
+            ))),
+        }
+    }
+
+    /// Refused (403) for a key limited to sites: lists that cannot be
+    /// filtered by site (`what`).
+    pub fn check_unlimited(&self, what: &str) -> Result<(), ApiError> {
+        if self.sites.is_empty() {
+            return Ok(());
+        }
+        Err(ApiError::Forbidden(format!(
+            "the key '{}' is limited to sites, and {what} spans every site",
+            self.name
+        )))
     }
 }
 
@@ -255,6 +316,12 @@ async fn authenticate(app: &AppState, header: Option<String>) -> Result<Caller, 
     Ok(Caller {
         name: key.name,
         role,
+        sites: key
+            .sites
+            .split(',')
+            .filter(|s| !s.is_empty())
+            .map(String::from)
+            .collect(),
     })
 }
 

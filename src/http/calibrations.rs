@@ -179,10 +179,12 @@ fn csv_response(rows: &[CalibrationRec]) -> ApiResult<Response> {
         (status = 422, description = "Bad filter value", body = ErrorBody)))]
 pub async fn list_calibrations(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     ApiQuery(f): ApiQuery<HistoryFilter>,
     ApiQuery(p): ApiQuery<PageParams>,
 ) -> ApiResult<Response> {
-    let filter = f.to_store()?;
+    let mut filter = f.to_store()?;
+    filter.site = caller.site_filter(filter.site)?;
     if f.format == Some(Format::Csv) {
         let (rows, _) = app
             .store
@@ -221,9 +223,11 @@ pub struct CalibrationOut {
         (status = 404, description = "No such calibration", body = ErrorBody)))]
 pub async fn get_calibration(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Id(id): Id,
 ) -> ApiResult<Json<CalibrationOut>> {
     let calibration = app.store.get_calibration(id).await?;
+    caller.check_robot(&app, calibration.robot_id).await?;
     let text = app.store.calibration_report(id).await?;
     let report = serde_json::from_str(&text).map_err(|e| ApiError::Internal(e.to_string()))?;
     Ok(Json(CalibrationOut {
@@ -280,10 +284,12 @@ pub struct FormatParam {
         (status = 404, description = "No such robot", body = ErrorBody)))]
 pub async fn robot_accuracy(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Id(id): Id,
     ApiQuery(q): ApiQuery<FormatParam>,
 ) -> ApiResult<Response> {
     let robot = app.store.get_robot(id).await?;
+    caller.check_site(&format!("robot {id}"), robot.site.as_deref())?;
     let filter = CalibrationFilter {
         robot_id: Some(id),
         ..Default::default()
@@ -375,6 +381,7 @@ pub async fn activate(
     ApiJson(a): ApiJson<Activate>,
 ) -> ApiResult<Json<ActivationRec>> {
     check_reason(&a.reason)?;
+    caller.check_robot(&app, id).await?;
     app.store.get_robot(id).await?;
     match app.store.get_calibration(a.calibration_id).await {
         Err(crate::store::StoreError::NotFound { .. }) => {
@@ -448,6 +455,7 @@ pub async fn rollback(
     ApiJson(r): ApiJson<Rollback>,
 ) -> ApiResult<Json<ActivationRec>> {
     check_reason(&r.reason)?;
+    caller.check_robot(&app, id).await?;
     let previous = app.store.previous_active(id).await?;
     let rec = app
         .store
@@ -467,10 +475,12 @@ pub async fn rollback(
         (status = 422, description = "Bad page", body = ErrorBody)))]
 pub async fn list_activations(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Id(id): Id,
     ApiQuery(p): ApiQuery<PageParams>,
 ) -> ApiResult<Json<Paged<ActivationRec>>> {
     let page = p.page()?;
+    caller.check_robot(&app, id).await?;
     let (items, total) = app.store.list_activations(id, page).await?;
     Ok(Json(Paged::new(items, total, page)))
 }

@@ -21,6 +21,7 @@
 use std::collections::HashSet;
 use std::sync::Arc;
 
+use axum::Extension;
 use axum::Json;
 use axum::extract::State;
 use axum::http::header::{ACCEPT, CONTENT_TYPE};
@@ -29,6 +30,7 @@ use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
+use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiQuery, RawBody, is_json, parse_json};
 use super::{ApiError, ApiResult, AppState, ErrorBody, MAX_COMPENSATE_TARGETS};
@@ -425,6 +427,7 @@ fn wants_csv(headers: &HeaderMap) -> bool {
         (status = 422, description = "Invalid target (row = 1-based position or CSV row), too many targets, temp_c not a temperature from -50 to 150 C, payload_kg not from 0 to 5000 kg, a calibration of another robot, or robot_id missing with a CSV body", body = ErrorBody)))]
 pub async fn compensate(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     headers: HeaderMap,
     ApiQuery(query): ApiQuery<CompensateQuery>,
     body: RawBody,
@@ -433,6 +436,7 @@ pub async fn compensate(
     let req = read_request(query, body)?;
     // A bad value is refused before the store is read.
     req.conditions.check(CONDITION_NAMES)?;
+    caller.check_robot(&app, req.robot_id).await?;
     let cached = calibration_for(&app, req.robot_id, req.calibration_id).await?;
     let dof = cached.compensator.dof();
     let targets = checked_targets(req.inputs, dof)?;

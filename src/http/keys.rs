@@ -29,6 +29,10 @@ pub struct CreateKey {
     /// never when absent.
     #[serde(default)]
     pub expires_at: Option<String>,
+    /// The sites it is limited to (robots' `site`); every site when absent
+    /// or empty. Not for admin keys.
+    #[serde(default)]
+    pub sites: Vec<String>,
 }
 
 /// A created key: the stored record and the key itself, shown this once.
@@ -49,6 +53,7 @@ pub async fn create(
     name: &str,
     role: &str,
     expires_at: Option<String>,
+    sites: &[String],
 ) -> ApiResult<CreatedKey> {
     let name = name.trim();
     if name.is_empty() || name.chars().count() > 100 {
@@ -69,13 +74,33 @@ pub async fn create(
         ),
         None => None,
     };
+    let mut limited: Vec<String> = Vec::new();
+    for s in sites.iter().map(|s| s.trim()) {
+        if s.is_empty() || s.len() > 100 || s.contains(',') || s.chars().any(char::is_control) {
+            return Err(ApiError::invalid(
+                "sites",
+                format!(
+                    "a site is 1 to 100 characters without commas or control characters, got {s:?}"
+                ),
+            ));
+        }
+        if !limited.iter().any(|l| l == s) {
+            limited.push(s.to_string());
+        }
+    }
+    if role == Role::Admin && !limited.is_empty() {
+        return Err(ApiError::invalid(
+            "sites",
+            "an admin key manages every key and the audit log: it is not limited to sites",
+        ));
+    }
     let fresh = new_secret().map_err(ApiError::Internal)?;
     let key = store
         .create_key(
             &NewKey {
                 name: name.to_string(),
                 role: role.as_str().to_string(),
-                sites: String::new(),
+                sites: limited.join(","),
                 prefix: fresh.prefix,
                 secret_hash: fresh.hash,
                 expires_at,
@@ -142,7 +167,15 @@ pub async fn create_key(
     Extension(caller): Extension<Caller>,
     ApiJson(k): ApiJson<CreateKey>,
 ) -> ApiResult<(StatusCode, Json<CreatedKey>)> {
-    let created = create(&app.store, &caller.name, &k.name, &k.role, k.expires_at).await?;
+    let created = create(
+        &app.store,
+        &caller.name,
+        &k.name,
+        &k.role,
+        k.expires_at,
+        &k.sites,
+    )
+    .await?;
     app.keys.clear();
     Ok((StatusCode::CREATED, Json(created)))
 }

@@ -1,11 +1,13 @@
 //! Robot models, robots and rigs.
 
+use axum::Extension;
 use axum::Json;
 use axum::extract::State;
 use axum::http::StatusCode;
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
+use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
@@ -157,12 +159,14 @@ pub struct CreateRobot {
         (status = 422, description = "Invalid field or unknown model", body = ErrorBody)))]
 pub async fn create_robot(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     ApiJson(r): ApiJson<CreateRobot>,
 ) -> ApiResult<(StatusCode, Json<RobotRec>)> {
     let serial = r.serial_number.trim().to_string();
     if serial.is_empty() || serial.len() > 100 {
         return Err(ApiError::invalid("serial_number", "1 to 100 characters"));
     }
+    caller.check_site(&format!("robot '{serial}'"), r.site.as_deref())?;
     for (f, v) in [("site", &r.site), ("line", &r.line), ("cell", &r.cell)] {
         if v.as_ref().is_some_and(|s| s.len() > 100) {
             return Err(ApiError::invalid(f, "at most 100 characters"));
@@ -213,13 +217,15 @@ pub struct RobotFilter {
         (status = 422, description = "Bad page", body = ErrorBody)))]
 pub async fn list_robots(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     ApiQuery(f): ApiQuery<RobotFilter>,
     ApiQuery(p): ApiQuery<PageParams>,
 ) -> ApiResult<Json<Paged<RobotRec>>> {
     let page = p.page()?;
+    let site = caller.site_filter(f.site)?;
     let (items, total) = app
         .store
-        .list_robots(f.model_id, f.site.as_deref(), f.line.as_deref(), page)
+        .list_robots(f.model_id, site.as_deref(), f.line.as_deref(), page)
         .await?;
     Ok(Json(Paged::new(items, total, page)))
 }
@@ -231,8 +237,14 @@ pub async fn list_robots(
         (status = 200, description = "The robot", body = RobotRec),
         (status = 400, description = "Bad id", body = ErrorBody),
         (status = 404, description = "No such robot", body = ErrorBody)))]
-pub async fn get_robot(State(app): State<AppState>, Id(id): Id) -> ApiResult<Json<RobotRec>> {
-    Ok(Json(app.store.get_robot(id).await?))
+pub async fn get_robot(
+    State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Id(id): Id,
+) -> ApiResult<Json<RobotRec>> {
+    let robot = app.store.get_robot(id).await?;
+    caller.check_site(&format!("robot {id}"), robot.site.as_deref())?;
+    Ok(Json(robot))
 }
 
 /// Upload a rig: the body is rig.json itself.

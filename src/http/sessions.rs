@@ -49,16 +49,21 @@ pub struct CreateSession {
         (status = 422, description = "Invalid field, unknown robot or rig", body = ErrorBody)))]
 pub async fn create_session(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     ApiJson(s): ApiJson<CreateSession>,
 ) -> ApiResult<(StatusCode, Json<SessionRec>)> {
     if s.name.as_ref().is_some_and(|n| n.len() > 200) {
         return Err(ApiError::invalid("name", "at most 200 characters"));
     }
-    if let Err(StoreError::NotFound { .. }) = app.store.get_robot(s.robot_id).await {
-        return Err(ApiError::invalid(
-            "robot_id",
-            format!("no robot {}", s.robot_id),
-        ));
+    match app.store.get_robot(s.robot_id).await {
+        Err(StoreError::NotFound { .. }) => {
+            return Err(ApiError::invalid(
+                "robot_id",
+                format!("no robot {}", s.robot_id),
+            ));
+        }
+        Err(e) => return Err(e.into()),
+        Ok(robot) => caller.check_site(&format!("robot {}", s.robot_id), robot.site.as_deref())?,
     }
     if let Err(StoreError::NotFound { .. }) = app.store.get_rig(s.rig_id).await {
         return Err(ApiError::invalid("rig_id", format!("no rig {}", s.rig_id)));
@@ -86,10 +91,15 @@ pub struct SessionFilter {
         (status = 422, description = "Bad page", body = ErrorBody)))]
 pub async fn list_sessions(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     ApiQuery(f): ApiQuery<SessionFilter>,
     ApiQuery(p): ApiQuery<PageParams>,
 ) -> ApiResult<Json<Paged<SessionRec>>> {
     let page = p.page()?;
+    match f.robot_id {
+        Some(r) => caller.check_robot(&app, r).await?,
+        None => caller.check_unlimited("the list of sessions without robot_id")?,
+    }
     let (items, total) = app.store.list_sessions(f.robot_id, page).await?;
     Ok(Json(Paged::new(items, total, page)))
 }
@@ -101,8 +111,14 @@ pub async fn list_sessions(
         (status = 200, description = "The session", body = SessionRec),
         (status = 400, description = "Bad id", body = ErrorBody),
         (status = 404, description = "No such session", body = ErrorBody)))]
-pub async fn get_session(State(app): State<AppState>, Id(id): Id) -> ApiResult<Json<SessionRec>> {
-    Ok(Json(app.store.get_session(id).await?))
+pub async fn get_session(
+    State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Id(id): Id,
+) -> ApiResult<Json<SessionRec>> {
+    let session = app.store.get_session(id).await?;
+    caller.check_robot(&app, session.robot_id).await?;
+    Ok(Json(session))
 }
 
 /// One pose as JSON: keys are the CSV columns, values numbers or strings.
@@ -350,8 +366,9 @@ pub async fn upload_poses(
     Id(id): Id,
     body: RawBody,
 ) -> ApiResult<Json<UploadResult>> {
-    app.limits.take(&caller.name, Action::Upload)?;
     let session = app.store.get_session(id).await?;
+    caller.check_robot(&app, session.robot_id).await?;
+    app.limits.take(&caller.name, Action::Upload)?;
     let table = upload_table(&body)?;
     // Columns: the first batch fixes them; later batches must match (in any order).
     let (header, rows) = match &session.columns {
@@ -511,8 +528,13 @@ async fn validate_with_stored(
         (status = 200, description = "poses.csv", body = String, content_type = "text/csv"),
         (status = 400, description = "Bad id", body = ErrorBody),
         (status = 404, description = "No such session", body = ErrorBody)))]
-pub async fn get_poses(State(app): State<AppState>, Id(id): Id) -> ApiResult<Response> {
+pub async fn get_poses(
+    State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Id(id): Id,
+) -> ApiResult<Response> {
     let session = app.store.get_session(id).await?;
+    caller.check_robot(&app, session.robot_id).await?;
     let batches = app.store.pose_batches(id).await?;
     let text = match &session.columns {
         Some(c) => session_csv(c, &batches),
@@ -567,6 +589,7 @@ pub async fn enqueue_job(
         .validate()
         .map_err(|(f, m)| ApiError::invalid(f, m))?;
     let session = app.store.get_session(id).await?;
+    caller.check_robot(&app, session.robot_id).await?;
     if session.n_poses == 0 {
         return Err(ApiError::Invalid {
             message: format!("session {id} has no poses: upload some first"),
@@ -639,10 +662,19 @@ pub struct JobFilter {
         (status = 422, description = "Bad page or state", body = ErrorBody)))]
 pub async fn list_jobs(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     ApiQuery(f): ApiQuery<JobFilter>,
     ApiQuery(p): ApiQuery<PageParams>,
 ) -> ApiResult<Json<Paged<JobRec>>> {
     let page = p.page()?;
+    match f.session_id {
+        Some(s) if !caller.sites.is_empty() => {
+            let session = app.store.get_session(s).await?;
+            caller.check_robot(&app, session.robot_id).await?;
+        }
+        Some(_) => {}
+        None => caller.check_unlimited("the list of jobs without session_id")?,
+    }
     if let Some(s) = &f.state {
         if !["queued", "running", "succeeded", "failed", "cancelled"].contains(&s.as_str()) {
             return Err(ApiError::invalid("state", format!("unknown state '{s}'")));
@@ -662,8 +694,14 @@ pub async fn list_jobs(
         (status = 200, description = "The job", body = JobRec),
         (status = 400, description = "Bad id", body = ErrorBody),
         (status = 404, description = "No such job", body = ErrorBody)))]
-pub async fn get_job(State(app): State<AppState>, Id(id): Id) -> ApiResult<Json<JobRec>> {
-    Ok(Json(app.store.get_job(id).await?))
+pub async fn get_job(
+    State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    Id(id): Id,
+) -> ApiResult<Json<JobRec>> {
+    let job = app.store.get_job(id).await?;
+    caller.check_robot(&app, job.robot_id).await?;
+    Ok(Json(job))
 }
 
 /// Cancel a job: a queued one at once, a running one at the engine's next
@@ -680,6 +718,8 @@ pub async fn cancel_job(
     Extension(caller): Extension<Caller>,
     Id(id): Id,
 ) -> ApiResult<(StatusCode, Json<JobRec>)> {
+    let robot_id = app.store.get_job(id).await?.robot_id;
+    caller.check_robot(&app, robot_id).await?;
     let job = app.store.request_cancel(id).await?;
     app.store
         .audit(&caller.name, "cancel_job", &format!("job {id}"), "")

@@ -6,12 +6,14 @@
 //! The page is plain HTML and JavaScript with no framework, no CDN and no
 //! build step; every number it shows comes from the API.
 
+use axum::Extension;
 use axum::Router;
 use axum::extract::State;
 use axum::http::header::{CACHE_CONTROL, CONTENT_TYPE};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 
+use super::auth::Caller;
 use super::extract::Id;
 use super::{ApiError, ApiResult, AppState, ErrorBody};
 use crate::report::Report;
@@ -64,9 +66,11 @@ async fn app_js() -> Response {
         (status = 404, description = "No such calibration", body = ErrorBody)))]
 pub async fn calibration_report_html(
     State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
     Id(id): Id,
 ) -> ApiResult<Response> {
     let calibration = app.store.get_calibration(id).await?;
+    caller.check_robot(&app, calibration.robot_id).await?;
     let text = app.store.calibration_report(id).await?;
     // The session's poses give the residual plots their x axes; a report
     // still renders without them.

@@ -252,3 +252,74 @@ async fn no_auth_is_refused_beyond_the_loopback() {
     };
     assert!(err.contains("loopback"), "{err}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_key_limited_to_a_site_reaches_only_that_sites_robots() {
+    let app = TestApp::spawn("sites").await;
+    // setup's robots are at plant-1; another at plant-2.
+    let (model, here, _, sid) = app.setup(DS, "SITE-1").await;
+    let there = ok_json(
+        app.post_json(
+            "/robots",
+            &json!({"serial_number": "SITE-2", "model_id": model, "site": "plant-2"}),
+        )
+        .await,
+        201,
+    )
+    .await["id"]
+        .as_i64()
+        .unwrap();
+    let made = ok_json(
+        app.post_json(
+            "/keys",
+            &json!({"name": "plant-1-eng", "role": "engineer", "sites": ["plant-1"]}),
+        )
+        .await,
+        201,
+    )
+    .await;
+    assert_eq!(made["key"]["sites"], "plant-1", "{made}");
+    let eng = client_with_key(made["secret"].as_str().unwrap());
+    let get = |path: String| send(eng.get(app.url(&path)));
+    assert_eq!(get(format!("/robots/{here}")).await.status(), 200);
+    assert_eq!(get(format!("/sessions/{sid}")).await.status(), 200);
+    let e = err_json(get(format!("/robots/{there}")).await, 403, "forbidden").await;
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("limited to the sites plant-1; robot"),
+        "{e}"
+    );
+    // Lists are the key's site's.
+    let robots = ok_json(get("/robots".into()).await, 200).await;
+    assert_eq!(robots["total"], 1, "{robots}");
+    err_json(get("/robots?site=plant-2".into()).await, 403, "forbidden").await;
+    err_json(get("/sessions".into()).await, 403, "forbidden").await;
+    assert_eq!(
+        get(format!("/sessions?robot_id={here}")).await.status(),
+        200
+    );
+    // Nothing made at another site.
+    let r = send(
+        eng.post(app.url("/robots"))
+            .json(&json!({"serial_number": "SITE-3", "model_id": model, "site": "plant-2"})),
+    )
+    .await;
+    err_json(r, 403, "forbidden").await;
+    let r = send(
+        eng.post(app.url("/sessions"))
+            .json(&json!({"robot_id": there, "rig_id": 1})),
+    )
+    .await;
+    err_json(r, 403, "forbidden").await;
+    // An admin key is never limited.
+    let r = app
+        .post_json(
+            "/keys",
+            &json!({"name": "a", "role": "admin", "sites": ["plant-1"]}),
+        )
+        .await;
+    err_json(r, 422, "invalid_input").await;
+    app.stop().await;
+}

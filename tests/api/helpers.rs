@@ -144,7 +144,7 @@ impl TestApp {
             0 => "test-admin".to_string(),
             n => format!("test-admin-{n}"),
         };
-        let admin = drawcal::http::keys::create(store, "test harness", &name, "admin", None)
+        let admin = drawcal::http::keys::create(store, "test harness", &name, "admin", None, &[])
             .await
             .expect("an admin key");
         let base = format!("http://{}", service.addr);
