@@ -177,14 +177,15 @@ pub fn without_bom(bytes: &[u8]) -> &[u8] {
 /// shape errors 422 `invalid_input` naming the field path.
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let bytes = without_bom(bytes);
-    // JSON writes a NUL character only as the escape `\u0000` (a raw one is
-    // a syntax error): rare, so only a body that has one is walked.
-    if bytes.windows(6).any(|w| w == b"\\u0000")
+    // JSON writes a control character only as an escape (`\u0000`, `\n`;
+    // a raw one is a syntax error): rare, so only a body that has one is
+    // walked.
+    if has_control_escape(bytes)
         && let Ok(v) = serde_json::from_slice::<serde_json::Value>(bytes)
-        && let Some(field) = nul_path(&v, String::new())
+        && let Some(field) = control_path(&v, String::new())
     {
         return Err(ApiError::Invalid {
-            message: NUL_MESSAGE.into(),
+            message: CONTROL_MESSAGE.into(),
             field: Some(field),
             row: None,
         });
@@ -240,29 +241,43 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     }
 }
 
-/// Why a text with a NUL character is refused.
-const NUL_MESSAGE: &str = "contains a NUL character (U+0000), which no text field accepts";
+/// Why a text with a control character is refused.
+const CONTROL_MESSAGE: &str =
+    "contains a control character (a NUL, a line break, a tab...), which no text field accepts";
 
-/// The path (`a.b[2]`) of the first string of `v` holding a NUL
+/// True when JSON text `bytes` may hold a control character: an escape
+/// that writes one (`\u0000`-`\u009f`, `\n`, `\t`...), or a C1 control
+/// written raw (UTF-8 `C2 80`-`C2 9F`, which JSON allows).
+fn has_control_escape(bytes: &[u8]) -> bool {
+    bytes.windows(2).enumerate().any(|(i, w)| {
+        (w[0] == 0xC2 && (0x80..=0x9F).contains(&w[1]))
+            || (w[0] == b'\\'
+                && (matches!(w[1], b'b' | b'f' | b'n' | b'r' | b't')
+                    || (w[1] == b'u' && bytes.get(i + 2..i + 4).is_some_and(|h| h == b"00"))))
+    })
+}
+
+/// The path (`a.b[2]`) of the first string of `v` holding a control
 /// character, or of the object key that does.
-fn nul_path(v: &serde_json::Value, at: String) -> Option<String> {
+fn control_path(v: &serde_json::Value, at: String) -> Option<String> {
     use serde_json::Value;
+    let control = |s: &str| s.chars().any(char::is_control);
     match v {
-        Value::String(s) if s.contains('\0') => Some(if at.is_empty() { ".".into() } else { at }),
+        Value::String(s) if control(s) => Some(if at.is_empty() { ".".into() } else { at }),
         Value::Array(a) => a
             .iter()
             .enumerate()
-            .find_map(|(i, x)| nul_path(x, format!("{at}[{i}]"))),
+            .find_map(|(i, x)| control_path(x, format!("{at}[{i}]"))),
         Value::Object(m) => m.iter().find_map(|(k, x)| {
             let here = if at.is_empty() {
                 k.clone()
             } else {
                 format!("{at}.{k}")
             };
-            if k.contains('\0') {
+            if control(k) {
                 return Some(here);
             }
-            nul_path(x, here)
+            control_path(x, here)
         }),
         _ => None,
     }
@@ -315,9 +330,17 @@ impl<S: Send + Sync, T: DeserializeOwned> FromRequestParts<S> for ApiQuery<T> {
 
     async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
         let query = parts.uri.query().unwrap_or("");
-        if let Some(pair) = query.split('&').find(|p| p.contains("%00")) {
+        // Control characters arrive percent-encoded (%00-%1F, %7F).
+        let control = |p: &&str| {
+            p.as_bytes().windows(3).any(|w| {
+                w[0] == b'%'
+                    && ((matches!(w[1], b'0' | b'1') && w[2].is_ascii_hexdigit())
+                        || (w[1] == b'7' && matches!(w[2], b'f' | b'F')))
+            })
+        };
+        if let Some(pair) = query.split('&').find(control) {
             return Err(ApiError::Invalid {
-                message: NUL_MESSAGE.into(),
+                message: CONTROL_MESSAGE.into(),
                 field: Some(pair.split('=').next().unwrap_or(pair).to_string()),
                 row: None,
             });

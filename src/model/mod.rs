@@ -223,13 +223,15 @@ pub(crate) fn csv_record(
             format!("{cells} where the header has {} columns", headers.len()),
         ));
     }
-    // A NUL byte is no text anyone typed, and PostgreSQL refuses it in
-    // text: refused here, naming the cell, for every file read.
-    if let Some(i) = rec.iter().position(|c| c.contains('\0')) {
+    // A control character is no text anyone typed in a cell (a NUL,
+    // which PostgreSQL refuses in text, or a line break or tab inside
+    // quotes, which forges rows in logs and exports): refused here, naming
+    // the cell, for every file read.
+    if let Some(i) = rec.iter().position(|c| c.chars().any(char::is_control)) {
         return Err(Error::cell(
             row,
             headers.get(i).unwrap_or("?"),
-            "contains a NUL byte (U+0000)",
+            "contains a control character (a NUL, a line break, a tab...)",
         ));
     }
     Ok(rec)

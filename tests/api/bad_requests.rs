@@ -386,6 +386,29 @@ async fn bad_requests_are_refused_and_change_nothing() {
     )
     .await;
     assert!(e["message"].as_str().unwrap().contains("NUL"), "{e}");
+    // Other control characters alike: a line break or a bell in a serial
+    // number (a forged line in a log or an export), a tab in a filter.
+    for control in ["A\nB", "A\u{7}B", "A\u{9b}B"] {
+        refused(
+            &app,
+            c.post(app.url("/robots"))
+                .json(&json!({"serial_number": control, "model_id": model_id})),
+            422,
+            "invalid_input",
+            Some("serial_number"),
+            None,
+        )
+        .await;
+    }
+    refused(
+        &app,
+        c.get(app.url("/calibrations?site=plant%091")),
+        422,
+        "invalid_input",
+        Some("site"),
+        None,
+    )
+    .await;
     refused(
         &app,
         c.get(app.url("/calibrations?site=plant%001")),
