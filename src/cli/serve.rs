@@ -54,7 +54,7 @@ pub struct ServeArgs {
     /// A name clients reach the service by (repeat for several; `*`: any).
     /// Requests whose Host header names another are refused (DNS
     /// rebinding). Default: the --listen address, localhost, 127.0.0.1
-    /// and [::1]; listening on 0.0.0.0 (a container), give the names.
+    /// and `[::1]`; listening on 0.0.0.0 (a container), give the names.
     #[arg(
         long = "allowed-host",
         env = "DRAWCAL_ALLOWED_HOST",
