@@ -162,8 +162,10 @@ impl std::ops::Deref for AppState {
 #[into_params(parameter_in = Query)]
 pub struct PageParams {
     /// Items per page, 1..=1000 (default 50).
+    #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<i64>,
     /// Items to skip (default 0).
+    #[param(minimum = 0)]
     pub offset: Option<i64>,
 }
 

@@ -50,6 +50,7 @@ pub struct JobOptions {
     pub physics: Option<bool>,
     /// Fraction held out when the poses carry no split, in (0, 0.9].
     #[serde(default)]
+    #[schema(exclusive_minimum = 0.0, maximum = 0.9)]
     pub holdout_fraction: Option<f64>,
     /// Seed of the hold-out choice.
     #[serde(default)]
@@ -58,6 +59,7 @@ pub struct JobOptions {
     /// joint parameter counts as undetermined and is held at nominal; 0
     /// keeps every parameter the structural identifiability test keeps.
     #[serde(default)]
+    #[schema(minimum = 0.0, maximum = 100.0)]
     pub undetermined_z: Option<f64>,
     /// Joint parameters to hold at nominal whatever the data say (`j5.a`,
     /// `j2.theta`...); not with the paper's method.

@@ -22,6 +22,18 @@ use crate::error::{Error, Result};
 /// nearest key the format has (a typo such as `conventon` is never silently
 /// ignored).
 pub(crate) fn parse_strict<T: serde::de::DeserializeOwned>(file: &str, text: &str) -> Result<T> {
+    // serde reads a struct from an array too (`[]` as every default):
+    // these files are objects.
+    if !text
+        .trim_start_matches('\u{feff}')
+        .trim_start()
+        .starts_with('{')
+    {
+        return Err(Error::field(
+            file,
+            "a JSON object ({ ... }) with the keys DATA_FORMAT.md lists",
+        ));
+    }
     let de = &mut serde_json::Deserializer::from_str(text);
     serde_path_to_error::deserialize(de).map_err(|e| {
         let path = e.path().to_string();

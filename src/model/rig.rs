@@ -235,6 +235,15 @@ mod tests {
     }
 
     #[test]
+    fn a_rig_is_an_object_never_an_array() {
+        // serde reads a struct from a sequence too: `[]` must not pass for
+        // a rig (it once stored one without anchors).
+        for t in ["[]", "[[[0,0,0]], 35]", "null", "\"rig\""] {
+            assert!(Rig::from_json(t).is_err(), "{t}");
+        }
+    }
+
+    #[test]
     fn two_anchors_are_refused() {
         let t = r#"{"anchors_mm":[[0,0,0],[500,0,0]],"r_mm":35}"#;
         assert!(Rig::from_json(t).is_err());
