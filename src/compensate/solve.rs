@@ -78,7 +78,17 @@ impl Compensator {
         let mut iterations = 0;
         let mut mu_scale = None;
         let (mu_first, mu_last, factor) = NEAREST_MU;
-        let mut mu_rel = mu_first;
+        // Away from a singular pose the last stage alone is the answer:
+        // with a vanishing weight each step solves the task where the
+        // Jacobian reaches and moves back towards `q0` in its null space
+        // (minimum-norm Gauss-Newton), which converges in a few steps. The
+        // continuation's early stages are for singular poses, where that
+        // step could leap to another branch (and cost five times as much).
+        let mut mu_rel = if self.singular_for_task(q0, oriented) {
+            mu_first
+        } else {
+            mu_last
+        };
         let mut within = None;
         loop {
             for _ in 0..NEAREST_ITERATIONS {
@@ -102,8 +112,10 @@ impl Compensator {
                         q: q.clone(),
                         iterations,
                     };
-                    if e_pos.norm() <= 1e-3 * self.tolerance_mm
-                        && e_rot.norm() <= 1e-3 * self.tolerance_rad
+                    // At the last stage the weight biases nothing.
+                    if mu_rel <= mu_last
+                        || (e_pos.norm() <= 1e-3 * self.tolerance_mm
+                            && e_rot.norm() <= 1e-3 * self.tolerance_rad)
                     {
                         return Ok(solution);
                     }

@@ -319,7 +319,7 @@ impl Compensator {
     /// True when the task's Jacobian at `q` (calibrated model: T's
     /// position, and the flange's rotation when `oriented`) is nearly rank
     /// deficient: its smallest singular value under 2 % of its largest.
-    fn singular_for_task(&self, q: &[f64], oriented: bool) -> bool {
+    pub(super) fn singular_for_task(&self, q: &[f64], oriented: bool) -> bool {
         let qe = self.effective(q);
         let mut jac = self.chain.new_jacobian();
         self.chain.point_jacobian(

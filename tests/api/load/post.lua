@@ -4,6 +4,7 @@ wrk.method = "POST"
 wrk.body = f:read("*a")
 f:close()
 wrk.headers["Content-Type"] = "application/json"
+wrk.headers["Authorization"] = "Bearer " .. os.getenv("KEY")
 
 -- Count non-2xx answers so that errors cannot hide in the latency figures.
 local bad = 0

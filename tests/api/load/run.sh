@@ -9,6 +9,8 @@
 #   2. POST /compensate, 10,000 targets per request (batch throughput);
 #   3. upload + identification of a 2000-pose session, end to end
 #      (the first 2000 poses of tests/data/real_ur10_ipa_random).
+#   0. (PARTS=health) GET /health, 64 connections: the same server's
+#      ceiling, against which the keyed POST /compensate is compared;
 #   4. (PARTS=rate, needs oha: `cargo install oha`) POST /compensate, one
 #      joint target per request, 64 connections, at a fixed arrival rate
 #      RATE (default 20000/s; open loop, latency corrected for coordinated
@@ -31,15 +33,19 @@ BASE=http://127.0.0.1:$PORT
 WORK=$(mktemp -d)
 trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true; rm -rf "$WORK"' EXIT
 
-DATABASE_URL=sqlite://$WORK/bench.db RUST_LOG=${LOG_LEVEL:-warn} DRAWCAL_LOG_FORMAT=${LOG_FORMAT:-text} ${SERVER_CPUS:+taskset -c $SERVER_CPUS} "$BIN" serve --listen 127.0.0.1:$PORT --workers 1 2>"$WORK/server.log" &
+# Every route but /health and /ready needs a key: the server's first admin
+# key, which every request below sends.
+export KEY=dck_bench_admin_key_0123456789abcdef0123456789ab
+DRAWCAL_ADMIN_KEY=$KEY DATABASE_URL=sqlite://$WORK/bench.db RUST_LOG=${LOG_LEVEL:-warn} DRAWCAL_LOG_FORMAT=${LOG_FORMAT:-text} ${SERVER_CPUS:+taskset -c $SERVER_CPUS} "$BIN" serve --listen 127.0.0.1:$PORT --workers 1 2>"$WORK/server.log" &
 SERVER=$!
 until curl -sf $BASE/ready >/dev/null; do sleep 0.2; done
 
-j() { curl -sS --fail-with-body -H 'content-type: application/json' "$@"; }
+j() { curl -sS --fail-with-body -H "authorization: Bearer $KEY" -H 'content-type: application/json' "$@"; }
+k() { curl -sS -H "authorization: Bearer $KEY" "$@"; }
 id() { python3 -c 'import json,sys; print(json.load(sys.stdin)["id"])'; }
 wait_job() {
-  until curl -sS $BASE/jobs/$1 | grep -Eq '"state":"(succeeded|failed|cancelled)"'; do sleep 0.05; done
-  curl -sS $BASE/jobs/$1 | python3 -c 'import json,sys; j=json.load(sys.stdin); assert j["state"]=="succeeded", j; print(j["calibration_id"])'
+  until k $BASE/jobs/$1 | grep -Eq '"state":"(succeeded|failed|cancelled)"'; do sleep 0.05; done
+  k $BASE/jobs/$1 | python3 -c 'import json,sys; j=json.load(sys.stdin); assert j["state"]=="succeeded", j; print(j["calibration_id"])'
 }
 setup() { # dataset serial -> session id
   local D=tests/data/$1
@@ -51,10 +57,10 @@ setup() { # dataset serial -> session id
 }
 
 read ROBOT SESSION < <(setup er3a_paper_like BENCH-1)
-curl -sS --fail-with-body -X POST $BASE/sessions/$SESSION/poses -H 'content-type: text/csv' --data-binary @tests/data/er3a_paper_like/poses.csv >/dev/null
+k --fail-with-body -X POST $BASE/sessions/$SESSION/poses -H 'content-type: text/csv' --data-binary @tests/data/er3a_paper_like/poses.csv >/dev/null
 JOB=$(j -X POST $BASE/sessions/$SESSION/jobs -d '{}' | id)
 CAL=$(wait_job $JOB)
-j -X POST $BASE/robots/$ROBOT/activate -d "{\"calibration_id\": $CAL, \"by\": \"bench\", \"reason\": \"load test\"}" >/dev/null
+j -X POST $BASE/robots/$ROBOT/activate -d "{\"calibration_id\": $CAL, \"reason\": \"load test\"}" >/dev/null
 
 python3 - "$ROBOT" "$WORK" <<'PY'
 import json, random, sys
@@ -65,6 +71,10 @@ def q():  # nominal joint targets inside the ER3A's limits
 json.dump({"robot_id": robot, "target": {"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]}}, open(f"{work}/one.json", "w"))
 json.dump({"robot_id": robot, "targets": [{"target": f"t{i}", "q_deg": q()} for i in range(10000)]}, open(f"{work}/batch.json", "w"))
 PY
+if has health; then
+  echo "### GET /health, 64 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
+  ${WRK_CPUS:+taskset -c $WRK_CPUS} wrk -t$WRK_THREADS -c64 -d$DUR --latency $BASE/health
+fi
 if has single; then
   echo "### single target, 64 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
   BODY=$WORK/one.json ${WRK_CPUS:+taskset -c $WRK_CPUS} wrk -t$WRK_THREADS -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
@@ -72,13 +82,13 @@ fi
 if has batch; then
   echo "### batch of 10,000 targets, 2 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
   BODY=$WORK/batch.json wrk -t2 -c2 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
-  curl -sS -H 'content-type: application/json' --data-binary @$WORK/batch.json $BASE/compensate |
+  k -H 'content-type: application/json' --data-binary @$WORK/batch.json $BASE/compensate |
     python3 -c 'import json,sys; r=json.load(sys.stdin); print("batch statuses:", {s: sum(1 for x in r["results"] if x["status"]==s) for s in ("ok","unreachable","joint_limit")})'
 fi
 if has rate; then
   echo "### single target, 64 connections, ${RATE:-20000} requests/s offered (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
   ${OHA:-oha} --no-tui -z $DUR -c 64 -q ${RATE:-20000} --latency-correction -m POST \
-    -H 'content-type: application/json' -D $WORK/one.json $BASE/compensate |
+    -H 'content-type: application/json' -H "authorization: Bearer $KEY" -D $WORK/one.json $BASE/compensate |
     grep -E 'Success rate|Requests/sec|Slowest|Average|50.00%|90.00%|99.00%|99.90%|\[[0-9]+\] [0-9]+ responses'
 fi
 has identify || exit 0
@@ -87,10 +97,10 @@ echo "### upload + identify, 2000 poses"
 head -n 2001 tests/data/real_ur10_ipa_random/poses.csv > $WORK/poses2000.csv
 read R2 S2 < <(setup real_ur10_ipa_random BENCH-2)
 T0=$(date +%s.%N)
-curl -sS --fail-with-body -X POST $BASE/sessions/$S2/poses -H 'content-type: text/csv' --data-binary @$WORK/poses2000.csv >/dev/null
+k --fail-with-body -X POST $BASE/sessions/$S2/poses -H 'content-type: text/csv' --data-binary @$WORK/poses2000.csv >/dev/null
 T1=$(date +%s.%N)
 J2=$(j -X POST $BASE/sessions/$S2/jobs -d '{}' | id)
 C2=$(wait_job $J2)
 T2=$(date +%s.%N)
 python3 -c "print(f'upload {($T1-$T0)*1000:.0f} ms, identify {($T2-$T1):.2f} s, end to end {($T2-$T0):.2f} s (calibration $C2)')"
-curl -sS $BASE/calibrations/$C2 | python3 -c 'import json,sys; c=json.load(sys.stdin)["calibration"]; print("held-out RMS before/after (mm):", c["test_rms_before_mm"], c["test_rms_after_mm"])'
+k $BASE/calibrations/$C2 | python3 -c 'import json,sys; c=json.load(sys.stdin)["calibration"]; print("held-out RMS before/after (mm):", c["test_rms_before_mm"], c["test_rms_after_mm"])'
