@@ -310,18 +310,9 @@ fn is_plain_request_id(s: &str) -> bool {
             .all(|b| b.is_ascii_alphanumeric() || b".:_-".contains(&b))
 }
 
-/// The application, ready to serve.
-pub fn router(state: AppState, max_upload_bytes: usize, client_timeout: Duration) -> Router {
-    router_with_budget(
-        state,
-        max_upload_bytes,
-        client_timeout,
-        conn::AnswerBudget::new(1 << 30),
-    )
-}
-
-/// [`router`] with the budget of large answers in flight.
-pub fn router_with_budget(
+/// The application, ready to serve; `budget` bounds what large answers
+/// hold in memory together.
+pub fn router(
     state: AppState,
     max_upload_bytes: usize,
     client_timeout: Duration,
@@ -497,7 +488,7 @@ impl Service {
         self,
         shutdown: impl std::future::Future<Output = ()> + Send + 'static,
     ) -> std::io::Result<()> {
-        let app = router_with_budget(
+        let app = router(
             self.state.clone(),
             self.max_upload_bytes,
             self.client_timeout,
