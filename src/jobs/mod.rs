@@ -407,6 +407,18 @@ fn worker_prefix() -> String {
     format!("{host}-{}-{nonce}", std::process::id())
 }
 
+/// How watching a running job ended.
+enum Watched {
+    /// Another worker holds the job now: nothing more to record.
+    LeaseLost,
+    /// The engine ended: its result, and whether the shutdown's grace ran
+    /// out (the job goes back to the queue).
+    Ended {
+        result: Result<crate::Result<Report>, tokio::task::JoinError>,
+        handed_back: bool,
+    },
+}
+
 struct Worker {
     name: String,
     store: Store,
@@ -480,49 +492,14 @@ impl Worker {
         // The engine runs on a blocking thread, never on the runtime.
         let mut handle = tokio::task::spawn_blocking(move || job_fn(&input, &*p));
 
-        // Often enough that a cancel reaches the engine (and progress the
-        // client) within half a second, not only at the lease's pace.
-        let beat = (self.cfg.lease / 3).clamp(Duration::from_millis(50), MAX_BEAT);
-        let mut lost_lease = false;
-        let mut handed_back = false;
-        let mut grace_deadline: Option<tokio::time::Instant> = None;
-        let result = loop {
-            let grace = async {
-                match grace_deadline {
-                    Some(d) => tokio::time::sleep_until(d).await,
-                    None => std::future::pending().await,
-                }
-            };
-            tokio::select! {
-                r = &mut handle => break r,
-                _ = tokio::time::sleep(beat) => {
-                    let (stage, frac) = progress.latest.lock().map(|l| l.clone()).unwrap_or_default();
-                    let lease_ms = self.cfg.lease.as_millis() as i64;
-                    match self.store.heartbeat(id, &self.name, lease_ms, Some(&stage), frac).await {
-                        Ok(Some(cancel)) => if cancel { progress.cancel.store(true, Ordering::Relaxed) },
-                        Ok(None) => {
-                            tracing::warn!("lease lost; abandoning the job");
-                            lost_lease = true;
-                            progress.cancel.store(true, Ordering::Relaxed);
-                        }
-                        Err(e) => tracing::warn!(error = %e, "heartbeat failed"),
-                    }
-                }
-                _ = self.shutdown.changed(), if grace_deadline.is_none() => {
-                    tracing::info!(grace_s = self.cfg.shutdown_grace.as_secs_f64(), "shutdown: letting the job finish");
-                    grace_deadline = Some(tokio::time::Instant::now() + self.cfg.shutdown_grace);
-                }
-                _ = grace => {
-                    tracing::warn!("shutdown grace over: cancelling the job and handing it back");
-                    handed_back = true;
-                    progress.cancel.store(true, Ordering::Relaxed);
-                    grace_deadline = Some(tokio::time::Instant::now() + Duration::from_secs(3600));
-                }
-            }
-        };
-        if lost_lease {
+        let Watched::Ended {
+            result,
+            handed_back,
+        } = self.watch(id, &mut handle, &progress).await
+        else {
             return;
-        }
+        };
+
         // A cancel asked for while the engine was finishing still wins: the
         // result is not stored (one last look at the flag).
         let cancel_at_end = matches!(result, Ok(Ok(_)))
@@ -571,6 +548,66 @@ impl Worker {
             Err(join) => {
                 tracing::error!(error = %join, "the engine panicked");
                 self.fail(id, JobError::Panicked).await
+            }
+        }
+    }
+
+    /// Keep the running job's lease alive and its progress recorded,
+    /// pass a cancel to the engine, and at shutdown give it its grace
+    /// period, until the engine ends (or the lease is lost to another
+    /// worker).
+    async fn watch(
+        &mut self,
+        id: i64,
+        handle: &mut tokio::task::JoinHandle<crate::Result<Report>>,
+        progress: &JobProgress,
+    ) -> Watched {
+        // Often enough that a cancel reaches the engine (and progress the
+        // client) within half a second, not only at the lease's pace.
+        let beat = (self.cfg.lease / 3).clamp(Duration::from_millis(50), MAX_BEAT);
+        let mut lost_lease = false;
+        let mut handed_back = false;
+        let mut grace_deadline: Option<tokio::time::Instant> = None;
+        let result = loop {
+            let grace = async {
+                match grace_deadline {
+                    Some(d) => tokio::time::sleep_until(d).await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                r = &mut *handle => break r,
+                _ = tokio::time::sleep(beat) => {
+                    let (stage, frac) = progress.latest.lock().map(|l| l.clone()).unwrap_or_default();
+                    let lease_ms = self.cfg.lease.as_millis() as i64;
+                    match self.store.heartbeat(id, &self.name, lease_ms, Some(&stage), frac).await {
+                        Ok(Some(cancel)) => if cancel { progress.cancel.store(true, Ordering::Relaxed) },
+                        Ok(None) => {
+                            tracing::warn!("lease lost; abandoning the job");
+                            lost_lease = true;
+                            progress.cancel.store(true, Ordering::Relaxed);
+                        }
+                        Err(e) => tracing::warn!(error = %e, "heartbeat failed"),
+                    }
+                }
+                _ = self.shutdown.changed(), if grace_deadline.is_none() => {
+                    tracing::info!(grace_s = self.cfg.shutdown_grace.as_secs_f64(), "shutdown: letting the job finish");
+                    grace_deadline = Some(tokio::time::Instant::now() + self.cfg.shutdown_grace);
+                }
+                _ = grace => {
+                    tracing::warn!("shutdown grace over: cancelling the job and handing it back");
+                    handed_back = true;
+                    progress.cancel.store(true, Ordering::Relaxed);
+                    grace_deadline = Some(tokio::time::Instant::now() + Duration::from_secs(3600));
+                }
+            }
+        };
+        if lost_lease {
+            Watched::LeaseLost
+        } else {
+            Watched::Ended {
+                result,
+                handed_back,
             }
         }
     }
