@@ -15,7 +15,9 @@
 #      joint target per request, 64 connections, at a fixed arrival rate
 #      RATE (default 20000/s; open loop, latency corrected for coordinated
 #      omission): latency at a given load rather than at saturation.
-# PARTS selects (default "single batch identify"); DUR the wrk duration;
+# INSECURE=1 serves with --insecure-no-auth (the key check left out, to
+# measure what it costs); PARTS selects (default "single batch identify");
+# DUR the wrk duration;
 # LOG_LEVEL the server's RUST_LOG (default warn), LOG_FORMAT its log format.
 # The generator shares the server's machine: WRK_THREADS (default 1) keeps it
 # to one core's worth, as the server's default of one runtime thread per two
@@ -36,7 +38,7 @@ trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true; rm -rf
 # Every route but /health and /ready needs a key: the server's first admin
 # key, which every request below sends.
 export KEY=dck_bench_admin_key_0123456789abcdef0123456789ab
-DRAWCAL_ADMIN_KEY=$KEY DATABASE_URL=sqlite://$WORK/bench.db RUST_LOG=${LOG_LEVEL:-warn} DRAWCAL_LOG_FORMAT=${LOG_FORMAT:-text} ${SERVER_CPUS:+taskset -c $SERVER_CPUS} "$BIN" serve --listen 127.0.0.1:$PORT --workers 1 2>"$WORK/server.log" &
+DRAWCAL_ADMIN_KEY=$KEY DATABASE_URL=sqlite://$WORK/bench.db RUST_LOG=${LOG_LEVEL:-warn} DRAWCAL_LOG_FORMAT=${LOG_FORMAT:-text} ${SERVER_CPUS:+taskset -c $SERVER_CPUS} "$BIN" serve --listen 127.0.0.1:$PORT --workers 1 ${INSECURE:+--insecure-no-auth} 2>"$WORK/server.log" &
 SERVER=$!
 until curl -sf $BASE/ready >/dev/null; do sleep 0.2; done
 
