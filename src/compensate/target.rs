@@ -237,7 +237,10 @@ impl Compensator {
                         residual_mm: Some(sol.residual_mm),
                         iterations: last_iterations,
                         status: CompensationStatus::Ok,
-                        message: None,
+                        message: self
+                            .joint_effects
+                            .as_ref()
+                            .and_then(|e| e.outside_fitted_range(&sol.q)),
                     };
                 }
                 Err(failed) => {

@@ -22,7 +22,9 @@ use nalgebra::Vector3;
 use crate::kinematics::chain::{Chain, OutputFrame};
 use crate::kinematics::{JointParam, Params};
 use crate::model::Robot;
-pub use crate::report::effect::{EffectModel, Kind, ThermalDriver};
+pub use crate::report::effect::{
+    CorrectionDriver, CorrectionTarget, EffectModel, Kind, ThermalDriver,
+};
 
 impl Kind {
     /// The physics in one sentence (`ctx` words a change point in seconds
@@ -94,8 +96,60 @@ impl Kind {
             Kind::RigDrift => {
                 "the measuring rig (anchors or tracker) crept steadily relative to the robot base during the session (a settling stand, a floor or a tracker drifting)".into()
             }
+            Kind::DataDriven {
+                target,
+                target_index,
+                driver,
+                driver_index,
+                knots,
+            } => format!(
+                "not a named physics: a data-driven correction of {} as a smooth function of {} ({} knots, chosen by cross-validation), fitted where the analysis located structure the catalogue does not explain",
+                correction_target_words(*target, *target_index),
+                correction_driver_words(*driver, *driver_index),
+                knots.len()
+            ),
         }
     }
+}
+
+/// What a data-driven correction corrects, in words.
+pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -> String {
+    let at = index.map_or(0, |i| i + 1);
+    match target {
+        CorrectionTarget::JointAngle => format!("joint {at}'s angle"),
+        CorrectionTarget::Point => "the position of T relative to the rig".into(),
+        CorrectionTarget::StringReading => format!("string {at}'s reading"),
+    }
+}
+
+/// What drives a data-driven correction, in words.
+pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -> String {
+    let at = index.map_or(0, |i| i + 1);
+    match driver {
+        CorrectionDriver::JointAngle => format!("joint {at}'s angle"),
+        CorrectionDriver::Time => "the session's clock".into(),
+        CorrectionDriver::Temperature => "the temperature".into(),
+        CorrectionDriver::StringLength => format!("string {at}'s length"),
+    }
+}
+
+/// Piecewise-linear ("hat") weights of `x` between increasing `knots`:
+/// the two knots around `x` and their weights, `x` held at the end knots
+/// beyond them. One implementation for the fit and compensation.
+pub fn hat_weights(knots: &[f64], x: f64) -> [(usize, f64); 2] {
+    let k = knots.len();
+    if k == 0 {
+        return [(0, 0.0), (0, 0.0)];
+    }
+    if k == 1 || x <= knots[0] {
+        return [(0, 1.0), (0, 0.0)];
+    }
+    if x >= knots[k - 1] {
+        return [(k - 1, 1.0), (k - 1, 0.0)];
+    }
+    let s = knots.partition_point(|&v| v <= x).clamp(1, k - 1);
+    let t = (x - knots[s - 1]) / (knots[s] - knots[s - 1]);
+    [(s - 1, 1.0 - t), (s, t)]
 }
 
 /// What the effects need to know about one pose.
@@ -109,6 +163,8 @@ pub struct PoseContext {
     pub time_s: f64,
     /// Thermal driver value (K or h).
     pub thermal: f64,
+    /// The recorded temperature (°C; none when the pose has none).
+    pub temp_c: Option<f64>,
     /// The point T in the rig frame used by sensor-side effects (true point
     /// in the simulator, located point in the analysis).
     pub point_rig: Vector3<f64>,
@@ -323,6 +379,7 @@ impl Context {
                         _ => i as f64,
                     },
                     thermal,
+                    temp_c: p.temp_c,
                     point_rig: p.point_rig,
                     torque,
                 }
@@ -488,6 +545,54 @@ impl Context {
                 }
             }
             Kind::RigDrift => self.rigid_basis(pc, self.clock_h(pc), out),
+            Kind::DataDriven {
+                target,
+                target_index,
+                driver,
+                driver_index,
+                knots,
+            } => {
+                let x = self.driver_value(pc, *driver, *driver_index);
+                for (k, w) in hat_weights(knots, x) {
+                    if w == 0.0 {
+                        continue;
+                    }
+                    match target {
+                        CorrectionTarget::JointAngle => {
+                            out.dq[k * n + target_index.unwrap_or(0)] += w;
+                        }
+                        CorrectionTarget::StringReading => {
+                            out.dl[k * m + target_index.unwrap_or(0)] += w;
+                        }
+                        CorrectionTarget::Point => {
+                            for c in 0..3 {
+                                out.dp[(3 * k + c) * 3 + c] += w;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The value of a data-driven correction's driver at pose `pc` (rad,
+    /// s or rows, degrees C, mm). A pose without a temperature reads the
+    /// first pose's.
+    pub fn driver_value(
+        &self,
+        pc: &PoseContext,
+        driver: CorrectionDriver,
+        index: Option<usize>,
+    ) -> f64 {
+        let i = index.unwrap_or(0);
+        match driver {
+            CorrectionDriver::JointAngle => pc.q_rad.get(i).copied().unwrap_or(0.0),
+            CorrectionDriver::Time => pc.time_s,
+            CorrectionDriver::Temperature => pc.temp_c.or(self.temp_ref_c).unwrap_or(0.0),
+            CorrectionDriver::StringLength => self
+                .anchors
+                .get(i)
+                .map_or(0.0, |a| (pc.point_rig - a).norm() - self.r_mm),
         }
     }
 

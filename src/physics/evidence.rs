@@ -26,7 +26,7 @@ use std::collections::HashSet;
 use nalgebra::{Matrix3, Vector3};
 
 use super::analyse::errors_with_effects;
-use super::effects::{Basis, Context, EffectModel, Kind, ThermalDriver};
+use super::effects::{Basis, Context, CorrectionDriver, EffectModel, Kind, ThermalDriver};
 use super::problem::EffectProblem;
 use crate::identify::Observations;
 use crate::kinematics::chain::OutputFrame;
@@ -119,6 +119,22 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             unit: "m".into(),
             per_string: true,
         },
+        Kind::DataDriven {
+            driver,
+            driver_index,
+            ..
+        } => {
+            let words = super::effects::correction_driver_words(*driver, *driver_index);
+            match driver {
+                CorrectionDriver::JointAngle => d(words, "deg"),
+                CorrectionDriver::Time => {
+                    let (label, unit) = ctx.time_axis();
+                    d(label.into(), unit)
+                }
+                CorrectionDriver::Temperature => d(words, "degrees C"),
+                CorrectionDriver::StringLength => d(words, "mm"),
+            }
+        }
         // A moved rig: the session's clock (the row order without one).
         Kind::RigStep { .. } | Kind::RigDrift => Driver {
             label: if ctx.timed {
@@ -168,6 +184,18 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
         }
         Kind::RigStep { .. } | Kind::RigDrift if !ctx.timed => pc.time_s + 1.0,
         Kind::RigStep { .. } | Kind::RigDrift => ctx.clock_h(pc),
+        Kind::DataDriven {
+            driver,
+            driver_index,
+            ..
+        } => {
+            let v = ctx.driver_value(pc, *driver, *driver_index);
+            match driver {
+                CorrectionDriver::JointAngle => v.to_degrees(),
+                CorrectionDriver::Time if !ctx.timed => v + 1.0,
+                _ => v,
+            }
+        }
     }
 }
 

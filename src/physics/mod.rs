@@ -117,6 +117,41 @@ impl JointEffects {
         }
     }
 
+    /// A warning when `q_rad` lies outside the range of a joint angle that
+    /// drives a data-driven correction (its end knots, the range the
+    /// calibration's poses covered): there the correction is held at its
+    /// end value, an extrapolation no pose supports.
+    pub fn outside_fitted_range(&self, q_rad: &[f64]) -> Option<String> {
+        let out: Vec<String> = self
+            .effects
+            .iter()
+            .filter_map(|e| match &e.kind {
+                Kind::DataDriven {
+                    driver: effects::CorrectionDriver::JointAngle,
+                    driver_index: Some(d),
+                    knots,
+                    target_index,
+                    ..
+                } => {
+                    let q = *q_rad.get(*d)?;
+                    let (lo, hi) = (*knots.first()?, *knots.last()?);
+                    (q < lo || q > hi).then(|| {
+                        format!(
+                            "warning: joint {}'s angle {:.1} deg is outside {:.1} to {:.1} deg, the range the data-driven correction of joint {}'s angle was fitted on; it is held at its end value there",
+                            d + 1,
+                            q.to_degrees(),
+                            lo.to_degrees(),
+                            hi.to_degrees(),
+                            target_index.map_or(0, |t| t + 1)
+                        )
+                    })
+                }
+                _ => None,
+            })
+            .collect();
+        (!out.is_empty()).then(|| out.join("; "))
+    }
+
     /// Joint-angle offsets (rad, per joint) at the commanded `q_rad`.
     /// `direction` is the approach direction of every joint (+1 or -1);
     /// without it the one set by [`JointEffects::with_approach`], else

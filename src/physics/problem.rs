@@ -262,14 +262,14 @@ impl LeastSquares for EffectProblem<'_> {
 /// Add `row rowᵀ` (upper triangle) and `row · r` to flat accumulators.
 #[inline]
 pub fn accumulate(upper: &mut [f64], g: &mut [f64], n: usize, row: &[f64], r: f64) {
-    for a in 0..n {
+    // Rows are sparse where effects are local (a change point, a
+    // data-driven correction's two knots): visit the nonzeros only.
+    let nz: Vec<usize> = (0..n).filter(|&a| row[a] != 0.0).collect();
+    for (k, &a) in nz.iter().enumerate() {
         let ra = row[a];
-        if ra == 0.0 {
-            continue;
-        }
         g[a] += ra * r;
         let base = a * n;
-        for b in a..n {
+        for &b in &nz[k..] {
             upper[base + b] += ra * row[b];
         }
     }

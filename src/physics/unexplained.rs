@@ -13,7 +13,7 @@ use super::analyse::{errors_with_effects, reading_errors, rms};
 use super::effects::{Context, EffectModel};
 use super::problem::EffectProblem;
 use crate::identify::Observations;
-use crate::report::{Finding, FindingModel, UnexplainedLocation};
+use crate::report::{Finding, FindingModel, Place, UnexplainedLocation};
 use crate::stats::{f_quantile_upper, normal_quantile, normal_upper_tail};
 
 /// The part of one pose's string residuals `r` (one per anchor, mm) that a
@@ -90,7 +90,18 @@ pub(super) fn unexplained(
     // of the axis, so raw residuals of neighbours in that angle need not
     // agree while these components do.
     let along = joint_components(obs, ctx, p, &res, rpp);
-    let nb = neighbours(ctx.n_joints, &pairings, along.as_deref(), &res, rpp);
+    let with_temp = has_temperature(obs);
+    let extra = string_tests(obs, ctx, &res, rpp);
+    let nb = neighbours(
+        ctx.n_joints,
+        with_temp,
+        obs.anchors.is_empty(),
+        &pairings,
+        along.as_deref(),
+        &extra,
+        &res,
+        rpp,
+    );
     let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
     let excess = robot_side_excess(obs, ctx, &res, rpp, n_params);
     let confined = if nb.best.is_none() {
@@ -115,10 +126,48 @@ pub(super) fn unexplained(
     };
     let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
     let test = rms(&errors_with_effects(obs, ctx, p, effects, &obs.test));
+    let mut places = nb.places.clone();
+    if let Some(c) = &confined {
+        places.push(Place {
+            driver: "joint".into(),
+            joint: Some(c.joint + 1),
+            sensor: None,
+            side: if obs.anchors.is_empty() {
+                "point"
+            } else {
+                "strings"
+            }
+            .into(),
+            z: normal_quantile(1.0 - c.p),
+            threshold: normal_quantile(1.0 - c.alpha / ctx.n_joints.max(1) as f64),
+            range: Some([c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]),
+        });
+    }
+    if let Some(x) = excess.filter(|x| x.f > x.threshold && places.is_empty()) {
+        places.push(Place {
+            driver: "robot".into(),
+            joint: None,
+            sensor: None,
+            side: "robot".into(),
+            z: x.f,
+            threshold: x.threshold,
+            range: None,
+        });
+    }
+    // The evidence plot knows the plain orderings up to the configuration.
+    let plot_len = ctx.n_joints + 2 + usize::from(with_temp);
+    let (ordering, z) = match winner {
+        w if w < pairings.len() => (pairings[w].0.clone(), nb.zs[w]),
+        w => (
+            extra[w - pairings.len()].name.clone(),
+            nb.best.as_ref().map_or(f64::NAN, |b| b.0),
+        ),
+    };
+    let resembles = resemblances(&places);
     let parameters = UnexplainedLocation {
-        ordering: pairings[winner].0.clone(),
+        ordering,
         along_joint_motion: nb.winner_at.is_some_and(|(_, projected)| projected),
-        z: nb.zs[winner],
+        z,
         confined_joint: confined.as_ref().map(|c| c.joint + 1),
         confined_deg: confined
             .as_ref()
@@ -127,6 +176,8 @@ pub(super) fn unexplained(
         confined_p: confined.as_ref().map(|c| c.p),
         robot_side_variance_ratio: excess.as_ref().map(|x| x.f),
         variance_ratio_threshold: excess.as_ref().map(|x| x.threshold),
+        places,
+        resembles,
     };
     Some(Finding {
         effect: "unexplained".into(),
@@ -140,8 +191,56 @@ pub(super) fn unexplained(
         test_rms_before_mm: test,
         test_rms_after_mm: test,
         parameters: Some(FindingModel::Unexplained(parameters)),
-        evidence_plot: super::evidence::unexplained_plot(obs, ctx, p, effects, winner, &nb.zs),
+        evidence_plot: super::evidence::unexplained_plot(
+            obs,
+            ctx,
+            p,
+            effects,
+            winner.min(plot_len - 1),
+            &nb.zs[..plot_len],
+        ),
     })
+}
+
+/// True when every pose recorded a temperature (then it is an ordering).
+fn has_temperature(obs: &Observations) -> bool {
+    obs.data.poses.iter().all(|p| p.temp_c.is_some())
+}
+
+/// The catalogue effects that act where the structure was located, and
+/// why they do not explain it: the analysis tried each of them in its
+/// rounds, and none passed its gates or, kept, left this structure.
+fn resemblances(places: &[Place]) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut say = |s: String| {
+        if !out.contains(&s) {
+            out.push(s);
+        }
+    };
+    for p in places {
+        match (p.driver.as_str(), p.joint, p.sensor) {
+            ("joint", Some(j), _) => say(format!(
+                "joint {j}: joint_periodic (1, 2 or 3 per revolution), joint_scale, joint_compliance and backlash act on its angle; each was tried and none explains this shape (a stretch, a harmonic the catalogue lacks, or an error driven by another joint)"
+            )),
+            ("time", _, Some(s)) => say(format!(
+                "string {s} over time: sensor_drift (linear creep) and anchor_step (one move) were tried; the structure is neither"
+            )),
+            ("string", _, Some(s)) => say(format!(
+                "string {s} by its length: sensor_scale (proportional) and sensor_offset (constant) were tried; the structure is neither"
+            )),
+            ("time", _, None) => say(
+                "time: rig_step (one move), rig_drift (linear creep) and thermal_expansion (warm-up) were tried; the structure is none of them".into(),
+            ),
+            ("temperature", _, _) => say(
+                "temperature: thermal_expansion (every length in proportion) was tried; the structure is not a uniform growth".into(),
+            ),
+            ("workspace" | "configuration", _, _) => say(
+                "the workspace: no catalogue effect is a field over the workspace; a distortion of the measuring device or a compliance of the stand or base would be".into(),
+            ),
+            _ => {}
+        }
+    }
+    out
 }
 
 /// The train poses' residuals with the accepted effects, pose after pose,
@@ -187,7 +286,7 @@ fn orderings(obs: &Observations, ctx: &Context) -> Vec<(String, Vec<(usize, usiz
         "time (visiting order)".into(),
         obs.train.iter().map(|&i| ctx.poses[i].time_s).collect(),
     ));
-    if obs.data.poses.iter().all(|p| p.temp_c.is_some()) {
+    if has_temperature(obs) {
         keys.push((
             "temperature".into(),
             obs.train
@@ -215,7 +314,86 @@ fn orderings(obs: &Observations, ctx: &Context) -> Vec<(String, Vec<(usize, usiz
         "the joint configuration (nearest pose in joint space)".into(),
         nearest_in_joint_space(ctx, &obs.train),
     ));
+    // Last, T's position: a field over the workspace (a distortion of the
+    // measuring device, a compliance of the stand) follows where T is,
+    // whatever the joints do to put it there.
+    pairings.push((
+        "T's position (nearest pose in the workspace)".into(),
+        nearest_in_workspace(ctx, &obs.train),
+    ));
     pairings
+}
+
+/// What the plain ordering `pk` of [`orderings`] follows, as a place's
+/// driver and joint (1-based). The layout: one per joint, time,
+/// temperature when recorded (`with_temp`), the configuration, T's
+/// position.
+fn driver_of(pk: usize, n: usize, with_temp: bool) -> (&'static str, Option<usize>) {
+    let t = usize::from(with_temp);
+    match pk {
+        j if j < n => ("joint", Some(j + 1)),
+        j if j == n => ("time", None),
+        j if with_temp && j == n + 1 => ("temperature", None),
+        j if j == n + 1 + t => ("configuration", None),
+        _ => ("workspace", None),
+    }
+}
+
+/// A neighbour test on one number per train pose rather than the whole
+/// residual: the sensor-side part of one string's residual, along its
+/// length or the clock.
+struct ScalarTest {
+    name: String,
+    sensor: usize,
+    driver: &'static str,
+    pairs: Vec<(usize, usize)>,
+    values: Vec<f64>,
+}
+
+/// With four or more strings, per string: the part of its residual no
+/// displacement of T explains (its sensor side), with the train poses
+/// ordered by the string's length and by time. A string that reads wrong
+/// by a function of its length (a drum's pitch, a worn spool) or of the
+/// clock shows here, not in the robot-side tests.
+fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> Vec<ScalarTest> {
+    let m = obs.anchors.len();
+    if m <= 3 || rpp != m {
+        return vec![];
+    }
+    let mut own = vec![Vec::with_capacity(obs.train.len()); m];
+    for (pos, &i) in obs.train.iter().enumerate() {
+        let r = &res[pos * rpp..(pos + 1) * rpp];
+        let t = &ctx.poses[i].point_rig;
+        let d = common_displacement(&obs.anchors, t, r).map_or(Vector3::zeros(), |(d, _)| d);
+        for (k, a) in obs.anchors.iter().enumerate() {
+            own[k].push(r[k] - (t - a).normalize().dot(&d));
+        }
+    }
+    let sorted_pairs = |key: &dyn Fn(usize) -> f64| -> Vec<(usize, usize)> {
+        let mut order: Vec<usize> = (0..obs.train.len()).collect();
+        order.sort_by(|a, b| key(*a).total_cmp(&key(*b)));
+        order.windows(2).map(|w| (w[0], w[1])).collect()
+    };
+    let by_time = sorted_pairs(&|a| ctx.poses[obs.train[a]].time_s);
+    let mut out = Vec::new();
+    for (k, values) in own.into_iter().enumerate() {
+        let length = |a: usize| (ctx.poses[obs.train[a]].point_rig - obs.anchors[k]).norm();
+        out.push(ScalarTest {
+            name: format!("string {}'s length (its own part of the residual)", k + 1),
+            sensor: k + 1,
+            driver: "string",
+            pairs: sorted_pairs(&length),
+            values: values.clone(),
+        });
+        out.push(ScalarTest {
+            name: format!("time (string {}'s own part of the residual)", k + 1),
+            sensor: k + 1,
+            driver: "time",
+            pairs: by_time.clone(),
+            values,
+        });
+    }
+    out
 }
 
 /// What the neighbour test found over every ordering (see [`neighbours`]).
@@ -228,24 +406,32 @@ struct Neighbours {
     /// Per ordering of the pairings (the plot's layout), the larger of the
     /// raw and the along-the-joint z for the joints (NaN: none).
     zs: Vec<f64>,
-    /// The winning ordering, and whether it was the along-the-joint one.
+    /// The winning test: an ordering of the pairings and whether it was the
+    /// along-the-joint one, or (index at or past the pairings) a string's
+    /// own test, `pairings.len() + k` for `extra[k]`.
     winner_at: Option<(usize, bool)>,
+    /// Every test past `zcrit`, strongest first.
+    places: Vec<Place>,
 }
 
 /// Do neighbours agree more than independent noise allows? Per ordering,
 /// the z of the summed products of neighbouring residuals `res` (`rpp`
 /// per pose), and for the first `n` orderings (the joints) also of their
-/// components `along` the direction the joint moves T. Every z is kept
-/// for the plot; the largest past the threshold locates the mismatch.
+/// components `along` the direction the joint moves T; then each string's
+/// own test of `extra`. Every z is kept for the plot; every one past the
+/// threshold is a place, and the largest locates the mismatch.
 fn neighbours(
     n: usize,
+    with_temp: bool,
+    point_data: bool,
     pairings: &[(String, Vec<(usize, usize)>)],
     along: Option<&[Vec<f64>]>,
+    extra: &[ScalarTest],
     res: &[f64],
     rpp: usize,
 ) -> Neighbours {
     let n_plain = pairings.len();
-    let n_tests = n_plain + along.as_ref().map_or(0, |_| n);
+    let n_tests = n_plain + along.as_ref().map_or(0, |_| n) + extra.len();
     let alpha = 1e-3 / n_tests as f64;
     let zcrit = normal_quantile(1.0 - alpha);
     let z_of = |pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64| {
@@ -260,6 +446,17 @@ fn neighbours(
     let mut best: Option<(f64, String)> = None;
     let mut zs = vec![f64::NAN; n_plain];
     let mut winner_at: Option<(usize, bool)> = None;
+    let mut places: Vec<Place> = Vec::new();
+    let place = |driver: &str, joint, sensor, side: &str, z| Place {
+        driver: driver.into(),
+        joint,
+        sensor,
+        side: side.into(),
+        z,
+        threshold: zcrit,
+        range: None,
+    };
+    let whole = if point_data { "point" } else { "strings" };
     for (pk, (name, pairs)) in pairings.iter().enumerate() {
         let raw = |i: usize, k: usize| (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
         let mut tries: Vec<(Option<f64>, bool)> = vec![(z_of(pairs, &raw), false)];
@@ -267,11 +464,19 @@ fn neighbours(
             let proj = |i: usize, k: usize| a[pk][i] * a[pk][k];
             tries.push((z_of(pairs, &proj), true));
         }
+        let (driver, joint) = driver_of(pk, n, with_temp);
+        let mut strongest: Option<Place> = None;
         for (z, projected) in tries {
             let Some(z) = z else { continue };
             // (NaN, not yet set, is replaced.)
             if zs[pk].is_nan() || z > zs[pk] {
                 zs[pk] = z;
+            }
+            if z > zcrit {
+                let side = if projected { "robot" } else { whole };
+                if strongest.as_ref().is_none_or(|p| z > p.z) {
+                    strongest = Some(place(driver, joint, None, side, z));
+                }
             }
             if z > zcrit && best.as_ref().is_none_or(|b| z > b.0) {
                 let label = if projected {
@@ -283,12 +488,28 @@ fn neighbours(
                 winner_at = Some((pk, projected));
             }
         }
+        places.extend(strongest);
     }
+    for (k, t) in extra.iter().enumerate() {
+        let v = &t.values;
+        let Some(z) = z_of(&t.pairs, &|i, j| v[i] * v[j]) else {
+            continue;
+        };
+        if z > zcrit {
+            places.push(place(t.driver, None, Some(t.sensor), "sensor", z));
+            if best.as_ref().is_none_or(|b| z > b.0) {
+                best = Some((z, t.name.clone()));
+                winner_at = Some((n_plain + k, false));
+            }
+        }
+    }
+    places.sort_by(|a, b| b.z.total_cmp(&a.z));
     Neighbours {
         zcrit,
         best,
         zs,
         winner_at,
+        places,
     }
 }
 
@@ -304,6 +525,12 @@ fn located(
 ) -> Option<(usize, String)> {
     let zcrit = nb.zcrit;
     Some(match (&nb.best, excess, nb.winner_at) {
+        (Some((z, name)), _, Some((pk, false))) if pk >= pairings.len() => (
+            pk,
+            format!(
+                "the part of the string residuals no displacement of T explains agrees between neighbouring poses by {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): that string reads wrong by an amount that varies smoothly with it, in a form no catalogue effect has"
+            ),
+        ),
         (Some((z, name)), _, Some((pk, false))) => (
             pk,
             format!(
@@ -674,6 +901,26 @@ fn nearest_in_joint_space(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)>
                     let d: f64 = q(a).iter().zip(q(b)).map(|(x, y)| (x - y).powi(2)).sum();
                     (d, b)
                 })
+                .min_by(|x, y| x.0.total_cmp(&y.0))
+                .map(|(_, b)| (a.min(b), a.max(b)))
+        })
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect()
+}
+
+/// Each train pose paired with its nearest other train pose by T's
+/// position (rig frame), each pair once; subsampled like
+/// [`nearest_in_joint_space`].
+fn nearest_in_workspace(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)> {
+    let stride = train.len().div_ceil(12_000).max(1);
+    let pick: Vec<usize> = (0..train.len()).step_by(stride).collect();
+    let t = |a: usize| ctx.poses[train[a]].point_rig;
+    pick.iter()
+        .filter_map(|&a| {
+            pick.iter()
+                .filter(|&&b| b != a)
+                .map(|&b| ((t(a) - t(b)).norm_squared(), b))
                 .min_by(|x, y| x.0.total_cmp(&y.0))
                 .map(|(_, b)| (a.min(b), a.max(b)))
         })

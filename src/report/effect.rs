@@ -17,6 +17,43 @@ pub enum ThermalDriver {
     Order,
 }
 
+/// What a data-driven correction ([`Kind::DataDriven`]) changes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CorrectionTarget {
+    /// One joint's angle (rad): the joint sits at commanded + correction.
+    JointAngle,
+    /// T relative to the rig (mm, rig frame; three coefficients per knot,
+    /// x, y, z).
+    Point,
+    /// One string's reading (mm): the string reads this much more.
+    StringReading,
+}
+
+/// What drives a data-driven correction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CorrectionDriver {
+    /// One joint's commanded angle (knots in rad).
+    JointAngle,
+    /// The session's clock (knots in s, or rows without `time_s`).
+    Time,
+    /// The recorded temperature (knots in degrees C).
+    Temperature,
+    /// One string's length (knots in mm).
+    StringLength,
+}
+
+impl CorrectionDriver {
+    /// True when the driver is known for a future target: a joint angle
+    /// is (the target's own); the session's clock and temperature history
+    /// describe this session, not the next, and a string's length exists
+    /// only with the rig mounted.
+    pub fn usable_for_compensation(self) -> bool {
+        matches!(self, CorrectionDriver::JointAngle)
+    }
+}
+
 /// One effect of the catalogue. Joint and sensor indices are 0-based here
 /// (reports and files use 1-based numbers).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -112,6 +149,26 @@ pub enum Kind {
     /// rate (mm/h, 3 coefficients) and a rotation rate (mrad/h, 3) about the
     /// centre of the measured points, times the hours since the first pose.
     RigDrift,
+    /// Not a named physics: a data-driven correction of structure the
+    /// catalogue left unexplained, a piecewise-linear function of its
+    /// driver between `knots` (one coefficient per knot, three for a point
+    /// target), held constant beyond the end knots. Fitted only where the
+    /// analysis located unexplained structure, its number of knots chosen
+    /// by cross-validation on the train poses.
+    DataDriven {
+        /// What it corrects.
+        target: CorrectionTarget,
+        /// The joint or string it corrects (0-based; none for a point).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        target_index: Option<usize>,
+        /// What it is a function of.
+        driver: CorrectionDriver,
+        /// The joint or string whose angle or length drives it (0-based).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        driver_index: Option<usize>,
+        /// Knots in the driver's unit (rad, s, degrees C, mm), increasing.
+        knots: Vec<f64>,
+    },
 }
 
 impl Kind {
@@ -130,6 +187,7 @@ impl Kind {
             Kind::AnchorStep { .. } => "anchor_step",
             Kind::RigStep { .. } => "rig_step",
             Kind::RigDrift => "rig_drift",
+            Kind::DataDriven { .. } => "data_driven",
         }
     }
 
@@ -140,6 +198,11 @@ impl Kind {
             | Kind::Backlash { joint_index }
             | Kind::JointPeriodic { joint_index, .. }
             | Kind::JointScale { joint_index } => Some(*joint_index),
+            Kind::DataDriven {
+                target: CorrectionTarget::JointAngle,
+                target_index,
+                ..
+            } => *target_index,
             _ => None,
         }
     }
@@ -151,6 +214,11 @@ impl Kind {
             | Kind::SensorOffset { sensor_index }
             | Kind::SensorDrift { sensor_index }
             | Kind::AnchorStep { sensor_index, .. } => Some(*sensor_index),
+            Kind::DataDriven {
+                target: CorrectionTarget::StringReading,
+                target_index,
+                ..
+            } => *target_index,
             _ => None,
         }
     }
@@ -168,7 +236,16 @@ impl Kind {
                 | Kind::ThermalExpansion { .. }
                 | Kind::RigStep { .. }
                 | Kind::RigDrift
+                | Kind::DataDriven {
+                    target: CorrectionTarget::JointAngle | CorrectionTarget::Point,
+                    ..
+                }
         )
+    }
+
+    /// True for a data-driven correction (not a named physics).
+    pub fn is_data_driven(&self) -> bool {
+        matches!(self, Kind::DataDriven { .. })
     }
 
     /// Time of a change point, for effects that have one.
@@ -199,6 +276,12 @@ impl Kind {
             Kind::JointPeriodic { .. } | Kind::Backlash { .. } => 2,
             Kind::AnchorStep { .. } => 3,
             Kind::RigStep { .. } | Kind::RigDrift => 6,
+            Kind::DataDriven {
+                target: CorrectionTarget::Point,
+                knots,
+                ..
+            } => 3 * knots.len(),
+            Kind::DataDriven { knots, .. } => knots.len(),
             _ => 1,
         }
     }
@@ -261,6 +344,27 @@ impl EffectModel {
                     "regressor {r}: link frames are 0..{n_joints}, the tool {n_joints}, the payload {}",
                     n_joints + 1
                 ));
+            }
+        }
+        if let Kind::DataDriven {
+            target,
+            target_index,
+            knots,
+            ..
+        } = &self.kind
+        {
+            if knots.len() < 2
+                || knots.iter().any(|k| !k.is_finite())
+                || knots.windows(2).any(|w| w[1] <= w[0])
+            {
+                return Err(
+                    "a data-driven correction needs two or more finite, increasing knots".into(),
+                );
+            }
+            if *target != CorrectionTarget::Point && target_index.is_none() {
+                return Err(
+                    "a data-driven correction of a joint or string needs its target_index".into(),
+                );
             }
         }
         if self.coef.len() != self.kind.n_coef() {

@@ -496,6 +496,48 @@ pub struct UnexplainedLocation {
     /// The ratio's threshold.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub variance_ratio_threshold: Option<f64>,
+    /// Every place the structure was located, strongest first: each test
+    /// that passed its threshold (empty in reports written before it
+    /// existed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub places: Vec<Place>,
+    /// The catalogue effects the structure resembles and why they do not
+    /// explain it, one sentence each.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub resembles: Vec<String>,
+}
+
+/// One place an `unexplained` structure was located: what it follows
+/// (the driver), on which joint or string, on which side of the
+/// measurement, how significant.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Place {
+    /// `joint` (a joint's angle), `time`, `temperature`, `configuration`
+    /// (nearest poses in joint space), `workspace` (nearest poses by T's
+    /// position), `string` (one string's reading), `robot` (a robot-side
+    /// excess that follows no driver tested).
+    pub driver: String,
+    /// The joint (1-based) whose angle it follows.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint: Option<usize>,
+    /// The string (1-based) it lives in.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<usize>,
+    /// `robot` (T itself is off), `sensor` (one string reads wrong),
+    /// `point` (tracker points: the two cannot be told apart), `strings`
+    /// (string residuals taken whole).
+    pub side: String,
+    /// Significance: z of the neighbour test (or, for a confined stretch
+    /// or a robot-side excess, the normal quantile of its p-value).
+    #[serde(deserialize_with = "nan_if_null")]
+    pub z: f64,
+    /// The z it had to pass.
+    #[serde(default = "nan", deserialize_with = "nan_if_null")]
+    pub threshold: f64,
+    /// A stretch of the driver, where the structure is confined to one
+    /// (degrees for a joint).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range: Option<[f64; 2]>,
 }
 
 /// Evidence of one finding, computed by the engine

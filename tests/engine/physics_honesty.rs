@@ -241,7 +241,26 @@ fn an_error_confined_to_a_stretch_of_a_joint_is_located_with_points() {
     assert!(lo < 20.0 && 20.0 < hi && hi - lo < 90.0, "{lo}..{hi}");
     assert_eq!(p["confined_train_poses"], serde_json::json!(["20", "168"]));
     assert!(p["confined_p"].as_f64().unwrap() < 1e-3 / 6.0, "{p}");
-    assert_eq!(a.findings.len(), 1, "{:#?}", a.findings);
+    assert_eq!(p["places"][0]["driver"], "joint", "{p}");
+    assert_eq!(p["places"][0]["joint"], 2, "{p}");
+    // Nothing is named; the stretch is modelled as a data-driven
+    // correction driven by joint 2's angle, which halves the held-out RMS.
+    let rest: Vec<&str> = a
+        .findings
+        .iter()
+        .filter(|f| f.effect != "unexplained")
+        .map(|f| f.effect.as_str())
+        .collect();
+    assert_eq!(rest, ["data_driven"], "{:#?}", a.findings);
+    let dd = a
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .unwrap();
+    assert!(
+        dd.test_rms_after_mm < 0.6 * dd.test_rms_before_mm,
+        "{dd:#?}"
+    );
 }
 
 /// Gross errors at a few train poses scattered over the workspace (a
@@ -303,41 +322,61 @@ fn an_error_outside_the_catalogue_is_located_on_its_joint_with_points() {
     );
 }
 
-/// A local bump of joint 3's angle (out of the catalogue; from the second
-/// cross-check, `tests/data/xcheck_bump_j3`) is approximated by harmonics
-/// and a scale error of joint 3 whose magnitudes (up to 1.9 deg) cancel
-/// each other down to a few hundredths of a degree: every such finding
-/// says so, and the rest is reported `unexplained`.
+/// A local bump of joint 3's angle (outside the catalogue: the second
+/// cross-check, `tests/data/xcheck_bump_j3`) was first approximated by
+/// harmonics and a scale error of joint 3 that cancel each other. Now the
+/// structure left on joint 3 is located (`places`: joint 3, robot side),
+/// modelled by a data-driven correction of joint 3's angle as a function of
+/// joint 3's angle, chosen by cross-validation and kept through the
+/// held-out gate; beside it the catalogue terms no longer improve the
+/// held-out readings, so they are dropped and no physics is named. The
+/// held-out RMS comes within 1.4x of what an exact model shows (0.0388 mm,
+/// the summary's noise floor) from 4.4x.
 #[test]
-fn terms_of_one_joint_that_cancel_are_called_a_series() {
+fn a_bump_of_one_joint_is_located_and_corrected_not_named() {
     let (robot, rig, data) = common::load("xcheck_bump_j3");
     let (a, _) = common::analyse_blind(&robot, &rig, &data);
-    let on_j3: Vec<&Finding> = a.findings.iter().filter(|f| f.joint == Some(3)).collect();
-    assert!(on_j3.len() >= 2, "{:#?}", a.findings);
-    for f in &on_j3 {
-        assert!(
-            f.evidence
-                .contains("effects kept on joint 3 largely cancel each other"),
-            "{}",
-            f.evidence
-        );
-    }
-    assert!(
-        a.findings.iter().any(|f| f.effect == "unexplained"),
-        "{:#?}",
-        a.findings
-    );
+    let named: Vec<&Finding> = a
+        .findings
+        .iter()
+        .filter(|f| f.effect != "unexplained" && f.effect != "data_driven")
+        .collect();
+    assert!(named.is_empty(), "{named:#?}");
+    let u = a
+        .findings
+        .iter()
+        .find(|f| f.effect == "unexplained")
+        .expect("an unexplained finding");
     // `unexplained` fits no parameter: its sigma is unknown (null), not 0.
-    for f in a.findings.iter().filter(|f| f.effect == "unexplained") {
-        assert!(f.sigma.is_nan(), "{f:#?}");
-    }
-    // Findings of other joints (and `unexplained`) carry no such doubt.
+    assert!(u.sigma.is_nan(), "{u:#?}");
+    let loc = u.unexplained().expect("its location");
+    assert_eq!(loc.places[0].driver, "joint", "{loc:#?}");
+    assert_eq!(loc.places[0].joint, Some(3), "{loc:#?}");
     assert!(
-        a.findings
-            .iter()
-            .filter(|f| f.joint != Some(3))
-            .all(|f| !f.evidence.contains("largely cancel")),
-        "{:#?}",
-        a.findings
+        loc.resembles.iter().any(|r| r.contains("joint_periodic")),
+        "{loc:#?}"
     );
+    let dd = a
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .expect("a data-driven correction");
+    assert_eq!(dd.joint, Some(3), "{dd:#?}");
+    let Some(drawcal::physics::Kind::DataDriven {
+        driver_index,
+        knots,
+        ..
+    }) = dd.effect_model().map(|m| &m.kind)
+    else {
+        panic!("{dd:#?}");
+    };
+    assert_eq!(*driver_index, Some(2));
+    assert!(knots.len() >= 3, "{knots:?}");
+    assert!(
+        dd.evidence.contains("compensation applies it"),
+        "{}",
+        dd.evidence
+    );
+    let test = drawcal::stats::rms_norm(&a.test_errors);
+    assert!(test < 1.4 * 0.0388, "held-out {test}");
 }

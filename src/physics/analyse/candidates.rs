@@ -316,6 +316,24 @@ pub(super) fn same_slot(a: &Kind, b: &Kind) -> bool {
             Kind::JointCompliance { joint_index: x, .. },
             Kind::JointCompliance { joint_index: y, .. },
         ) => x == y,
+        // A data-driven correction's slot is what it corrects and what
+        // drives it, at any number of knots.
+        (
+            Kind::DataDriven {
+                target: t1,
+                target_index: i1,
+                driver: d1,
+                driver_index: k1,
+                ..
+            },
+            Kind::DataDriven {
+                target: t2,
+                target_index: i2,
+                driver: d2,
+                driver_index: k2,
+                ..
+            },
+        ) => t1 == t2 && i1 == i2 && d1 == d2 && k1 == k2,
         _ => a == b,
     }
 }

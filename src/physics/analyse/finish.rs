@@ -6,6 +6,7 @@
 use super::magnitude::magnitude;
 use super::refit::FitInfo;
 use super::{Analysis, Inputs, State, errors_with_effects};
+use super::{data_driven, naming};
 use crate::identify::{Observations, Progress};
 use crate::kinematics::Params;
 use crate::physics::effects::{Basis, Context, EffectModel};
@@ -26,23 +27,59 @@ pub(super) fn finish(
     share: (Option<f64>, Option<f64>),
     progress: &dyn Progress,
 ) -> Analysis {
-    let Inputs { obs, ctx, free, .. } = inputs;
     if let Some(fit) = &state.final_fit {
         restate(
-            obs,
-            &ctx,
+            inputs.obs,
+            &inputs.ctx,
             &state.p,
             &state.accepted,
             fit,
             &mut state.findings,
         );
     }
-    doubt_cancelling_terms(obs, &ctx, &state.accepted, &mut state.findings);
-    // Anything left that varies smoothly?
-    if let Some(f) = unexplained(obs, &ctx, &state.p, &state.accepted, free.len()) {
+    doubt_cancelling_terms(
+        inputs.obs,
+        &inputs.ctx,
+        &state.accepted,
+        &mut state.findings,
+    );
+    // Anything left that varies smoothly? Say where, and model it there
+    // without a name where that predicts the held-out poses better.
+    if let Some(f) = unexplained(
+        inputs.obs,
+        &inputs.ctx,
+        &state.p,
+        &state.accepted,
+        inputs.free.len(),
+    ) {
+        let places = f
+            .unexplained()
+            .map(|u| u.places.clone())
+            .unwrap_or_default();
         state.findings.push(f);
+        let n_before = state.accepted.len();
+        data_driven::correct(&inputs, &mut state, &places);
+        if state.accepted.len() > n_before {
+            naming::prune(&inputs, &mut state);
+            if let Some((p, accepted, fit)) = data_driven::linear_refit(&inputs, &state) {
+                state.p = p;
+                state.accepted = accepted;
+                state.final_fit = Some(fit);
+            }
+            if let Some(fit) = &state.final_fit {
+                restate(
+                    inputs.obs,
+                    &inputs.ctx,
+                    &state.p,
+                    &state.accepted,
+                    fit,
+                    &mut state.findings,
+                );
+            }
+        }
     }
     progress.update("physics analysis", 1.0);
+    let Inputs { obs, ctx, .. } = inputs;
     let test_errors = errors_with_effects(obs, &ctx, &state.p, &state.accepted, &obs.test);
     Analysis {
         findings: state.findings,

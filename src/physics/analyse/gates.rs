@@ -76,6 +76,21 @@ impl Before {
             r,
         }
     }
+
+    /// The current model's held-out errors alone, for a step that has no
+    /// round's scores (its cross-validation is its own): `cv0` is NaN.
+    pub(super) fn now(inputs: &Inputs, state: &State) -> Self {
+        let Inputs { obs, ctx, .. } = inputs;
+        let e = errors_with_effects(obs, ctx, &state.p, &state.accepted, &obs.test);
+        let r = reading_errors(obs, ctx, &state.p, &state.accepted);
+        let test_rms = rms(&e);
+        Before {
+            cv0: f64::NAN,
+            e,
+            test_rms,
+            r,
+        }
+    }
 }
 
 /// What the held-out poses said of a refitted proposal.
@@ -380,6 +395,20 @@ pub(super) fn pair_members(
         rms: stage_rms,
         pair_z,
     })
+}
+
+/// Paired z that the held-out readings of model `b` beat those of model
+/// `a` (each its geometric parameters and effects): positive when `b`
+/// predicts the held-out poses better.
+pub(super) fn held_out_gain_z(
+    inputs: &Inputs,
+    a: (&[f64], &[EffectModel]),
+    b: (&[f64], &[EffectModel]),
+) -> f64 {
+    let Inputs { obs, ctx, .. } = inputs;
+    let ra = reading_errors(obs, ctx, a.0, a.1);
+    let rb = reading_errors(obs, ctx, b.0, b.1);
+    paired_gain_z_sums(&ra, &rb)
 }
 
 /// RMS per row of summed squares `(sum, rows)` per pose.

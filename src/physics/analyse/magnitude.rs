@@ -4,7 +4,7 @@
 
 use super::refit::FitInfo;
 use crate::identify::Observations;
-use crate::physics::effects::{self, Context, EffectModel, Kind, ThermalDriver};
+use crate::physics::effects::{self, Context, CorrectionTarget, EffectModel, Kind, ThermalDriver};
 
 /// Reported magnitude, 1-sigma and unit of an effect.
 pub(super) fn magnitude(
@@ -95,7 +95,58 @@ fn size_of<'a>(
             let train = obs.train.clone();
             Box::new(move |c: &[f64]| ctx.rigid_rms_mm(&kind, c, &train))
         }
+        Kind::DataDriven { target, .. } => {
+            let kind = e.kind.clone();
+            let train = obs.train.clone();
+            let scale = if *target == CorrectionTarget::JointAngle {
+                deg
+            } else {
+                1.0
+            };
+            Box::new(move |c: &[f64]| data_driven_spread(ctx, &kind, c, &train) * scale)
+        }
     }
+}
+
+/// RMS of a data-driven correction's contribution over `poses` about its
+/// mean (rad of the joint, or mm of T or of the reading): its constant part
+/// is a zero offset the geometry takes.
+fn data_driven_spread(ctx: &Context, kind: &Kind, coef: &[f64], poses: &[usize]) -> f64 {
+    let mut buf = effects::Basis::default();
+    let (n, m) = (ctx.n_joints, ctx.anchors.len());
+    let values: Vec<Vec<f64>> = poses
+        .iter()
+        .map(|&i| {
+            ctx.basis(kind, i, &mut buf);
+            let sum = |v: &[f64], width: usize, at: usize| -> f64 {
+                coef.iter()
+                    .enumerate()
+                    .map(|(k, c)| c * v[k * width + at])
+                    .sum()
+            };
+            match kind {
+                Kind::DataDriven {
+                    target: CorrectionTarget::JointAngle,
+                    target_index,
+                    ..
+                } => vec![sum(&buf.dq, n, target_index.unwrap_or(0))],
+                Kind::DataDriven {
+                    target: CorrectionTarget::StringReading,
+                    target_index,
+                    ..
+                } => vec![sum(&buf.dl, m, target_index.unwrap_or(0))],
+                _ => (0..3).map(|r| sum(&buf.dp, 3, r)).collect(),
+            }
+        })
+        .collect();
+    let count = values.len().max(1) as f64;
+    let width = values.first().map_or(0, Vec::len);
+    let mut ss = 0.0;
+    for r in 0..width {
+        let mean = values.iter().map(|v| v[r]).sum::<f64>() / count;
+        ss += values.iter().map(|v| (v[r] - mean).powi(2)).sum::<f64>();
+    }
+    (ss / count).sqrt()
 }
 
 /// The unit of an effect's magnitude, naming a warm-up's time constant
@@ -146,5 +197,14 @@ fn fixed_unit(kind: &Kind) -> &'static str {
         Kind::AnchorStep { .. } => "mm",
         Kind::RigStep { .. } => "mm (RMS displacement of T after the move)",
         Kind::RigDrift => "mm (RMS displacement of T over the session)",
+        Kind::DataDriven {
+            target: CorrectionTarget::JointAngle,
+            ..
+        } => "deg (RMS of the correction over the train poses)",
+        Kind::DataDriven {
+            target: CorrectionTarget::Point,
+            ..
+        } => "mm (RMS displacement of T over the train poses)",
+        Kind::DataDriven { .. } => "mm (RMS change of the reading over the train poses)",
     }
 }

@@ -34,10 +34,12 @@
 //! findings restated, cancelling terms, the unexplained remainder).
 
 mod candidates;
+mod data_driven;
 mod findings;
 mod finish;
 mod gates;
 mod magnitude;
+mod naming;
 mod normals;
 mod proposals;
 mod refit;

@@ -59,7 +59,7 @@ impl Normals {
 
 /// One pass over the rows of `problem` at `x`, accumulated into the fold
 /// each row's pose belongs to.
-fn normals(problem: &EffectProblem, x: &[f64], fold_of: &[usize]) -> Normals {
+pub(super) fn normals(problem: &EffectProblem, x: &[f64], fold_of: &[usize]) -> Normals {
     let n = x.len();
     let mut up = vec![vec![0.0; n * n]; FOLDS];
     let mut g = vec![vec![0.0; n]; FOLDS];

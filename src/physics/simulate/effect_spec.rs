@@ -214,6 +214,9 @@ pub fn report_magnitude(e: &EffectModel, ctx: &Context) -> (f64, &'static str) {
             ctx.rigid_rms_mm(&e.kind, c, &(0..ctx.poses.len()).collect::<Vec<_>>()),
             "mm (RMS displacement of T over the session)",
         ),
+        // The simulator draws catalogue effects only; a data-driven
+        // correction is never a truth.
+        Kind::DataDriven { .. } => (f64::NAN, "data-driven correction (never simulated)"),
     }
 }
 

@@ -1,0 +1,407 @@
+//! Modelling what has no name: where the analysis located structure that
+//! no catalogue effect explains, a data-driven correction in the located
+//! driver (a smooth function of a joint's angle acting on some joint's
+//! angle, of the clock or the temperature moving T, of a string's length
+//! or the clock changing that string's reading), piecewise linear between
+//! knots at quantiles of the driver over the train poses. Its family and
+//! number of knots are chosen by 5-fold cross-validation on the train
+//! poses, it is fitted jointly with the geometry and the accepted effects
+//! (one linearised step: the correction is linear and the model already
+//! fitted), and it is kept only through the held-out gate every named
+//! effect passes.
+//!
+//! It is reported as `data_driven`, never as a physics name: the finding
+//! says where and what it corrects, and whether compensation can use it
+//! (a function of joint angles can, inside the range the poses covered; a
+//! function of the clock or of the temperature history describes this
+//! session, not the next; a string's reading is the measurement's, not the
+//! robot's).
+
+use nalgebra::DMatrix;
+
+use super::candidates::Candidate;
+use super::gates::{self, Before};
+use super::magnitude::magnitude;
+use super::normals::{Normals, cv_sse, normals, solve_subset, unaliased};
+use super::refit::FitInfo;
+use super::{Inputs, State};
+use crate::physics::effects::{CorrectionDriver, CorrectionTarget, EffectModel, Kind};
+use crate::physics::evidence::evidence_plot;
+use crate::physics::problem::EffectProblem;
+use crate::report::{EffectParameters, Finding, FindingModel, Place};
+
+/// Knot counts tried for a function of a joint angle or a string's length
+/// (a joint's range holds a few features at most).
+const JOINT_KNOTS: [usize; 8] = [3, 4, 6, 8, 12, 16, 24, 32];
+/// Knot counts tried for a function of time or temperature: a long
+/// session can drift through many states, so up to one knot per eight
+/// train poses.
+const CLOCK_KNOTS: [usize; 10] = [3, 4, 6, 8, 12, 16, 24, 32, 48, 64];
+/// Fewest train poses per knot (each knot's coefficient needs its poses).
+const POSES_PER_KNOT: usize = 8;
+/// At most this many corrections (one per located driver, strongest
+/// first).
+pub(super) const MAX_CORRECTIONS: usize = 3;
+
+/// Try a data-driven correction at each of the located `places`
+/// (strongest first, at most [`MAX_CORRECTIONS`] kept); each kept one is
+/// a finding, and `state` moves to the model with it.
+pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
+    let mut tried: Vec<Kind> = Vec::new();
+    let mut kept = 0;
+    for place in places {
+        if kept == MAX_CORRECTIONS {
+            break;
+        }
+        let family: Vec<Vec<Kind>> = families(inputs, place)
+            .into_iter()
+            .filter(|f| {
+                f.first()
+                    .is_some_and(|k| !tried.iter().any(|t| super::candidates::same_slot(t, k)))
+            })
+            .collect();
+        if family.is_empty() {
+            continue;
+        }
+        tried.extend(family.iter().filter_map(|f| f.first().cloned()));
+        if try_place(inputs, state, &family, place) {
+            kept += 1;
+        }
+    }
+}
+
+/// The candidate families at a place: per family one slot (what is
+/// corrected, what drives it) at every knot count the train poses allow.
+fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
+    let Inputs { obs, ctx, .. } = inputs;
+    let n = ctx.n_joints;
+    let m = ctx.anchors.len();
+    let train = &obs.train;
+    let values = |driver: CorrectionDriver, index: Option<usize>| -> Vec<f64> {
+        train
+            .iter()
+            .map(|&i| ctx.driver_value(&ctx.poses[i], driver, index))
+            .collect()
+    };
+    let family = |target, target_index, driver, driver_index, counts: &[usize]| -> Vec<Kind> {
+        let v = values(driver, driver_index);
+        counts
+            .iter()
+            .filter(|&&k| k * POSES_PER_KNOT <= train.len())
+            .filter_map(|&k| knots_at_quantiles(&v, k))
+            .map(|knots| Kind::DataDriven {
+                target,
+                target_index,
+                driver,
+                driver_index,
+                knots,
+            })
+            .collect()
+    };
+    let mut out = Vec::new();
+    match (place.driver.as_str(), place.joint, place.sensor) {
+        // A joint's angle drives it: an error of any joint's angle (its
+        // own, or another's it is coupled to).
+        ("joint", Some(j), _) => {
+            for t in 0..n {
+                out.push(family(
+                    CorrectionTarget::JointAngle,
+                    Some(t),
+                    CorrectionDriver::JointAngle,
+                    Some(j - 1),
+                    &JOINT_KNOTS,
+                ));
+            }
+        }
+        ("time", None, None) => out.push(family(
+            CorrectionTarget::Point,
+            None,
+            CorrectionDriver::Time,
+            None,
+            &CLOCK_KNOTS,
+        )),
+        ("temperature", _, _) => out.push(family(
+            CorrectionTarget::Point,
+            None,
+            CorrectionDriver::Temperature,
+            None,
+            &CLOCK_KNOTS,
+        )),
+        ("time", _, Some(s)) if s <= m => out.push(family(
+            CorrectionTarget::StringReading,
+            Some(s - 1),
+            CorrectionDriver::Time,
+            None,
+            &CLOCK_KNOTS,
+        )),
+        ("string", _, Some(s)) if s <= m => out.push(family(
+            CorrectionTarget::StringReading,
+            Some(s - 1),
+            CorrectionDriver::StringLength,
+            Some(s - 1),
+            &JOINT_KNOTS,
+        )),
+        _ => {}
+    }
+    out.retain(|f| !f.is_empty());
+    out
+}
+
+/// `k` knots at quantiles of `values` (their ends the smallest and the
+/// largest), distinct; `None` when fewer than two distinct remain.
+fn knots_at_quantiles(values: &[f64], k: usize) -> Option<Vec<f64>> {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.len() < 2 || k < 2 {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let mut knots: Vec<f64> = (0..k).map(|i| v[(i * (v.len() - 1)) / (k - 1)]).collect();
+    knots.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * (1.0 + b.abs()));
+    (knots.len() >= 2 && knots.len() == k).then_some(knots)
+}
+
+/// A candidate's linearised fit: the problem it was built on, its normal
+/// equations, the columns fitted and their cross-validated SSE.
+struct Linearised<'a> {
+    problem: EffectProblem<'a>,
+    nm: Normals,
+    a: DMatrix<f64>,
+    b: Vec<f64>,
+    rr: f64,
+    base: Vec<usize>,
+    cols: Vec<usize>,
+    cv: f64,
+    cv0: f64,
+}
+
+/// The candidate `kind` linearised with the geometry and the accepted
+/// effects; `None` when all its columns are aliased or it does not solve.
+fn linearise<'a>(inputs: &'a Inputs, state: &State, kind: &Kind) -> Option<Linearised<'a>> {
+    let Inputs {
+        obs,
+        ctx,
+        free,
+        fold_of,
+    } = inputs;
+    let mut effects = state.accepted.clone();
+    effects.push(EffectModel::zero(kind.clone()));
+    let problem = EffectProblem::of_observations(
+        obs,
+        ctx,
+        obs.train.clone(),
+        &state.p,
+        free.clone(),
+        effects,
+    );
+    let nm = normals(&problem, &problem.x0(), fold_of);
+    let (a, b, rr) = nm.total();
+    let n_base = free.len()
+        + state
+            .accepted
+            .iter()
+            .map(|e| e.kind.n_coef())
+            .sum::<usize>();
+    let base: Vec<usize> = (0..n_base).collect();
+    let own: Vec<usize> = (n_base..n_base + kind.n_coef()).collect();
+    let cols = unaliased(&a, &base, &own);
+    if cols.is_empty() {
+        return None;
+    }
+    let mut all = base.clone();
+    all.extend(&cols);
+    let cv = cv_sse(&nm, &a, &b, &all);
+    let cv0 = cv_sse(&nm, &a, &b, &base);
+    Some(Linearised {
+        problem,
+        nm,
+        a,
+        b,
+        rr,
+        base,
+        cols,
+        cv,
+        cv0,
+    })
+}
+
+/// The best candidate of `families` by cross-validated SSE, through the
+/// held-out gate; kept: its finding written and `state` moved to it.
+fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: &Place) -> bool {
+    let mut ranked: Vec<(Kind, Linearised)> = families
+        .iter()
+        .flatten()
+        .filter_map(|k| linearise(inputs, state, k).map(|l| (k.clone(), l)))
+        .filter(|(_, l)| l.cv.is_finite() && l.cv < l.cv0)
+        .collect();
+    ranked.sort_by(|x, y| x.1.cv.total_cmp(&y.1.cv));
+    // The best by cross-validation that also solves in full.
+    let Some((kind, lin, (p_new, eff_new, fit))) = ranked
+        .into_iter()
+        .find_map(|(k, l)| stepped(&l).map(|s| (k, l, s)))
+    else {
+        return false;
+    };
+    let Inputs { obs, ctx, .. } = inputs;
+    let cand = Candidate {
+        kind: kind.clone(),
+        scanned: 1,
+        what: format!("a data-driven correction at the {} place", place.driver),
+    };
+    let before = Before::now(inputs, state);
+    let held = match gates::held_out(
+        inputs,
+        &before,
+        std::slice::from_ref(&cand),
+        &p_new,
+        &eff_new,
+    ) {
+        Ok(h) => h,
+        Err(turned) => {
+            state.notes.extend(turned.note);
+            return false;
+        }
+    };
+    let k = eff_new.len() - 1;
+    let e = eff_new[k].clone();
+    let at: usize = eff_new[..k].iter().map(|e| e.kind.n_coef()).sum();
+    let (mag, sig, unit) = magnitude(ctx, obs, &e, &fit.block(at, e.kind.n_coef()));
+    let Kind::DataDriven { driver, knots, .. } = &e.kind else {
+        return false;
+    };
+    let usable = if driver.usable_for_compensation() {
+        format!(
+            "compensation applies it (a function of joint angles), inside the range the poses covered ({:.1} to {:.1} deg; beyond it the correction is held at its end value and compensation warns)",
+            knots[0].to_degrees(),
+            knots[knots.len() - 1].to_degrees()
+        )
+    } else if e.kind.robot_side() {
+        "compensation cannot use it: it is a function of this session's clock or temperature history, not of a future target; find what changed during the session (the stand, the tracker, the temperature of the cell), keep it constant, or re-calibrate when it has settled".into()
+    } else {
+        "compensation does not need it: it corrects what a string read, not where the robot went; check that string (its drum, its exit, its mounting)".into()
+    };
+    let evidence = format!(
+        "{} knots chosen by 5-fold cross-validation on the train poses (cross-validated SSE {:.4} -> {:.4} mm^2 over {} readings); held-out RMS per reading {:.4} -> {:.4} mm (paired z = {:.1}), 3-D {:.4} -> {:.4} mm; {usable}",
+        knots.len(),
+        lin.cv0,
+        lin.cv,
+        lin.nm.rows,
+        held.rb,
+        held.ra,
+        held.gain_z,
+        before.test_rms,
+        held.test_after,
+    );
+    state.findings.push(Finding {
+        effect: e.kind.name().into(),
+        joint: e.kind.joint().map(|j| j + 1),
+        sensor: e.kind.sensor().map(|s| s + 1),
+        magnitude: mag,
+        sigma: sig,
+        unit,
+        explanation: e.kind.explanation(ctx),
+        evidence,
+        test_rms_before_mm: before.test_rms,
+        test_rms_after_mm: held.test_after,
+        parameters: Some(FindingModel::Effect(EffectParameters::new(e))),
+        evidence_plot: evidence_plot(obs, ctx, &p_new, &eff_new, k),
+    });
+    state.p = p_new;
+    state.accepted = eff_new;
+    state.final_fit = Some(fit);
+    true
+}
+
+/// The whole model (`state`'s geometry and effects) refit by one
+/// linearised step, with its covariance: every free geometric column and
+/// every effect column not aliased with the geometry (the constant part
+/// of a correction is a zero offset the geometry holds). What the
+/// findings are restated from once a correction is in.
+pub(super) fn linear_refit(
+    inputs: &Inputs,
+    state: &State,
+) -> Option<(Vec<f64>, Vec<EffectModel>, FitInfo)> {
+    let Inputs {
+        obs,
+        ctx,
+        free,
+        fold_of,
+    } = inputs;
+    let problem = EffectProblem::of_observations(
+        obs,
+        ctx,
+        obs.train.clone(),
+        &state.p,
+        free.clone(),
+        state.accepted.clone(),
+    );
+    let x0 = problem.x0();
+    let nm = normals(&problem, &x0, fold_of);
+    let (a, b, rr) = nm.total();
+    let base: Vec<usize> = (0..free.len()).collect();
+    let cols = unaliased(&a, &base, &(free.len()..x0.len()).collect::<Vec<_>>());
+    stepped(&Linearised {
+        problem,
+        nm,
+        a,
+        b,
+        rr,
+        base,
+        cols,
+        cv: f64::NAN,
+        cv0: f64::NAN,
+    })
+}
+
+/// One Gauss-Newton step on the base and the candidate's columns from the
+/// current fit: the geometry, the accepted effects and the correction
+/// jointly, with the covariance of every effect coefficient and the
+/// geometric sigmas. The correction is linear in its coefficients and the
+/// rest already sits at its optimum, so one step is the fit (an LM refit
+/// of up to 200 coefficients over a large session would cost seconds for
+/// nothing).
+fn stepped(lin: &Linearised) -> Option<(Vec<f64>, Vec<EffectModel>, FitInfo)> {
+    let mut all = lin.base.clone();
+    all.extend(&lin.cols);
+    let (drop, delta) = solve_subset(&lin.a, &lin.b, &all)?;
+    let mut x = lin.problem.x0();
+    for (k, &c) in all.iter().enumerate() {
+        x[c] += delta[k];
+    }
+    let (p_new, eff_new) = lin.problem.unpack(&x);
+    // Covariance: s² (JᵀJ)⁻¹ over the fitted columns, zero for aliased ones.
+    let dof = (lin.nm.rows as f64 - all.len() as f64).max(1.0);
+    let s2 = ((lin.rr - drop) / dof).max(0.0);
+    // Inverted as `solve_subset` solves: scaled to a unit diagonal, with
+    // the same tiny jitter, so that what solved also has a covariance.
+    let k = all.len();
+    let d: Vec<f64> = all
+        .iter()
+        .map(|&c| lin.a[(c, c)].sqrt().max(1e-300))
+        .collect();
+    let mut sub = DMatrix::from_fn(k, k, |i, j| lin.a[(all[i], all[j])] / (d[i] * d[j]));
+    for i in 0..k {
+        sub[(i, i)] += 1e-12;
+    }
+    let scaled = sub.cholesky()?.inverse();
+    let inv = DMatrix::from_fn(k, k, |i, j| scaled[(i, j)] / (d[i] * d[j]));
+    let n_free = lin.problem.free.len();
+    let n_coef = x.len() - n_free;
+    let pos = |c: usize| all.iter().position(|&a| a == c);
+    let cov_last = DMatrix::from_fn(n_coef, n_coef, |i, j| {
+        match (pos(n_free + i), pos(n_free + j)) {
+            (Some(a), Some(b)) => s2 * inv[(a, b)],
+            _ => 0.0,
+        }
+    });
+    let sigma_free = (0..n_free)
+        .map(|c| pos(c).map_or(0.0, |a| (s2 * inv[(a, a)]).max(0.0).sqrt()))
+        .collect();
+    Some((
+        p_new,
+        eff_new,
+        FitInfo {
+            cov_last,
+            sigma_free,
+        },
+    ))
+}

@@ -1,0 +1,194 @@
+//! The naming gate once a data-driven correction is in the model: every
+//! named effect kept must still improve the held-out readings on its own.
+//! Catalogue terms kept in earlier rounds to mop up structure of another
+//! shape (three harmonics and a scale error on a joint with a local bump)
+//! stop doing so once a correction of the right shape is there; they are
+//! then dropped, not reported as physics, and the `unexplained` finding
+//! says which catalogue effects the structure resembled and why they were
+//! not kept.
+
+use super::gates::held_out_gain_z;
+use super::normals::{normals, solve_subset};
+use super::{Inputs, PAIR_MEMBER_Z, State};
+use crate::physics::effects::EffectModel;
+use crate::physics::problem::EffectProblem;
+use crate::report::FindingModel;
+
+/// Drop, weakest first, every named effect without which the model (refit
+/// by one linearised step) predicts the held-out readings as well: its
+/// paired z of gain below [`PAIR_MEMBER_Z`]. Each drop is said in the
+/// `unexplained` finding's `resembles` and in the notes.
+pub(super) fn prune(inputs: &Inputs, state: &mut State) {
+    prune_overlapping(inputs, state);
+    loop {
+        let mut weakest: Option<(usize, f64, Vec<f64>, Vec<EffectModel>)> = None;
+        for k in 0..state.accepted.len() {
+            if state.accepted[k].kind.is_data_driven() {
+                continue;
+            }
+            let Some((p, eff)) = without(inputs, state, k) else {
+                continue;
+            };
+            let z = held_out_gain_z(inputs, (&p, &eff), (&state.p, &state.accepted));
+            if z < PAIR_MEMBER_Z && weakest.as_ref().is_none_or(|w| z < w.1) {
+                weakest = Some((k, z, p, eff));
+            }
+        }
+        let Some((k, z, p, eff)) = weakest else {
+            return;
+        };
+        let gone = state.accepted[k].kind.clone();
+        let why = format!(
+            "{} was kept in an earlier round, but beside the data-driven correction it no longer improves the held-out readings on its own (paired z = {z:.1}, needs {PAIR_MEMBER_Z}): it was absorbing part of a structure of another shape, so it is dropped rather than named",
+            described(&gone)
+        );
+        drop_kinds(state, &[gone], &why);
+        state.p = p;
+        state.accepted = eff;
+    }
+}
+
+/// The named effects that act where a kept correction acts, through the
+/// same driver: on the corrected joint (its compliance, backlash,
+/// harmonics, scale) for a correction of a joint's angle, on the corrected
+/// string for a string's, every effect of the session's clock (rig moves,
+/// drifts, a warm-up) for a correction of T in time. The correction can
+/// take every shape they have.
+fn overlapping(state: &State) -> Vec<usize> {
+    use crate::physics::effects::{CorrectionDriver, CorrectionTarget, Kind, ThermalDriver};
+    let mut out = Vec::new();
+    for c in state.accepted.iter().filter(|e| e.kind.is_data_driven()) {
+        let Kind::DataDriven {
+            target,
+            target_index,
+            driver,
+            ..
+        } = &c.kind
+        else {
+            continue;
+        };
+        for (k, e) in state.accepted.iter().enumerate() {
+            let hit = match (target, driver, &e.kind) {
+                (_, _, other) if other.is_data_driven() => false,
+                (CorrectionTarget::JointAngle, _, other) => other.joint() == *target_index,
+                (CorrectionTarget::StringReading, _, other) => other.sensor() == *target_index,
+                (CorrectionTarget::Point, CorrectionDriver::Time, other) => matches!(
+                    other,
+                    Kind::RigStep { .. }
+                        | Kind::RigDrift
+                        | Kind::ThermalExpansion {
+                            driver: ThermalDriver::Time | ThermalDriver::Order,
+                            ..
+                        }
+                ),
+                (CorrectionTarget::Point, CorrectionDriver::Temperature, other) => matches!(
+                    other,
+                    Kind::ThermalExpansion {
+                        driver: ThermalDriver::Temperature,
+                        ..
+                    }
+                ),
+                _ => false,
+            };
+            if hit && !out.contains(&k) {
+                out.push(k);
+            }
+        }
+    }
+    out
+}
+
+/// The named effects [`overlapping`] a correction are dropped together
+/// unless, together, they still improve the held-out readings
+/// significantly beside it (the gate a new proposal passes).
+fn prune_overlapping(inputs: &Inputs, state: &mut State) {
+    let group = overlapping(state);
+    if group.is_empty() {
+        return;
+    }
+    let Some((p, eff)) = without_all(inputs, state, &group) else {
+        return;
+    };
+    let z = held_out_gain_z(inputs, (&p, &eff), (&state.p, &state.accepted));
+    if z >= super::HELD_OUT_Z {
+        return;
+    }
+    let gone: Vec<_> = group
+        .iter()
+        .map(|&k| state.accepted[k].kind.clone())
+        .collect();
+    let names: Vec<String> = gone.iter().map(|k| described(k)).collect();
+    let why = format!(
+        "{} kept in earlier rounds acted where the data-driven correction acts; beside it they no longer improve the held-out readings significantly (paired z = {z:.1}, a new effect needs {}): they were absorbing a structure of another shape, so they are dropped rather than named",
+        names.join(", "),
+        super::HELD_OUT_Z
+    );
+    drop_kinds(state, &gone, &why);
+    state.p = p;
+    state.accepted = eff;
+}
+
+/// `kind` with where it acts, for a sentence.
+fn described(gone: &crate::physics::effects::Kind) -> String {
+    match (gone.joint(), gone.sensor()) {
+        (Some(j), _) => format!("{} on joint {}", gone.name(), j + 1),
+        (_, Some(s)) => format!("{} on string {}", gone.name(), s + 1),
+        _ => gone.name().to_string(),
+    }
+}
+
+/// Remove the findings of `gone`, and say `why` in the `unexplained`
+/// finding and the notes.
+fn drop_kinds(state: &mut State, gone: &[crate::physics::effects::Kind], why: &str) {
+    state
+        .findings
+        .retain(|f| f.effect_model().is_none_or(|m| !gone.contains(&m.kind)));
+    for f in state.findings.iter_mut() {
+        if let Some(FindingModel::Unexplained(u)) = &mut f.parameters {
+            u.resembles.push(why.to_string());
+        }
+    }
+    state.notes.push(why.to_string());
+}
+
+/// The model without effect `k`, refit by one linearised step of the
+/// geometry and the other effects from where they are.
+fn without(inputs: &Inputs, state: &State, k: usize) -> Option<(Vec<f64>, Vec<EffectModel>)> {
+    without_all(inputs, state, &[k])
+}
+
+/// The model without the effects `ks`, refit likewise.
+fn without_all(
+    inputs: &Inputs,
+    state: &State,
+    ks: &[usize],
+) -> Option<(Vec<f64>, Vec<EffectModel>)> {
+    let Inputs {
+        obs,
+        ctx,
+        free,
+        fold_of,
+    } = inputs;
+    let effects: Vec<EffectModel> = state
+        .accepted
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !ks.contains(i))
+        .map(|(_, e)| e.clone())
+        .collect();
+    let problem = EffectProblem::of_observations(
+        obs,
+        ctx,
+        obs.train.clone(),
+        &state.p,
+        free.clone(),
+        effects,
+    );
+    let x0 = problem.x0();
+    let nm = normals(&problem, &x0, fold_of);
+    let (a, b, _) = nm.total();
+    let cols: Vec<usize> = (0..x0.len()).collect();
+    let (_, delta) = solve_subset(&a, &b, &cols)?;
+    let x: Vec<f64> = x0.iter().zip(&delta).map(|(x, d)| x + d).collect();
+    Some(problem.unpack(&x))
+}
