@@ -77,7 +77,7 @@ KINDS = {
 }
 TUNE = [k for k, v in KINDS.items() if v[0] == "tune"]
 HELD = [k for k, v in KINDS.items() if v[0] == "heldback"]
-SEEDS_PER_KIND = 5
+SEEDS_PER_KIND = 7
 
 
 def rodrigues(rv):
@@ -408,27 +408,27 @@ def plan():
         half = KINDS[kind][0]
         for i in range(SEEDS_PER_KIND):
             rb = ROB[i % 2]
-            rig = RIGS_ROBOT[i]
+            rig = RIGS_ROBOT[i % 5]
             cols = rand_cols()
             if kind == "cross_coupling":
-                a, b = [(2, 3), (3, 2), (4, 5), (2, 3), (3, 2)][i]
+                a, b = [(2, 3), (3, 2), (4, 5), (2, 3), (3, 2)][i % 5]
                 prm = {"source_joint": a, "joint": b}
                 places, drivers = [place("joint", a), place("joint", b)], [f"joint {a} angle"]
             elif kind == "nonint_harmonic":
-                j = [1, 2, 3, 1, 2][i]
-                prm = {"joint": j, "harmonic": [1.5, 2.5, 4.7, 3.3, 1.5][i]}
+                j = [1, 2, 3, 1, 2, 3, 1][i % 7]
+                prm = {"joint": j, "harmonic": [1.5, 2.5, 4.7, 3.3, 1.5, 2.5, 3.3][i % 7]}
                 places, drivers = [place("joint", j)], [f"joint {j} angle"]
             elif kind == "base_tilt":
                 prm = {}
                 places = [place("joint", 2), place("joint", 3), place("workspace")]
                 drivers = ["configuration (horizontal gravity moment about the base: q1, q2, q3 mostly)"]
             elif kind == "rig_osc":
-                rig = ["points", "std4", "s5np", "s3tilt", "points"][i]
+                rig = ["points", "std4", "s5np", "s3tilt", "points"][i % 5]
                 cols = ["time_s", "temp_c"] if i % 2 == 0 else ["time_s"]
                 prm = {}
                 places, drivers = [place("time"), place("order")], ["time"]
             elif kind in ("drum_pitch", "eyelet_friction", "string_zero_osc"):
-                rig = RIGS_SENS[i]
+                rig = RIGS_SENS[i % 5]
                 s = int(R.integers(1, NSTR[rig] + 1))
                 prm = {"sensor": s}
                 if kind == "drum_pitch":
@@ -444,11 +444,11 @@ def plan():
                 prm = {"variant": ["z2", "azimuth16"][i % 2]}
                 places, drivers = [place("workspace")], ["workspace position"]
             elif kind == "local_bump":
-                j = [2, 3, 1, 2, 3][i]
+                j = [2, 3, 1, 2, 3, 1, 2][i % 7]
                 prm = {"joint": j}
                 places, drivers = [place("joint", j)], [f"joint {j} angle"]
             elif kind == "axis_wobble":
-                j = [1, 2, 3, 2, 1][i]
+                j = [1, 2, 3, 2, 1, 3, 2][i % 7]
                 prm = {"joint": j}
                 places, drivers = [place("joint", j)], [f"joint {j} angle"]
             elif kind == "link_thermal":
