@@ -214,7 +214,8 @@ def main(out=None):
             kinds.append(r["kind"])
     for k in kinds:
         rr = [r for r in rows if r["kind"] == k]
-        print(f"{k:18s} {rr[0]['half']:9s} {len(rr):2d} {sum(r['cat'] == 'located' for r in rr):7d} "
+        hv = "both" if len({r["half"] for r in rr}) > 1 else rr[0]["half"]
+        print(f"{k:18s} {hv:9s} {len(rr):2d} {sum(r['cat'] == 'located' for r in rr):7d} "
               f"{sum(r['cat'] == 'wrong_place' for r in rr):7d} {sum(r['cat'] == 'silent' for r in rr):6d} "
               f"{sum(r.get('named', 0) for r in rr):5d} {sum(r.get('named_ge1pct', 0) for r in rr):9d} "
               f"{gmean([r.get('ratio') for r in rr]):6.3f}"
