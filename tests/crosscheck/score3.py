@@ -124,7 +124,10 @@ def score_one(d):
         row["oracle_rms"] = row["ratio"] = None
     row["findings"] = [short(f) for f in F]
     row["n_findings"] = len(F)
-    named = [f for f in F if f.get("effect") != "unexplained"]
+    # A `data_driven` finding is the tool's correction of an unexplained
+    # structure, not a physics name: not counted as misnamed (it still
+    # counts as a finding on effect-free data).
+    named = [f for f in F if f.get("effect") not in ("unexplained", "data_driven")]
     unexp = [f for f in F if f.get("effect") == "unexplained"]
     row["named"] = len(named)
     row["named_ge1pct"] = sum(1 for f in named if (gain(f) is None or gain(f) >= 0.01))

@@ -43,40 +43,28 @@ pub(super) fn finish(
         &state.accepted,
         &mut state.findings,
     );
-    // Anything left that varies smoothly? Say where, and model it there
-    // without a name where that predicts the held-out poses better.
-    if let Some(f) = unexplained(
-        inputs.obs,
-        &inputs.ctx,
-        &state.p,
-        &state.accepted,
-        inputs.free.len(),
-    ) {
-        let places = f
-            .unexplained()
-            .map(|u| u.places.clone())
-            .unwrap_or_default();
-        state.findings.push(f);
-        let n_before = state.accepted.len();
-        data_driven::correct(&inputs, &mut state, &places);
-        if state.accepted.len() > n_before {
-            naming::prune(&inputs, &mut state);
-            if let Some((p, accepted, fit)) = data_driven::linear_refit(&inputs, &state) {
-                state.p = p;
-                state.accepted = accepted;
-                state.final_fit = Some(fit);
-            }
-            if let Some(fit) = &state.final_fit {
-                restate(
-                    inputs.obs,
-                    &inputs.ctx,
-                    &state.p,
-                    &state.accepted,
-                    fit,
-                    &mut state.findings,
-                );
-            }
+    // Named terms whose shape is no one physical effect (a series of terms
+    // of one joint, several moves of the rig or of one anchor) are taken
+    // out and the structure they fitted is located and modelled without a
+    // name, unless they predict the held-out poses clearly better.
+    let series = naming::series(&state);
+    if !series.is_empty() {
+        let named = state.clone();
+        naming::take_out(&inputs, &mut state, &series);
+        let corrected = locate_and_correct(&inputs, &mut state);
+        let z = naming::held_out_gain_z(
+            &inputs,
+            (&named.p, &named.accepted),
+            (&state.p, &state.accepted),
+        );
+        if corrected && z > naming::series_threshold(&series) {
+            naming::say_why(&mut state, &series, z);
+        } else {
+            state = named;
+            locate_and_correct(&inputs, &mut state);
         }
+    } else {
+        locate_and_correct(&inputs, &mut state);
     }
     progress.update("physics analysis", 1.0);
     let Inputs { obs, ctx, .. } = inputs;
@@ -95,6 +83,50 @@ pub(super) fn finish(
         notes: state.notes,
         final_sigmas: state.final_fit.map(|f| f.sigma_free),
     }
+}
+
+/// Anything left that varies smoothly? Say where (an `unexplained`
+/// finding), and model it there without a name where that predicts the
+/// held-out poses better (then the named terms it makes redundant are
+/// dropped, and every finding restated from the refit). True when a
+/// data-driven correction was kept.
+fn locate_and_correct(inputs: &Inputs, state: &mut State) -> bool {
+    let Some(f) = unexplained(
+        inputs.obs,
+        &inputs.ctx,
+        &state.p,
+        &state.accepted,
+        inputs.free.len(),
+    ) else {
+        return false;
+    };
+    let places = f
+        .unexplained()
+        .map(|u| u.places.clone())
+        .unwrap_or_default();
+    state.findings.push(f);
+    let n_before = state.accepted.len();
+    data_driven::correct(inputs, state, &places);
+    if state.accepted.len() == n_before {
+        return false;
+    }
+    naming::prune(inputs, state);
+    if let Some((p, accepted, fit)) = data_driven::linear_refit(inputs, state) {
+        state.p = p;
+        state.accepted = accepted;
+        state.final_fit = Some(fit);
+    }
+    if let Some(fit) = &state.final_fit {
+        restate(
+            inputs.obs,
+            &inputs.ctx,
+            &state.p,
+            &state.accepted,
+            fit,
+            &mut state.findings,
+        );
+    }
+    true
 }
 
 /// Later rounds refit the earlier effects: every finding reports its

@@ -139,6 +139,7 @@ impl<'a> Inputs<'a> {
 
 /// What one round hands the next: the model so far, what it reported, and
 /// the effects turned down (not proposed again).
+#[derive(Clone)]
 struct State {
     /// Geometric parameters of the current fit.
     p: Vec<f64>,

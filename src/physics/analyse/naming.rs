@@ -7,7 +7,7 @@
 //! says which catalogue effects the structure resembled and why they were
 //! not kept.
 
-use super::gates::held_out_gain_z;
+pub(super) use super::gates::held_out_gain_z;
 use super::normals::{normals, solve_subset};
 use super::{Inputs, PAIR_MEMBER_Z, State};
 use crate::physics::effects::EffectModel;
@@ -191,4 +191,143 @@ fn without_all(
     let (_, delta) = solve_subset(&a, &b, &cols)?;
     let x: Vec<f64> = x0.iter().zip(&delta).map(|(x, d)| x + d).collect();
     Some(problem.unpack(&x))
+}
+
+/// A set of named effects whose shape is no one physical effect.
+pub(super) struct Series {
+    /// Their positions in the accepted effects.
+    members: Vec<usize>,
+    /// Their names and places, for the sentence.
+    names: Vec<String>,
+    /// What makes the shape unphysical.
+    why: &'static str,
+    /// True when the shape alone condemns them (three or more terms of a
+    /// joint, terms that cancel, several moves): the data-driven
+    /// correction need only not be clearly worse. Otherwise (two shape
+    /// terms of one joint) it must be better.
+    strong: bool,
+}
+
+/// The named effects of `state` whose shape is no one physical effect:
+/// three or more terms of one joint, or two
+/// shape terms (harmonics, a scale error) of one joint; two or more moves
+/// or drifts of the rig; two or more steps or creeps of one string.
+pub(super) fn series(state: &State) -> Vec<Series> {
+    use crate::physics::effects::Kind;
+    let acc = &state.accepted;
+    let mut out = Vec::new();
+    let n_joints = acc
+        .iter()
+        .filter_map(|e| e.kind.joint())
+        .max()
+        .map_or(0, |j| j + 1);
+    for j in 0..n_joints {
+        let members: Vec<usize> = (0..acc.len())
+            .filter(|&k| !acc[k].kind.is_data_driven() && acc[k].kind.joint() == Some(j))
+            .collect();
+        if members.len() < 2 {
+            continue;
+        }
+        let shape_only = members.iter().all(|&k| {
+            matches!(
+                acc[k].kind,
+                Kind::JointPeriodic { .. } | Kind::JointScale { .. }
+            )
+        });
+        let strong = members.len() >= 3;
+        if !strong && !shape_only {
+            continue;
+        }
+        out.push(Series {
+            names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
+            members,
+            why: if strong {
+                "three or more terms of one joint together fit one error of its angle"
+            } else {
+                "two shape terms of one joint together fit one error of its angle"
+            },
+            strong,
+        });
+    }
+    let rig: Vec<usize> = (0..acc.len())
+        .filter(|&k| matches!(acc[k].kind, Kind::RigStep { .. } | Kind::RigDrift))
+        .collect();
+    if rig.len() >= 2 {
+        out.push(Series {
+            names: rig.iter().map(|&k| described(&acc[k].kind)).collect(),
+            members: rig,
+            why: "several moves of the rig in one session fit one motion of another shape",
+            strong: true,
+        });
+    }
+    let strings = acc
+        .iter()
+        .filter_map(|e| e.kind.sensor())
+        .max()
+        .map_or(0, |s| s + 1);
+    for s in 0..strings {
+        let members: Vec<usize> = (0..acc.len())
+            .filter(|&k| {
+                matches!(
+                    acc[k].kind,
+                    Kind::AnchorStep { .. } | Kind::SensorDrift { .. }
+                ) && acc[k].kind.sensor() == Some(s)
+            })
+            .collect();
+        if members.len() >= 2 {
+            out.push(Series {
+                names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
+                members,
+                why: "several steps or creeps of one string in one session fit one change of another shape",
+                strong: true,
+            });
+        }
+    }
+    out
+}
+
+/// The paired z the model without the series (with what replaced it)
+/// must pass against the model with it: -[`HELD_OUT_Z`](super::HELD_OUT_Z)
+/// (not clearly worse) when every series is condemned by its shape, else
+/// +[`PAIR_MEMBER_Z`] (better).
+pub(super) fn series_threshold(series: &[Series]) -> f64 {
+    if series.iter().all(|s| s.strong) {
+        -super::HELD_OUT_Z
+    } else {
+        PAIR_MEMBER_Z
+    }
+}
+
+/// Take every series' effects out of the model (findings and effects),
+/// the rest refit by one linearised step.
+pub(super) fn take_out(inputs: &Inputs, state: &mut State, series: &[Series]) {
+    let ks: Vec<usize> = series.iter().flat_map(|s| s.members.clone()).collect();
+    let Some((p, eff)) = without_all(inputs, state, &ks) else {
+        return;
+    };
+    let gone: Vec<_> = ks.iter().map(|&k| state.accepted[k].kind.clone()).collect();
+    state
+        .findings
+        .retain(|f| f.effect_model().is_none_or(|m| !gone.contains(&m.kind)));
+    state.p = p;
+    state.accepted = eff;
+}
+
+/// Say in the `unexplained` finding (and the notes) which named terms the
+/// structure was first fitted with and why they are not reported.
+pub(super) fn say_why(state: &mut State, series: &[Series], z: f64) {
+    for s in series {
+        let why = format!(
+            "{} were first fitted to this structure, but {}, which is no one physical effect; the data-driven correction predicts the held-out readings {} (paired z = {z:.1}), so they are not reported as physics",
+            s.names.join(", "),
+            s.why,
+            if z >= 0.0 { "better" } else { "about as well" }
+        );
+        for f in state.findings.iter_mut() {
+            if let Some(FindingModel::Unexplained(u)) = &mut f.parameters {
+                u.resembles.push(why.clone());
+            }
+        }
+        state.notes.push(why);
+    }
 }

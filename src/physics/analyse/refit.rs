@@ -14,6 +14,7 @@ use crate::physics::problem::EffectProblem;
 pub(super) type Fit = (Vec<f64>, Vec<EffectModel>, FitInfo);
 
 /// Covariance information of a refit.
+#[derive(Debug, Clone)]
 pub struct FitInfo {
     /// Covariance of the effect coefficients (all effects of the refit, or
     /// one effect's block), internal units.
