@@ -36,7 +36,12 @@ const JOINT_KNOTS: [usize; 8] = [3, 4, 6, 8, 12, 16, 24, 32];
 /// Knot counts tried for a function of time or temperature: a long
 /// session can drift through many states, so up to one knot per eight
 /// train poses.
-const CLOCK_KNOTS: [usize; 10] = [3, 4, 6, 8, 12, 16, 24, 32, 48, 64];
+const CLOCK_KNOTS: [usize; 14] = [3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256];
+/// Above this many columns a candidate's alias check is not run column by
+/// column (it costs the cube of the columns for each): its first knot's
+/// columns are left out instead, the only part a geometry holds (a constant
+/// shift: the base's translation, a joint's zero offset).
+const ALIAS_CHECK_MAX_COLUMNS: usize = 48;
 /// Fewest train poses per knot (each knot's coefficient needs its poses).
 const POSES_PER_KNOT: usize = 8;
 /// At most this many corrections (one per located driver, strongest
@@ -49,7 +54,13 @@ pub(super) const MAX_CORRECTIONS: usize = 3;
 pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
     let mut tried: Vec<Kind> = Vec::new();
     let mut kept = 0;
-    for place in places {
+    // Functions of the clock or the temperature last: over a long session
+    // they carry hundreds of coefficients, and every later candidate's fit
+    // would carry them too (its normal equations grow with the cube).
+    let clock = |p: &Place| matches!(p.driver.as_str(), "time" | "temperature");
+    let mut ordered: Vec<&Place> = places.iter().filter(|p| !clock(p)).collect();
+    ordered.extend(places.iter().filter(|p| clock(p)));
+    for place in ordered {
         if kept == MAX_CORRECTIONS {
             break;
         }
@@ -160,6 +171,24 @@ fn knots_at_quantiles(values: &[f64], k: usize) -> Option<Vec<f64>> {
     (knots.len() >= 2 && knots.len() == k).then_some(knots)
 }
 
+/// The columns of effect `kind` (starting at `at`) that are fitted beside
+/// `base`: those not aliased with it; for a correction of many columns,
+/// all but its first knot's (see [`ALIAS_CHECK_MAX_COLUMNS`]).
+fn own_columns(a: &DMatrix<f64>, base: &[usize], kind: &Kind, at: usize) -> Vec<usize> {
+    let own: Vec<usize> = (at..at + kind.n_coef()).collect();
+    if own.len() <= ALIAS_CHECK_MAX_COLUMNS {
+        return unaliased(a, base, &own);
+    }
+    let per_knot = match kind {
+        Kind::DataDriven {
+            target: CorrectionTarget::Point,
+            ..
+        } => 3,
+        _ => 1,
+    };
+    own[per_knot..].to_vec()
+}
+
 /// A candidate's linearised fit: the problem it was built on, its normal
 /// equations, the columns fitted and their cross-validated SSE.
 struct Linearised<'a> {
@@ -202,8 +231,7 @@ fn linearise<'a>(inputs: &'a Inputs, state: &State, kind: &Kind) -> Option<Linea
             .map(|e| e.kind.n_coef())
             .sum::<usize>();
     let base: Vec<usize> = (0..n_base).collect();
-    let own: Vec<usize> = (n_base..n_base + kind.n_coef()).collect();
-    let cols = unaliased(&a, &base, &own);
+    let cols = own_columns(&a, &base, kind, n_base);
     if cols.is_empty() {
         return None;
     }
@@ -227,18 +255,22 @@ fn linearise<'a>(inputs: &'a Inputs, state: &State, kind: &Kind) -> Option<Linea
 /// The best candidate of `families` by cross-validated SSE, through the
 /// held-out gate; kept: its finding written and `state` moved to it.
 fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: &Place) -> bool {
-    let mut ranked: Vec<(Kind, Linearised)> = families
+    // Ranked by cross-validation; only the scores are kept (the normal
+    // equations of a long session's many-knot candidates are large), and
+    // the best that also solves in full is linearised again.
+    let mut ranked: Vec<(Kind, f64)> = families
         .iter()
         .flatten()
-        .filter_map(|k| linearise(inputs, state, k).map(|l| (k.clone(), l)))
-        .filter(|(_, l)| l.cv.is_finite() && l.cv < l.cv0)
+        .filter_map(|k| linearise(inputs, state, k).map(|l| (k.clone(), l.cv, l.cv0)))
+        .filter(|(_, cv, cv0)| cv.is_finite() && cv < cv0)
+        .map(|(k, cv, _)| (k, cv))
         .collect();
-    ranked.sort_by(|x, y| x.1.cv.total_cmp(&y.1.cv));
-    // The best by cross-validation that also solves in full.
-    let Some((kind, lin, (p_new, eff_new, fit))) = ranked
-        .into_iter()
-        .find_map(|(k, l)| stepped(&l).map(|s| (k, l, s)))
-    else {
+    ranked.sort_by(|x, y| x.1.total_cmp(&y.1));
+    let Some((kind, lin, (p_new, eff_new, fit))) = ranked.into_iter().find_map(|(k, _)| {
+        let l = linearise(inputs, state, &k)?;
+        let s = stepped(&l)?;
+        Some((k, l, s))
+    }) else {
         return false;
     };
     let Inputs { obs, ctx, .. } = inputs;
@@ -338,7 +370,14 @@ pub(super) fn linear_refit(
     let nm = normals(&problem, &x0, fold_of);
     let (a, b, rr) = nm.total();
     let base: Vec<usize> = (0..free.len()).collect();
-    let cols = unaliased(&a, &base, &(free.len()..x0.len()).collect::<Vec<_>>());
+    let mut cols: Vec<usize> = Vec::new();
+    let mut at = free.len();
+    for e in &state.accepted {
+        let mut fixed = base.clone();
+        fixed.extend(&cols);
+        cols.extend(own_columns(&a, &fixed, &e.kind, at));
+        at += e.kind.n_coef();
+    }
     stepped(&Linearised {
         problem,
         nm,

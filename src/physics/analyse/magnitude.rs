@@ -13,8 +13,12 @@ pub(super) fn magnitude(
     e: &EffectModel,
     fit: &FitInfo,
 ) -> (f64, f64, String) {
-    let f = size_of(ctx, obs, e);
     let unit = unit_of(ctx, &e.kind);
+    if e.kind.is_data_driven() {
+        let (v, s) = data_driven_size(ctx, &e.kind, &e.coef, &obs.train, fit);
+        return (v, s, unit);
+    }
+    let f = size_of(ctx, obs, e);
     let c = &e.coef;
     let v = f(c);
     // Delta method with a numerical gradient of the magnitude.
@@ -106,6 +110,108 @@ fn size_of<'a>(
             Box::new(move |c: &[f64]| data_driven_spread(ctx, &kind, c, &train) * scale)
         }
     }
+}
+
+/// A data-driven correction's size ([`data_driven_spread`], in degrees for
+/// a joint's angle) and its 1-sigma, with the gradient in closed form: the
+/// size is the RMS of a linear function of the coefficients, and a long
+/// session's correction has hundreds of them (a numerical gradient would
+/// evaluate the whole session twice per coefficient).
+fn data_driven_size(
+    ctx: &Context,
+    kind: &Kind,
+    coef: &[f64],
+    poses: &[usize],
+    fit: &FitInfo,
+) -> (f64, f64) {
+    let scale = match kind {
+        Kind::DataDriven {
+            target: CorrectionTarget::JointAngle,
+            ..
+        } => 180.0 / std::f64::consts::PI,
+        _ => 1.0,
+    };
+    let v = data_driven_spread(ctx, kind, coef, poses);
+    if v <= 0.0 || poses.is_empty() {
+        return (v * scale, 0.0);
+    }
+    // u_i = B_i c per pose (1 or 3 values); d v / d c = Σ B_iᵀ (u_i - ū) / (N v).
+    let mut buf = effects::Basis::default();
+    let (n, m) = (ctx.n_joints, ctx.anchors.len());
+    let rows: Vec<Vec<(usize, usize, f64)>> = poses
+        .iter()
+        .map(|&i| {
+            ctx.basis(kind, i, &mut buf);
+            let mut nz = Vec::new();
+            for k in 0..coef.len() {
+                match kind {
+                    Kind::DataDriven {
+                        target: CorrectionTarget::JointAngle,
+                        target_index,
+                        ..
+                    } => {
+                        let w = buf.dq[k * n + target_index.unwrap_or(0)];
+                        if w != 0.0 {
+                            nz.push((0, k, w));
+                        }
+                    }
+                    Kind::DataDriven {
+                        target: CorrectionTarget::StringReading,
+                        target_index,
+                        ..
+                    } => {
+                        let w = buf.dl[k * m + target_index.unwrap_or(0)];
+                        if w != 0.0 {
+                            nz.push((0, k, w));
+                        }
+                    }
+                    _ => {
+                        for r in 0..3 {
+                            let w = buf.dp[k * 3 + r];
+                            if w != 0.0 {
+                                nz.push((r, k, w));
+                            }
+                        }
+                    }
+                }
+            }
+            nz
+        })
+        .collect();
+    let u: Vec<[f64; 3]> = rows
+        .iter()
+        .map(|nz| {
+            let mut u = [0.0; 3];
+            for &(r, k, w) in nz {
+                u[r] += w * coef[k];
+            }
+            u
+        })
+        .collect();
+    let count = u.len() as f64;
+    let mut mean = [0.0; 3];
+    for x in &u {
+        for r in 0..3 {
+            mean[r] += x[r] / count;
+        }
+    }
+    let mut grad = vec![0.0; coef.len()];
+    for (nz, x) in rows.iter().zip(&u) {
+        for &(r, k, w) in nz {
+            grad[k] += w * (x[r] - mean[r]) / (count * v);
+        }
+    }
+    let c = &fit.cov_last;
+    let mut var = 0.0;
+    for i in 0..grad.len().min(c.nrows()) {
+        if grad[i] == 0.0 {
+            continue;
+        }
+        for j in 0..grad.len().min(c.ncols()) {
+            var += grad[i] * c[(i, j)] * grad[j];
+        }
+    }
+    (v * scale, var.max(0.0).sqrt() * scale)
 }
 
 /// RMS of a data-driven correction's contribution over `poses` about its
