@@ -574,7 +574,7 @@ async fn serve_connections(
             tokio::spawn(conn::refuse(tcp, max_connections));
             continue;
         };
-        let io = conn::WriteTimeout::new(tcp, write_timeout);
+        let io = conn::WriteTimeout::new(conn::JsonParseErrors::new(tcp), write_timeout);
         let conn = hyper::server::conn::http1::Builder::new()
             .timer(TokioTimer::new())
             .header_read_timeout(idle_timeout)
