@@ -14,7 +14,11 @@
 //!   over [`LARGE_ANSWER_BYTES`] together hold at most
 //!   `--max-answer-bytes-in-flight`; past it a request for another is
 //!   answered 503 with `Retry-After`, so that clients that request large
-//!   pose files and never read them cannot pin the machine's memory.
+//!   pose files and never read them cannot pin the machine's memory;
+//! - **every HTTP-level error in the error shape** ([`JsonParseErrors`]):
+//!   what hyper answers by itself to a request it cannot parse (400, 414,
+//!   431, with an empty body) leaves as a JSON [`super::ErrorBody`] like
+//!   every other error.
 
 use std::future::Future;
 use std::io;
@@ -75,21 +79,206 @@ pub fn default_max_connections(limit: Option<u64>) -> usize {
     limit.saturating_sub(RESERVED_DESCRIPTORS).clamp(16, 16_384) as usize
 }
 
+/// A complete HTTP/1.1 answer carrying `err` in the error shape (the
+/// status and body [`ApiError`] gives it, `extra` header lines), after
+/// which the connection closes: the connection layer's answers, written
+/// where there is no router to answer.
+pub fn raw_answer(err: &ApiError, extra: &[(&str, &str)]) -> Vec<u8> {
+    let (status, _) = err.status_code();
+    let body = serde_json::to_string(&err.body()).expect("an error body serialises");
+    let mut answer = format!(
+        "HTTP/1.1 {} {}\r\ncontent-type: application/json\r\nx-content-type-options: nosniff\r\nconnection: close\r\ncontent-length: {}\r\n",
+        status.as_u16(),
+        status.canonical_reason().unwrap_or(""),
+        body.len()
+    );
+    for (name, value) in extra {
+        answer.push_str(&format!("{name}: {value}\r\n"));
+    }
+    answer.push_str("\r\n");
+    answer.push_str(&body);
+    answer.into_bytes()
+}
+
 /// Answer a connection past the cap: 503 with a JSON body, then close,
 /// without reading its request (it may never send one).
 pub async fn refuse(mut tcp: tokio::net::TcpStream, max_connections: usize) {
-    let body = format!(
-        r#"{{"error":"unavailable","message":"the service is serving its {max_connections} connections at most (--max-connections); retry shortly"}}"#
-    );
-    let answer = format!(
-        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\nretry-after: 1\r\nconnection: close\r\ncontent-length: {}\r\n\r\n{body}",
-        body.len()
+    let answer = raw_answer(
+        &ApiError::Unavailable(format!(
+            "the service is serving its {max_connections} connections at most (--max-connections); retry shortly"
+        )),
+        &[("retry-after", "1")],
     );
     let _ = tokio::time::timeout(Duration::from_secs(1), async {
-        let _ = tcp.write_all(answer.as_bytes()).await;
+        let _ = tcp.write_all(&answer).await;
         let _ = tcp.shutdown().await;
     })
     .await;
+}
+
+/// The heads hyper writes by itself, with no body, when it cannot parse a
+/// request (`hyper::proto::h1::role::Server::on_error`), and the error
+/// each stands for.
+const HYPER_PARSE_ERRORS: [(&[u8], fn() -> ApiError); 3] = [
+    (b"HTTP/1.1 400 Bad Request\r\n", || {
+        ApiError::BadRequest(
+            "the request is not HTTP/1.1 the service can read: a malformed request line, \
+             header or Content-Length"
+                .into(),
+        )
+    }),
+    (b"HTTP/1.1 414 URI Too Long\r\n", || {
+        ApiError::UriTooLong("the request target is longer than 65,534 bytes".into())
+    }),
+    (b"HTTP/1.1 431 Request Header Fields Too Large\r\n", || {
+        ApiError::HeaderTooLarge(
+            "the request header is larger than the service reads (about 400 KiB, at most 100 fields)"
+                .into(),
+        )
+    }),
+];
+
+/// If `buf` starts with one of hyper's own parse-error heads: its length
+/// and the answer in the error shape to send instead.
+///
+/// Exact for this service: such a head has no `content-type`, and every
+/// 400 the router gives has one (a JSON [`ApiError`]); no answer body the
+/// service sends (JSON, validated CSV, its page's HTML and scripts) can
+/// start with a status line.
+fn hyper_parse_error(buf: &[u8]) -> Option<(usize, Vec<u8>)> {
+    let (_, error) = HYPER_PARSE_ERRORS
+        .iter()
+        .find(|(line, _)| buf.starts_with(line))?;
+    let end = buf.windows(4).position(|w| w == b"\r\n\r\n")? + 4;
+    let head = String::from_utf8_lossy(&buf[..end]).to_ascii_lowercase();
+    if head.contains("\r\ncontent-type:") || !head.contains("\r\ncontent-length: 0\r\n") {
+        return None;
+    }
+    Some((end, raw_answer(&error(), &[])))
+}
+
+/// An I/O stream on which hyper's own answers to requests it cannot parse
+/// (400 for a malformed request line, header or `Content-Length`; 414 for
+/// a request target over 64 KiB; 431 for a header section over hyper's
+/// buffer or field count), a bare head with an empty body, are replaced
+/// by the same status with a JSON [`super::ErrorBody`] ([`raw_answer`]).
+/// hyper closes the connection after them.
+pub struct JsonParseErrors<S> {
+    inner: S,
+    /// An answer replacing one of hyper's, and how much of it is written.
+    pending: Vec<u8>,
+    written: usize,
+}
+
+impl<S> JsonParseErrors<S> {
+    /// `inner` with hyper's parse-error answers in the error shape.
+    pub fn new(inner: S) -> Self {
+        JsonParseErrors {
+            inner,
+            pending: Vec::new(),
+            written: 0,
+        }
+    }
+}
+
+impl<S: AsyncWrite + Unpin> JsonParseErrors<S> {
+    /// Write what is left of a replacing answer.
+    fn poll_pending(&mut self, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        while self.written < self.pending.len() {
+            let n = match Pin::new(&mut self.inner).poll_write(cx, &self.pending[self.written..]) {
+                Poll::Ready(Ok(n)) => n,
+                Poll::Ready(Err(e)) => return Poll::Ready(Err(e)),
+                Poll::Pending => return Poll::Pending,
+            };
+            if n == 0 {
+                return Poll::Ready(Err(io::ErrorKind::WriteZero.into()));
+            }
+            self.written += n;
+        }
+        self.pending.clear();
+        self.written = 0;
+        Poll::Ready(Ok(()))
+    }
+
+    /// hyper's head of `len` bytes is taken (as if written); `answer`
+    /// goes in its place, now or at the next write or flush.
+    fn replace(
+        &mut self,
+        cx: &mut Context<'_>,
+        len: usize,
+        answer: Vec<u8>,
+    ) -> Poll<io::Result<usize>> {
+        self.pending = answer;
+        self.written = 0;
+        match self.poll_pending(cx) {
+            Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
+            _ => Poll::Ready(Ok(len)),
+        }
+    }
+}
+
+impl<S: AsyncRead + Unpin> AsyncRead for JsonParseErrors<S> {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.get_mut().inner).poll_read(cx, buf)
+    }
+}
+
+impl<S: AsyncWrite + Unpin> AsyncWrite for JsonParseErrors<S> {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        std::task::ready!(this.poll_pending(cx))?;
+        match hyper_parse_error(buf) {
+            Some((len, answer)) => this.replace(cx, len, answer),
+            None => Pin::new(&mut this.inner).poll_write(cx, buf),
+        }
+    }
+
+    fn poll_write_vectored(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[io::IoSlice<'_>],
+    ) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        std::task::ready!(this.poll_pending(cx))?;
+        // hyper queues each head as a slice of its own: one of its error
+        // heads first is replaced; one after other slices (a pipelined
+        // answer before it) waits for the next write.
+        let Some(first) = bufs.iter().position(|b| !b.is_empty()) else {
+            return Poll::Ready(Ok(0));
+        };
+        if let Some((len, answer)) = hyper_parse_error(&bufs[first]) {
+            return this.replace(cx, len, answer);
+        }
+        let upto = bufs[first + 1..]
+            .iter()
+            .position(|b| hyper_parse_error(b).is_some())
+            .map_or(bufs.len(), |i| first + 1 + i);
+        Pin::new(&mut this.inner).poll_write_vectored(cx, &bufs[..upto])
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.inner.is_write_vectored()
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        std::task::ready!(this.poll_pending(cx))?;
+        Pin::new(&mut this.inner).poll_flush(cx)
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        std::task::ready!(this.poll_pending(cx))?;
+        Pin::new(&mut this.inner).poll_shutdown(cx)
+    }
 }
 
 /// An I/O stream whose writes fail with `TimedOut` when the peer has
@@ -313,6 +502,21 @@ mod tests {
         assert_eq!(default_max_connections(Some(1 << 20)), 16_384);
         assert_eq!(default_max_connections(Some(100)), 16);
         assert_eq!(default_max_connections(None), 896);
+    }
+
+    #[test]
+    fn only_hypers_bare_parse_error_heads_are_replaced() {
+        let hyper = b"HTTP/1.1 431 Request Header Fields Too Large\r\ncontent-length: 0\r\ndate: Wed, 02 Dec 2026 20:00:00 GMT\r\n\r\n";
+        let (len, answer) = hyper_parse_error(hyper).expect("replaced");
+        assert_eq!(len, hyper.len());
+        let answer = String::from_utf8(answer).unwrap();
+        assert!(answer.starts_with("HTTP/1.1 431 "), "{answer}");
+        assert!(answer.contains(r#""error":"header_too_large""#), "{answer}");
+        // The router's errors carry a content type and a body.
+        let routed = b"HTTP/1.1 400 Bad Request\r\ncontent-type: application/json\r\ncontent-length: 42\r\n\r\n";
+        assert!(hyper_parse_error(routed).is_none());
+        assert!(hyper_parse_error(br#"{"error":"bad_request"}"#).is_none());
+        assert!(hyper_parse_error(b"HTTP/1.1 400 Bad Request\r\ncontent-length: 0\r\n").is_none());
     }
 
     #[test]

@@ -27,7 +27,7 @@ pub struct ErrorBody {
     /// `invalid_input`, `not_found`, `conflict`, `payload_too_large`,
     /// `request_timeout`, `unsupported_media_type`, `method_not_allowed`,
     /// `unauthorized`, `forbidden`, `host_not_allowed`, `too_many_requests`,
-    /// `unavailable`, `internal`.
+    /// `uri_too_long`, `header_too_large`, `unavailable`, `internal`.
     pub error: String,
     /// What went wrong, for a human.
     pub message: String,
@@ -97,6 +97,14 @@ pub enum ApiError {
     /// Method not allowed on this path.
     #[error("method not allowed")]
     MethodNotAllowed,
+    /// A request target longer than HTTP/1.1 parsing takes (found by the
+    /// connection layer, [`super::conn::JsonParseErrors`]).
+    #[error("{0}")]
+    UriTooLong(String),
+    /// A request header section over the connection's buffer or its field
+    /// count (found by the connection layer).
+    #[error("{0}")]
+    HeaderTooLarge(String),
     /// A dependency (the database) is not answering.
     #[error("{0}")]
     Unavailable(String),
@@ -135,6 +143,11 @@ impl ApiError {
                 (StatusCode::TOO_MANY_REQUESTS, "too_many_requests")
             }
             ApiError::MethodNotAllowed => (StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed"),
+            ApiError::UriTooLong(_) => (StatusCode::URI_TOO_LONG, "uri_too_long"),
+            ApiError::HeaderTooLarge(_) => (
+                StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+                "header_too_large",
+            ),
             ApiError::Unavailable(_) => (StatusCode::SERVICE_UNAVAILABLE, "unavailable"),
             ApiError::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal"),
         }
@@ -181,30 +194,36 @@ impl From<crate::Error> for ApiError {
     }
 }
 
-impl IntoResponse for ApiError {
-    fn into_response(self) -> Response {
-        let (status, code) = self.status_code();
-        let message = match &self {
-            ApiError::Internal(detail) => {
-                tracing::error!(error = %detail, "internal error");
-                "internal error; see the server log".to_string()
-            }
-            ApiError::Unavailable(detail) => {
-                tracing::warn!(error = %detail, "unavailable");
-                detail.clone()
-            }
+impl ApiError {
+    /// The JSON body of this error (an internal error's detail is not in it).
+    pub fn body(&self) -> ErrorBody {
+        let (_, code) = self.status_code();
+        let message = match self {
+            ApiError::Internal(_) => "internal error; see the server log".to_string(),
             other => other.to_string(),
         };
-        let (field, row) = match &self {
+        let (field, row) = match self {
             ApiError::Invalid { field, row, .. } => (field.clone(), *row),
             _ => (None, None),
         };
-        let body = ErrorBody {
+        ErrorBody {
             error: code.to_string(),
             message,
             field,
             row,
-        };
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let (status, _) = self.status_code();
+        match &self {
+            ApiError::Internal(detail) => tracing::error!(error = %detail, "internal error"),
+            ApiError::Unavailable(detail) => tracing::warn!(error = %detail, "unavailable"),
+            _ => {}
+        }
+        let body = self.body();
         let mut response = (status, axum::Json(body)).into_response();
         if let ApiError::TooManyRequests { retry_after_s, .. } = &self {
             response.headers_mut().insert(

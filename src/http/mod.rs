@@ -276,7 +276,68 @@ fn api() -> OpenApiRouter<AppState> {
 
 /// The OpenAPI document of the service.
 pub fn openapi() -> utoipa::openapi::OpenApi {
-    api().split_for_parts().1
+    let mut doc = api().split_for_parts().1;
+    declare_roles(&mut doc);
+    doc
+}
+
+/// Each operation's role, from the rule the key check applies
+/// ([`auth::required_role`]): `x-required-role` is `reader`, `operator`,
+/// `engineer` or `admin` (a key with it or a higher role may call the
+/// route), or `none` for the routes anyone may call.
+fn declare_roles(doc: &mut utoipa::openapi::OpenApi) {
+    use axum::http::Method;
+    for (path, item) in doc.paths.paths.iter_mut() {
+        let operations = [
+            (Method::GET, &mut item.get),
+            (Method::POST, &mut item.post),
+            (Method::PUT, &mut item.put),
+            (Method::PATCH, &mut item.patch),
+            (Method::DELETE, &mut item.delete),
+        ];
+        for (method, op) in operations {
+            let Some(op) = op else { continue };
+            let role = auth::required_role(&method, path);
+            op.extensions.get_or_insert_with(Default::default).insert(
+                "x-required-role".into(),
+                role.map_or("none", auth::Role::as_str).into(),
+            );
+            let Some(role) = role else { continue };
+            for (status, description) in [
+                (
+                    "401",
+                    "No API key, or one that is unknown, expired or revoked: error `unauthorized`"
+                        .to_string(),
+                ),
+                (
+                    "403",
+                    format!(
+                        "The key's role is below `{role}`, or the key is limited to sites this \
+                         resource is not at: error `forbidden`"
+                    ),
+                ),
+            ] {
+                op.responses
+                    .responses
+                    .entry(status.into())
+                    .or_insert_with(|| error_response(description).into());
+            }
+        }
+    }
+}
+
+/// An answer documented as the error shape.
+fn error_response(description: String) -> utoipa::openapi::Response {
+    use utoipa::openapi::{ContentBuilder, Ref, ResponseBuilder};
+    ResponseBuilder::new()
+        .description(description)
+        .content(
+            "application/json",
+            ContentBuilder::new()
+                .schema(Some(Ref::from_schema_name("ErrorBody")))
+                .build(),
+        )
+        .build()
 }
 
 /// The OpenAPI document as committed in `openapi.yaml`.
@@ -574,7 +635,7 @@ async fn serve_connections(
             tokio::spawn(conn::refuse(tcp, max_connections));
             continue;
         };
-        let io = conn::WriteTimeout::new(tcp, write_timeout);
+        let io = conn::WriteTimeout::new(conn::JsonParseErrors::new(tcp), write_timeout);
         let conn = hyper::server::conn::http1::Builder::new()
             .timer(TokioTimer::new())
             .header_read_timeout(idle_timeout)

@@ -19,6 +19,7 @@ mod compensate_thermal;
 mod deploy;
 mod e2e;
 mod helpers;
+mod http_errors;
 mod jobs;
 mod limits;
 mod logs;

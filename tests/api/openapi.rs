@@ -26,8 +26,8 @@ fn committed_openapi_yaml_matches_the_router() {
     );
 }
 
-/// Every `$ref` of the spec names a schema it defines (a generated client
-/// fails on one that does not).
+/// Every `$ref` of the spec resolves, as a JSON pointer into the document
+/// (a generated client fails on one that does not).
 #[test]
 fn every_reference_resolves() {
     fn refs<'a>(v: &'a Value, out: &mut Vec<&'a str>) {
@@ -49,11 +49,127 @@ fn every_reference_resolves() {
     let dangling: BTreeSet<&str> = all
         .into_iter()
         .filter(|r| {
-            let name = r.strip_prefix("#/components/schemas/").unwrap_or(r);
-            spec["components"]["schemas"].get(name).is_none()
+            r.strip_prefix('#')
+                .and_then(|p| spec.pointer(&p.replace("~1", "/").replace("~0", "~")))
+                .is_none()
         })
         .collect();
     assert!(dangling.is_empty(), "undefined: {dangling:?}");
+}
+
+/// The document has the structure OpenAPI 3.1 requires, and what this
+/// service promises of it: every path parameter declared, required and
+/// typed; every parameter with a name, a place and a schema; every body
+/// with a content type; every answer described, its errors in the error
+/// shape; operation ids unique; security naming the bearer scheme; each
+/// operation's role declared (`x-required-role`) and the public ones
+/// without security.
+#[test]
+fn the_spec_is_structurally_valid() {
+    let spec = spec();
+    let mut problems = Vec::new();
+    assert!(
+        spec["openapi"]
+            .as_str()
+            .is_some_and(|v| v.starts_with("3.1.")),
+        "{}",
+        spec["openapi"]
+    );
+    assert!(spec["info"]["title"].is_string() && spec["info"]["version"].is_string());
+    let scheme = &spec["components"]["securitySchemes"]["api_key"];
+    assert_eq!(scheme["type"], "http", "{scheme}");
+    assert_eq!(scheme["scheme"], "bearer", "{scheme}");
+    assert_eq!(spec["security"], serde_json::json!([{"api_key": []}]));
+    let mut ids = BTreeSet::new();
+    for (path, item) in spec["paths"].as_object().expect("paths") {
+        assert!(path.starts_with('/'), "{path}");
+        let templated: BTreeSet<&str> = path
+            .split('/')
+            .filter_map(|seg| seg.strip_prefix('{').and_then(|s| s.strip_suffix('}')))
+            .collect();
+        for (method, op) in item.as_object().unwrap() {
+            let at = format!("{method} {path}");
+            if !["get", "post", "put", "patch", "delete"].contains(&method.as_str()) {
+                problems.push(format!("{at}: not an operation"));
+                continue;
+            }
+            match op["operationId"].as_str() {
+                Some(id) if ids.insert(id.to_string()) => {}
+                other => problems.push(format!("{at}: operationId {other:?} missing or repeated")),
+            }
+            let mut in_path = BTreeSet::new();
+            for p in op["parameters"].as_array().into_iter().flatten() {
+                let (Some(name), Some(place)) = (p["name"].as_str(), p["in"].as_str()) else {
+                    problems.push(format!("{at}: parameter without name or in: {p}"));
+                    continue;
+                };
+                if !["path", "query", "header", "cookie"].contains(&place) {
+                    problems.push(format!("{at}: parameter {name} in {place}"));
+                }
+                if !p["schema"].is_object() {
+                    problems.push(format!("{at}: parameter {name} without a schema"));
+                }
+                if place == "path" {
+                    in_path.insert(name);
+                    if p["required"] != true {
+                        problems.push(format!("{at}: path parameter {name} not required"));
+                    }
+                }
+            }
+            if in_path != templated {
+                problems.push(format!(
+                    "{at}: path parameters {in_path:?} for {templated:?}"
+                ));
+            }
+            if let Some(body) = op.get("requestBody") {
+                let content = body["content"].as_object();
+                if content.is_none_or(|c| c.is_empty()) {
+                    problems.push(format!("{at}: request body without content"));
+                }
+                for (ct, media) in content.into_iter().flatten() {
+                    if !media["schema"].is_object() {
+                        problems.push(format!("{at}: request body {ct} without a schema"));
+                    }
+                }
+            }
+            let responses = op["responses"].as_object();
+            if responses.is_none_or(|r| r.is_empty()) {
+                problems.push(format!("{at}: no responses"));
+            }
+            for (status, resp) in responses.into_iter().flatten() {
+                if !(status.len() == 3
+                    && status.parse::<u16>().is_ok_and(|s| (100..600).contains(&s)))
+                {
+                    problems.push(format!("{at}: status {status}"));
+                }
+                if !resp["description"].is_string() {
+                    problems.push(format!("{at} {status}: no description"));
+                }
+                if status.starts_with('4') || status.starts_with('5') {
+                    let schema = &resp["content"]["application/json"]["schema"];
+                    if schema["$ref"] != "#/components/schemas/ErrorBody" {
+                        problems.push(format!("{at} {status}: not the error shape: {schema}"));
+                    }
+                }
+            }
+            let role = op["x-required-role"].as_str();
+            let public = role == Some("none");
+            match role {
+                Some("none" | "reader" | "operator" | "engineer" | "admin") => {}
+                other => problems.push(format!("{at}: x-required-role {other:?}")),
+            }
+            if public != (op["security"] == serde_json::json!([{}])) {
+                problems.push(format!(
+                    "{at}: role {role:?} but security {}",
+                    op["security"]
+                ));
+            }
+            if !public && !op["responses"]["401"].is_object() {
+                problems.push(format!("{at}: needs a key but documents no 401"));
+            }
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
 }
 
 fn resolve<'a>(spec: &'a Value, schema: &'a Value) -> &'a Value {
