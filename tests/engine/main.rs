@@ -32,3 +32,4 @@ mod physics_rig;
 mod physics_sensor_drift;
 mod report_html;
 mod simulate_files;
+mod urdf;
