@@ -28,7 +28,6 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::robot::{Convention, JointSpec, LinkMass, Robot};
 use crate::error::{Error, Result};
-use crate::kinematics::rpy_matrix;
 
 /// Axes closer to parallel than this (deg) get Hayati's form (d = 0, the
 /// tilt in β) instead of the far-off common normal.
@@ -68,8 +67,9 @@ impl Pose {
     }
     /// From URDF's `xyz` (mm here) and `rpy` (rad, fixed axes: Rz Ry Rx).
     pub fn from_xyz_rpy(xyz_mm: [f64; 3], rpy_rad: [f64; 3]) -> Self {
+        let [roll, pitch, yaw] = rpy_rad;
         Pose {
-            r: rpy_matrix(rpy_rad[0], rpy_rad[1], rpy_rad[2]),
+            r: Pose::rot(2, yaw).r * Pose::rot(1, pitch).r * Pose::rot(0, roll).r,
             p: Vector3::from(xyz_mm),
         }
     }
@@ -734,16 +734,31 @@ fn first_joint(name: &str, base: &str, why: String) -> Error {
 }
 
 /// The converted model's T against the URDF's at a few joint angles: a
-/// guard on the construction (the tests check 1e-9 mm at random angles).
+/// guard on the construction (the tests check 1e-9 mm at random angles
+/// with `kinematics::Chain`; here the link transforms are multiplied out).
 fn self_check(robot: &Robot, chain: &[&UrdfJoint], tool_xyz_mm: &[f64; 3]) -> Result<()> {
-    use crate::kinematics::{Chain, Params, chain::OutputFrame};
-    let p = Params::of_robot(robot);
-    let c = Chain::new(robot.convention, robot.dof(), 0);
     let mut rng = crate::rng::Rng::new(19);
+    let tool = Vector3::from(*tool_xyz_mm);
     for _ in 0..4 {
         let q: Vec<f64> = (0..robot.dof()).map(|_| rng.range(-3.0, 3.0)).collect();
-        let (_, ours) = c.point(&p.values, &q, OutputFrame::Base);
-        let theirs = chain_fk(chain, &q).apply(&Vector3::from(*tool_xyz_mm));
+        let mut f = Pose::identity();
+        for (j, qj) in robot.joints.iter().zip(&q) {
+            let (a, al, d) = (j.a_mm, j.alpha_deg.to_radians(), j.d_mm);
+            let (th, be) = (
+                j.theta_offset_deg.to_radians() + qj,
+                j.beta_deg.to_radians(),
+            );
+            f = f.then(&match robot.convention {
+                Convention::Dh => dh_link(a, al, d, th, be),
+                Convention::Mdh => Pose::rot(0, al)
+                    .then(&Pose::rot(1, be))
+                    .then(&Pose::trans(0, a))
+                    .then(&Pose::rot(2, th))
+                    .then(&Pose::trans(2, d)),
+            });
+        }
+        let ours = f.apply(&Vector3::from(robot.tool_point_mm));
+        let theirs = chain_fk(chain, &q).apply(&tool);
         let e = (ours - theirs).norm();
         if e > 1e-6 * (1.0 + theirs.norm()) {
             return Err(Error::Numerical(format!(
