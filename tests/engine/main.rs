@@ -11,6 +11,7 @@ mod cli;
 mod compensate_bound;
 mod compensate_edited_report;
 mod compensate_ik;
+mod export;
 mod fuzz_parsers;
 mod fuzz_physics;
 mod identify_datasets;
