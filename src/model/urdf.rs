@@ -502,6 +502,39 @@ pub fn robot_from_urdf(text: &str, options: &UrdfOptions) -> Result<Robot> {
     urdf.to_robot(options)
 }
 
+/// A robot file's text as a model: a URDF (when `urdf` is set, e.g. by a
+/// `.urdf` file name, or when the text starts with `<`) converted with
+/// `options`, else robot.json. The one rule the CLI's `--robot` and the
+/// service's `POST /models` share.
+pub fn robot_from_text(text: &str, urdf: bool, options: &UrdfOptions) -> Result<Robot> {
+    if urdf || looks_like_xml(text) {
+        robot_from_urdf(text, options)
+    } else {
+        Robot::from_json(text)
+    }
+}
+
+/// `tool_xyz_mm` as the command line and the query string write it:
+/// three numbers separated by commas (`0,0,100`).
+pub fn parse_xyz_mm(field: &str, s: &str) -> Result<[f64; 3]> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(Error::field(
+            field,
+            format!("{s:?}: expected three numbers separated by commas (x,y,z in mm)"),
+        ));
+    }
+    let mut out = [0.0; 3];
+    for (o, p) in out.iter_mut().zip(&parts) {
+        *o = p
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && v.abs() <= super::MAX_LENGTH_MM)
+            .ok_or_else(|| Error::field(field, format!("{p:?} is not a length in mm")))?;
+    }
+    Ok(out)
+}
+
 /// An axis line at zero joint angles, in the base frame.
 #[derive(Debug, Clone, Copy)]
 struct Axis {
