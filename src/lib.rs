@@ -22,6 +22,7 @@
 pub mod cli;
 pub mod compensate;
 pub mod error;
+pub mod export;
 pub mod http;
 pub mod identify;
 pub mod jobs;

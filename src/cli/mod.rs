@@ -3,6 +3,7 @@
 
 mod error;
 pub mod evaluate;
+pub mod export;
 pub mod keys;
 pub mod report;
 pub mod serve;
@@ -21,7 +22,7 @@ use crate::compensate::{Applied, Approach, Compensator, ConditionNames, Note, No
 use crate::identify::{self, IdentifyOptions, Method, Progress};
 use crate::measure;
 use crate::model::compensated::{Compensated, CompensationStatus, write_csv};
-use crate::model::{Dataset, Rig, Robot, targets::targets_from_csv};
+use crate::model::{Dataset, Rig, targets::targets_from_csv};
 use crate::pipeline;
 use crate::report::{ClosedFormComparison, Report};
 pub use error::CliError;
@@ -82,6 +83,8 @@ pub enum Command {
     /// Blind evaluation of the physics analysis on simulated datasets.
     Evaluate(evaluate::EvaluateArgs),
     Report(report::ReportArgs),
+    /// A report's calibrated model as URDF, robot.json or a CSV of deviations.
+    Export(export::ExportArgs),
 }
 
 /// Identification method on the command line.
@@ -126,9 +129,14 @@ pub enum Switch {
 /// `drawcal identify`.
 #[derive(Debug, Args)]
 pub struct IdentifyArgs {
-    /// Nominal robot model (robot.json).
+    /// Nominal robot model (robot.json, or a URDF: `.urdf` or XML text,
+    /// read with the `--tool-link`, `--tool-xyz-mm`, `--base-link` and
+    /// `--convention` options).
     #[arg(long)]
     pub robot: PathBuf,
+    /// How a URDF `--robot` is read.
+    #[command(flatten)]
+    pub urdf: export::UrdfArgs,
     /// Measuring rig (rig.json).
     #[arg(long)]
     pub rig: PathBuf,
@@ -248,6 +256,9 @@ pub struct LocateArgs {
     /// of the anchors' normal).
     #[arg(long)]
     pub robot: Option<PathBuf>,
+    /// How a URDF `--robot` is read.
+    #[command(flatten)]
+    pub urdf: export::UrdfArgs,
     /// Where to write the located points CSV (stdout if absent).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -274,11 +285,12 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Simulate(a) => simulate::run(a),
         Command::Evaluate(a) => evaluate::run(a),
         Command::Report(a) => report::run(a),
+        Command::Export(a) => export::run(a),
     }
 }
 
 fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
-    let robot = core(&a.robot, Robot::from_json(&read(&a.robot)?))?;
+    let robot = export::read_robot(&a.robot, &a.urdf)?;
     let rig = core(&a.rig, Rig::from_json(&read(&a.rig)?))?;
     let file = File::open(&a.poses).map_err(|source| CliError::Io {
         path: a.poses.clone(),
@@ -553,7 +565,7 @@ fn locate_input(
     })?;
     match &a.robot {
         Some(path) => {
-            let robot = core(path, Robot::from_json(&read(path)?))?;
+            let robot = export::read_robot(path, &a.urdf)?;
             if rig.base_in_rig.is_none() {
                 return Err(CliError::Core {
                     path: a.rig.clone(),

@@ -8,6 +8,7 @@ pub mod dataset;
 pub mod rig;
 pub mod robot;
 pub mod targets;
+pub mod urdf;
 
 pub use compensated::{Compensated, CompensationStatus};
 pub use dataset::{Dataset, Measurement, PoseRecord, Split};

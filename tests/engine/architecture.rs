@@ -25,6 +25,7 @@ const CORE: &[&str] = &[
     "pipeline",
     "compensate",
     "report_html",
+    "export",
 ];
 
 /// What a core file must not use: file, network, process or async I/O,

@@ -945,3 +945,88 @@ fn rig_anchors_on_the_command_line() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--rig-anchors"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--robot robot.urdf` (issue 19): the UR5 URDF, from the DH base
+/// (base_link_inertia) with T 50 mm out of tool0, calibrates the
+/// ur5_geometric session exactly as its robot.json does; `drawcal export`
+/// writes the three formats; errors name the option or the field.
+#[test]
+fn cli_urdf_robot_and_export() {
+    let dir = scratch("urdf");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let d = root.join("ur5_geometric");
+    let urdf = root.join("urdf/ur5.urdf");
+    let (a, b) = (dir.join("a.json"), dir.join("b.json"));
+    let out = identify_files(
+        &urdf,
+        &d.join("rig.json"),
+        &d.join("poses.csv"),
+        &[
+            "--base-link",
+            "base_link_inertia",
+            "--tool-xyz-mm",
+            "0,0,50",
+            "--out",
+            a.to_str().unwrap(),
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = identify_files(
+        &d.join("robot.json"),
+        &d.join("rig.json"),
+        &d.join("poses.csv"),
+        &["--out", b.to_str().unwrap()],
+    );
+    assert!(out.status.success());
+    let ra = drawcal::report::Report::from_json(&std::fs::read_to_string(&a).unwrap()).unwrap();
+    let rb = drawcal::report::Report::from_json(&std::fs::read_to_string(&b).unwrap()).unwrap();
+    let (ta, tb) = (ra.stats.test.after.rms_mm, rb.stats.test.after.rms_mm);
+    assert!((ta - tb).abs() < 1e-4, "URDF {ta} mm vs robot.json {tb} mm");
+    for (format, start) in [
+        ("urdf", "<?xml"),
+        ("robot-json", "{"),
+        ("csv", "joint,parameter"),
+    ] {
+        let f = dir.join(format!("out.{format}"));
+        let out = bin()
+            .arg("export")
+            .arg(&a)
+            .args(["--format", format, "--out"])
+            .arg(&f)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            std::fs::read_to_string(&f).unwrap().starts_with(start),
+            "{format}"
+        );
+    }
+    let out = bin()
+        .arg("export")
+        .arg(&a)
+        .args(["--format", "step"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--format"));
+    let out = identify_files(
+        &urdf,
+        &d.join("rig.json"),
+        &d.join("poses.csv"),
+        &["--tool-link", "nope"],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("ur5.urdf") && err.contains("tool_link"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
