@@ -380,3 +380,50 @@ fn a_bump_of_one_joint_is_located_and_corrected_not_named() {
     let test = drawcal::stats::rms_norm(&a.test_errors);
     assert!(test < 1.4 * 0.0388, "held-out {test}");
 }
+
+/// Compensation uses a data-driven correction that is a function of joint
+/// angles (the j3 bump's) and says so when a target drives it outside the
+/// range the calibration's poses covered.
+#[test]
+fn compensation_applies_a_joint_driven_correction_and_warns_outside_its_range() {
+    use drawcal::compensate::{CompensationStatus, Compensator};
+    use drawcal::model::{Target, TargetKind};
+    let (robot, rig, data) = common::load("xcheck_bump_j3");
+    let report = common::identify_default(&robot, &rig, &data);
+    assert!(
+        report.findings.iter().any(|f| f.effect == "data_driven"),
+        "{:#?}",
+        report.findings
+    );
+    let comp = Compensator::from_report(&report).unwrap();
+    let target = |q3: f64| Target {
+        target: format!("q3 {q3}"),
+        kind: TargetKind::Joints {
+            q_deg: vec![10.0, -30.0, q3, 20.0, 40.0, 0.0],
+        },
+    };
+    // Inside the fitted range (about -70 to 150 deg of joint 3): no word.
+    let inside = comp.compensate(&target(40.0), false);
+    assert_eq!(inside.status, CompensationStatus::Ok, "{inside:?}");
+    assert!(inside.message.is_none(), "{inside:?}");
+    // The correction enters the joint offsets: joint 3 sits elsewhere.
+    let offsets = drawcal::physics::joint_offsets_rad(
+        &report.findings,
+        &report.nominal_robot,
+        &[
+            10f64.to_radians(),
+            -30f64.to_radians(),
+            40f64.to_radians(),
+            0.35,
+            0.7,
+            0.0,
+        ],
+    );
+    assert!(offsets[2] != 0.0, "{offsets:?}");
+    let outside = comp.compensate(&target(165.0), false);
+    let m = outside.message.clone().unwrap_or_default();
+    assert!(
+        m.contains("outside") && m.contains("joint 3"),
+        "{outside:?}"
+    );
+}
