@@ -31,6 +31,7 @@ pub mod measure;
 pub mod model;
 pub mod physics;
 pub mod pipeline;
+pub mod plan;
 pub mod report;
 pub mod report_html;
 pub mod rng;

@@ -5,6 +5,7 @@ mod error;
 pub mod evaluate;
 pub mod export;
 pub mod keys;
+pub mod plan;
 pub mod report;
 pub mod serve;
 pub mod simulate;
@@ -78,6 +79,8 @@ pub enum Command {
     Serve(serve::ServeArgs),
     /// API keys of the service: create (printed once), list, revoke.
     Keys(keys::KeysArgs),
+    /// Choose the poses of a calibration session (targets.csv and a report).
+    Plan(plan::PlanArgs),
     /// Simulate a recording from a spec (robot, rig, deviations, effects).
     Simulate(simulate::SimulateArgs),
     /// Blind evaluation of the physics analysis on simulated datasets.
@@ -282,6 +285,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Command::Locate(a) => run_locate(a),
         Command::Serve(a) => serve::run(a),
         Command::Keys(a) => keys::run(a),
+        Command::Plan(a) => plan::run(a),
         Command::Simulate(a) => simulate::run(a),
         Command::Evaluate(a) => evaluate::run(a),
         Command::Report(a) => report::run(a),

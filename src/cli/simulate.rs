@@ -16,6 +16,11 @@ pub struct SimulateArgs {
     /// Output folder: robot.json, rig.json, poses.csv, truth.json.
     #[arg(long)]
     pub out: PathBuf,
+    /// Record these joint targets, in this order (a plan's targets.csv:
+    /// `target,q1_deg..qn_deg[,split]`), instead of drawing the spec's
+    /// `n_poses`; their ids and split go into poses.csv.
+    #[arg(long)]
+    pub targets: Option<PathBuf>,
 }
 
 /// Generate a dataset.
@@ -46,7 +51,34 @@ pub fn run(args: SimulateArgs) -> Result<(), CliError> {
             }
             None => None,
         },
+        poses: None,
     };
+    let mut files = files;
+    if let Some(path) = &args.targets {
+        let dof = match &files.robot {
+            Some(r) => r.dof(),
+            None => simulate::preset(&spec.robot).map_or(0, |(r, _, _)| r.dof()),
+        };
+        let text = read(path)?;
+        let targets = core(path, crate::model::targets_from_csv(text.as_bytes(), dof))?;
+        let split = core(path, crate::model::target_splits(text.as_bytes()))?;
+        let mut given = Vec::with_capacity(targets.len());
+        for (r, t) in targets.into_iter().enumerate() {
+            let crate::model::TargetKind::Joints { q_deg } = t.kind else {
+                return Err(CliError::Usage(format!(
+                    "{}: row {}: simulate records joint targets (q1_deg..), not Cartesian ones",
+                    path.display(),
+                    r + 1
+                )));
+            };
+            given.push(simulate::GivenPose {
+                id: t.target,
+                q_deg,
+                test: split.as_ref().map(|s| s[r]),
+            });
+        }
+        files.poses = Some(given);
+    }
     let sim = simulate::generate_with(&spec, files)?;
     write(&sim, &args.out)?;
     println!(

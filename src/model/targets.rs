@@ -117,6 +117,32 @@ pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
     Ok(out)
 }
 
+/// The optional `split` column of a targets.csv (drawcal's addition, as
+/// written by `drawcal plan`): per row `true` for `test`, `false` for
+/// `train`; `None` when the file has no such column.
+pub fn target_splits<R: Read>(input: R) -> Result<Option<Vec<bool>>> {
+    let (mut rdr, headers) = super::csv_with_header(input)?;
+    let Some(col) = headers.iter().position(|h| h == "split") else {
+        return Ok(None);
+    };
+    let mut out = Vec::new();
+    for (r, rec) in rdr.records().enumerate() {
+        let rec = super::csv_record(r + 1, rec, &headers)?;
+        out.push(match rec.get(col).unwrap_or("").trim() {
+            "test" => true,
+            "train" => false,
+            other => {
+                return Err(Error::cell(
+                    r + 1,
+                    "split",
+                    format!("'{other}': expected train or test"),
+                ));
+            }
+        });
+    }
+    Ok(Some(out))
+}
+
 /// A warning when joint targets look like radians: a robot with three or
 /// more joints, at least one joint target, not all at zero, and every angle
 /// of every joint target within ±2π (a single target too: one taught pose

@@ -164,6 +164,7 @@ pub fn run_case(
         SpecFiles {
             robot: None,
             rig: rig.cloned(),
+            poses: None,
         },
     )?;
     let truth: Vec<(String, Option<usize>)> = sim

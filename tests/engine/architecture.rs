@@ -23,6 +23,7 @@ const CORE: &[&str] = &[
     "identify",
     "physics",
     "pipeline",
+    "plan",
     "compensate",
     "report_html",
     "export",

@@ -59,6 +59,7 @@ fn session_on(
         simulate::SpecFiles {
             robot: None,
             rig: Some(truth.clone()),
+            poses: None,
         },
     )
     .unwrap();
@@ -261,6 +262,7 @@ fn refused_on_three_strings_and_on_points_naming_the_option() {
         simulate::SpecFiles {
             robot: None,
             rig: Some(three.clone()),
+            poses: None,
         },
     )
     .unwrap();

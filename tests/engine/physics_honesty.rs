@@ -133,6 +133,7 @@ fn indistinguishable_models_are_named_as_such() {
         simulate::SpecFiles {
             robot: Some(drawcal::model::Robot::from_json(&read("robot.json")).unwrap()),
             rig: Some(Rig::from_json(&read("rig.json")).unwrap()),
+            poses: None,
         },
     )
     .unwrap();

@@ -219,3 +219,49 @@ fn urdf_options_and_errors_name_what_is_wrong() {
         .to_string();
     assert!(e.contains("XML"), "{e}");
 }
+
+/// The README's ER3A URDF is the ER3A of robot.json: the same T at random
+/// angles (tool point 0,0,60 mm on the flange), so a plan made from either
+/// is the same session.
+#[test]
+fn urdf_er3a_is_the_er3a_robot_json() {
+    let (robot, worst) = worst_fk_error(
+        &text("er3a.urdf"),
+        &options("flange", [0.0, 0.0, 60.0]),
+        100,
+    );
+    assert!(worst < 1e-9, "{worst}");
+    let json = Robot::from_json(
+        &std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/data/er3a_paper_like/robot.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let (a, b) = (Params::of_robot(&robot), Params::of_robot(&json));
+    let (ca, cb) = (
+        Chain::new(robot.convention, 6, 0),
+        Chain::new(json.convention, 6, 0),
+    );
+    let mut rng = drawcal::rng::Rng::new(4);
+    for _ in 0..200 {
+        let q: Vec<f64> = json
+            .joints
+            .iter()
+            .map(|j| rng.range(j.q_min_deg, j.q_max_deg).to_radians())
+            .collect();
+        let d = (ca.point(&a.values, &q, OutputFrame::Base).1
+            - cb.point(&b.values, &q, OutputFrame::Base).1)
+            .norm();
+        assert!(d < 1e-6, "{d} mm at {q:?}");
+    }
+    for (j, (x, y)) in robot.joints.iter().zip(&json.joints).enumerate() {
+        assert!(
+            (x.q_min_deg - y.q_min_deg).abs() < 1e-9 && (x.q_max_deg - y.q_max_deg).abs() < 1e-9,
+            "joint {}",
+            j + 1
+        );
+    }
+    assert!(robot.links.is_some());
+}

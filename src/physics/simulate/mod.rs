@@ -261,6 +261,9 @@ pub struct Simulated {
     /// Per pose: point located from the noisy readings minus the point
     /// located from the exact ones (rig frame, mm).
     pub point_noise: Vec<Vector3<f64>>,
+    /// Per pose: the true T with the robot-side effects (rig frame, mm),
+    /// to judge a calibrated model against.
+    pub true_point: Vec<Vector3<f64>>,
 }
 
 /// The files a [`Spec`] names, read by the caller: the robot.json of a
@@ -272,6 +275,21 @@ pub struct SpecFiles {
     pub robot: Option<Robot>,
     /// The rig `spec.rig` names.
     pub rig: Option<Rig>,
+    /// Poses to record, in this order, instead of drawing `spec.n_poses`
+    /// and touring them (a plan's targets.csv).
+    pub poses: Option<Vec<GivenPose>>,
+}
+
+/// A pose the recording visits, as a plan gives it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GivenPose {
+    /// Id (poses.csv's `pose`).
+    pub id: String,
+    /// Joint angles (deg).
+    pub q_deg: Vec<f64>,
+    /// `Some(true)` for a `test` pose; `None` lets `spec.test_fraction`
+    /// choose (for every pose, unless all have a split).
+    pub test: Option<bool>,
 }
 
 /// Generate a dataset from a spec whose robot is a preset (and whose rig is
@@ -281,7 +299,8 @@ pub fn generate(spec: &Spec) -> Result<Simulated> {
 }
 
 /// Generate a dataset from a spec and the files it names.
-pub fn generate_with(spec: &Spec, files: SpecFiles) -> Result<Simulated> {
+pub fn generate_with(spec: &Spec, mut files: SpecFiles) -> Result<Simulated> {
+    let given = files.poses.take();
     let (robot, rig, home_deg, preset_name) = presets::load(spec, files)?;
     let m = rig.n_strings();
     if m < 3 {
@@ -296,11 +315,26 @@ pub fn generate_with(spec: &Spec, files: SpecFiles) -> Result<Simulated> {
     let geometry = truth::true_geometry(spec, &robot, &rig, &mut rng);
     let chain = Chain::new(robot.convention, robot.dof(), m);
     let anchors: Vec<Vector3<f64>> = (0..m).map(|k| rig.anchor(k)).collect();
-    let qs = tour::sample_poses(spec, &robot, &rig, &chain, &anchors, &geometry, &mut rng)?;
-    let visits = tour::Tour::new(&spec.session, &home_deg, qs, &mut rng);
+    let visits = match &given {
+        Some(given) => {
+            let qs = tour::given_poses(&robot, given)?;
+            let ids = given.iter().map(|p| p.id.clone()).collect();
+            tour::Tour::in_order(&spec.session, &home_deg, qs, ids, &mut rng)
+        }
+        None => {
+            let qs = tour::sample_poses(spec, &robot, &rig, &chain, &anchors, &geometry, &mut rng)?;
+            tour::Tour::new(&spec.session, &home_deg, qs, &mut rng)
+        }
+    };
     let scene = record::Scene::new(&robot, &rig, chain, anchors, &geometry, &visits);
     let effects = record::effects(spec, &scene, &home_deg, &mut rng)?;
-    let recording = record::Recording::new(spec, &scene, &effects, &mut rng);
+    let mut recording = record::Recording::new(spec, &scene, &effects, &mut rng);
+    if let Some(split) = given
+        .as_ref()
+        .and_then(|g| g.iter().map(|p| p.test).collect::<Option<Vec<bool>>>())
+    {
+        recording.is_test = split;
+    }
     let poses_csv = record::poses_csv(&spec.session, &scene, &recording);
     let dataset = Dataset::from_csv(poses_csv.as_bytes(), &robot, &rig)?;
     let point_noise_mm = (recording.noise_sq / visits.qs.len() as f64).sqrt();
@@ -313,7 +347,11 @@ pub fn generate_with(spec: &Spec, files: SpecFiles) -> Result<Simulated> {
         recording: &recording,
         point_noise_mm,
     });
-    let record::Recording { point_noise, .. } = recording;
+    let record::Recording {
+        point_noise,
+        true_t: true_point,
+        ..
+    } = recording;
     Ok(Simulated {
         robot,
         rig,
@@ -323,5 +361,6 @@ pub fn generate_with(spec: &Spec, files: SpecFiles) -> Result<Simulated> {
         effects,
         point_noise_mm,
         point_noise,
+        true_point,
     })
 }

@@ -306,7 +306,7 @@ pub(super) fn poses_csv(ss: &SessionSpec, scene: &Scene, rec: &Recording) -> Str
     header.push("split".into());
     rows.push(header.join(","));
     for i in 0..tour.qs.len() {
-        let mut row = vec![format!("{}", i + 1)];
+        let mut row = vec![tour.ids[i].clone()];
         row.extend(tour.qs[i].iter().map(|v| format!("{v:.4}")));
         row.extend(rec.readings[i].iter().map(|v| format!("{v:.6}")));
         row.push(format!("{:.3}", tour.time[i]));

@@ -93,8 +93,46 @@ pub(super) fn sample_poses(
     Ok(qs)
 }
 
+/// Poses given by the caller (a plan), checked against the robot: as many
+/// angles as joints, finite, inside the limits.
+pub(super) fn given_poses(robot: &Robot, given: &[super::GivenPose]) -> Result<Vec<Vec<f64>>> {
+    if given.is_empty() {
+        return Err(Error::field("targets", "no poses given"));
+    }
+    for (r, p) in given.iter().enumerate() {
+        if p.q_deg.len() != robot.dof() {
+            return Err(Error::cell(
+                r + 1,
+                "q_deg",
+                format!(
+                    "{} angles for a robot with {} joints",
+                    p.q_deg.len(),
+                    robot.dof()
+                ),
+            ));
+        }
+        for (j, (q, js)) in p.q_deg.iter().zip(&robot.joints).enumerate() {
+            if !q.is_finite() || *q < js.q_min_deg || *q > js.q_max_deg {
+                return Err(Error::cell(
+                    r + 1,
+                    format!("q{}_deg", j + 1),
+                    format!(
+                        "{q} is outside joint {}'s limits [{}, {}]",
+                        j + 1,
+                        js.q_min_deg,
+                        js.q_max_deg
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(given.iter().map(|p| p.q_deg.clone()).collect())
+}
+
 /// The poses in visiting order, with what the file records of each.
 pub(super) struct Tour {
+    /// Pose ids (poses.csv's `pose`).
+    pub ids: Vec<String>,
     /// Joint angles (deg), in visiting order.
     pub qs: Vec<Vec<f64>>,
     /// The same in rad.
@@ -118,6 +156,18 @@ impl Tour {
         rng: &mut Rng,
     ) -> Tour {
         let qs = visiting_order(home_deg, qs);
+        let ids = (1..=qs.len()).map(|i| i.to_string()).collect();
+        Tour::in_order(ss, home_deg, qs, ids, rng)
+    }
+
+    /// The poses visited in the order given, with these ids.
+    pub(super) fn in_order(
+        ss: &SessionSpec,
+        home_deg: &[f64],
+        qs: Vec<Vec<f64>>,
+        ids: Vec<String>,
+        rng: &mut Rng,
+    ) -> Tour {
         let (time, temp) = clock(ss, home_deg, &qs, rng);
         let payload: Vec<Option<f64>> = (0..qs.len())
             .map(|i| {
@@ -130,6 +180,7 @@ impl Tour {
             .map(|q| q.iter().map(|v| v.to_radians()).collect())
             .collect();
         Tour {
+            ids,
             qs,
             q_rad,
             time,

@@ -1,0 +1,165 @@
+//! `drawcal plan`: choose the poses of a calibration session (see
+//! [`crate::plan`]), write them as targets.csv and the plan's report.
+
+use std::path::PathBuf;
+
+use super::export::{UrdfArgs, read_robot};
+use super::{CliError, core, read};
+use crate::model::Rig;
+use crate::plan::{self, KeepOut, PlanOptions, Workspace};
+
+/// Arguments of `drawcal plan`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct PlanArgs {
+    /// robot.json, or a URDF (`.urdf`; see the URDF options).
+    #[arg(long)]
+    pub robot: PathBuf,
+    /// How a URDF robot is read.
+    #[command(flatten)]
+    pub urdf: UrdfArgs,
+    /// rig.json (with `base_in_rig` for a string rig).
+    #[arg(long)]
+    pub rig: PathBuf,
+    /// Poses to choose for the identification.
+    #[arg(long, default_value_t = 30)]
+    pub n: usize,
+    /// Random check poses added and marked `test` (default max(5, N/4)).
+    #[arg(long)]
+    pub check: Option<usize>,
+    /// A box the arm, the tool and the strings stay out of, robot base
+    /// frame: `x0,y0,z0,x1,y1,z1` (mm); repeat for several.
+    #[arg(long = "keep-out", allow_hyphen_values = true)]
+    pub keep_out: Vec<String>,
+    /// Floor height in the robot base frame (mm): joints, flange and T stay
+    /// above it.
+    #[arg(long, allow_hyphen_values = true)]
+    pub floor_z_mm: Option<f64>,
+    /// Effects the poses must also determine, comma-separated:
+    /// joint_compliance, backlash, joint_scale, sensor_scale, cable_sag.
+    #[arg(long, value_delimiter = ',')]
+    pub effects: Vec<String>,
+    /// Valid candidate poses to choose from.
+    #[arg(long, default_value_t = 10_000)]
+    pub candidates: usize,
+    /// Seed of the candidate draws.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Noise of one reading (mm; default 0.02 for strings with the
+    /// resolution's quantisation, 0.03 per coordinate for a tracker).
+    #[arg(long)]
+    pub noise_mm: Option<f64>,
+    /// Where the tour starts, `q1,...,qn` (deg; default all zero).
+    #[arg(long, allow_hyphen_values = true, value_delimiter = ',')]
+    pub home_deg: Option<Vec<f64>>,
+    /// Where to write the poses (targets.csv with a split column).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Where to write the plan's report (JSON; default: next to --out,
+    /// `<out>.plan.json`).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
+/// Plan, write, summarise.
+pub fn run(a: PlanArgs) -> Result<(), CliError> {
+    let robot = read_robot(&a.robot, &a.urdf)?;
+    let rig = core(&a.rig, Rig::from_json(&read(&a.rig)?))?;
+    let keep_out = a
+        .keep_out
+        .iter()
+        .map(|s| KeepOut::parse("--keep-out", s))
+        .collect::<crate::Result<Vec<_>>>()
+        .map_err(|e| CliError::Usage(e.to_string()))?;
+    let opts = PlanOptions {
+        n_poses: a.n,
+        n_check: a.check,
+        workspace: Workspace {
+            floor_z_mm: a.floor_z_mm,
+            keep_out,
+            ..Workspace::default()
+        },
+        effects: a.effects.clone(),
+        candidates: a.candidates,
+        seed: a.seed,
+        noise_mm: a.noise_mm,
+        home_deg: a.home_deg.clone(),
+    };
+    let plan = plan::plan(&robot, &rig, &opts)?;
+    let report_path = a
+        .report
+        .clone()
+        .unwrap_or_else(|| a.out.with_extension("plan.json"));
+    let io = |path: &PathBuf| {
+        let path = path.clone();
+        move |source| CliError::Io { path, source }
+    };
+    std::fs::write(&a.out, plan.targets_csv()).map_err(io(&a.out))?;
+    let json = serde_json::to_string_pretty(&plan.report).expect("a plan report serialises");
+    std::fs::write(&report_path, json + "\n").map_err(io(&report_path))?;
+    print!("{}", summary(&plan.report));
+    println!(
+        "wrote {} ({} poses to identify, {} check poses) and {}",
+        a.out.display(),
+        plan.report.n_poses,
+        plan.report.n_check,
+        report_path.display()
+    );
+    Ok(())
+}
+
+/// The terminal summary of a plan.
+pub fn summary(r: &plan::PlanReport) -> String {
+    let mut s = String::new();
+    s += &format!(
+        "plan: {} poses from {} valid candidates ({} drawn)\n",
+        r.n_poses, r.candidates_kept, r.candidates_drawn
+    );
+    s += &format!(
+        "predicted model error at random valid poses: {:.4} mm RMS (random poses: {:.4} mm, {:.2}x)\n",
+        r.predicted.model_rms_mm,
+        r.random.model_rms_mm,
+        r.predicted.model_rms_mm / r.random.model_rms_mm
+    );
+    s += &format!(
+        "predicted held-out RMS: {:.4} mm (the located point's noise alone: {:.4} mm)\n",
+        r.predicted.holdout_rms_mm, r.point_noise_rms_mm
+    );
+    let curve: Vec<String> = r
+        .by_n
+        .iter()
+        .map(|p| format!("{}: {:.4}", p.n_poses, p.model_rms_mm))
+        .collect();
+    s += &format!("model error by N (mm): {}\n", curve.join(", "));
+    if let Some(worst) = r
+        .parameters
+        .iter()
+        .filter(|p| p.unit == "mm" || p.unit == "deg")
+        .max_by(|a, b| {
+            let k = |p: &plan::PredictedParam| {
+                if p.unit == "deg" {
+                    p.sigma * 10.0
+                } else {
+                    p.sigma
+                }
+            };
+            k(a).total_cmp(&k(b))
+        })
+    {
+        s += &format!(
+            "least determined parameter: {} (1-sigma {:.4} {})\n",
+            worst.name, worst.sigma, worst.unit
+        );
+    }
+    if !r.undetermined.is_empty() {
+        let names: Vec<String> = r
+            .undetermined
+            .iter()
+            .map(|f| format!("{} (moves T like {})", f.name, f.aliased_with.join(" + ")))
+            .collect();
+        s += &format!("no poses on this rig can determine: {}\n", names.join("; "));
+    }
+    for n in &r.notes {
+        s += &format!("note: {n}\n");
+    }
+    s
+}

@@ -1,0 +1,893 @@
+//! Planning a calibration session: which poses to record, in which order,
+//! and what they will determine (`drawcal plan`, `POST /plans`).
+//!
+//! 1. Candidates ([`candidates`]): random joint poses inside the limits
+//!    that the rig measures well (every string in range, off the anchors'
+//!    plane, well spread at T, clear of the arm) and that keep the arm
+//!    above the floor, out of the keep-out boxes and away from
+//!    singularities.
+//! 2. Selection ([`design`]): the `n` poses minimising the expected
+//!    squared error of the calibrated model's T at random valid poses
+//!    (I-optimal), over the parameters the identification frees and any
+//!    effects asked for, greedily and then by exchanges.
+//! 3. Order ([`tour`]): a short tour from home.
+//! 4. The report: predicted 1-sigma per parameter, predicted held-out RMS
+//!    (and the same for random poses), the parameters the rig and the
+//!    poses cannot determine and why, and the prediction over N.
+//!
+//! The predictions are linear least squares with the noise given: they
+//! hold for the geometric model and the effects planned for, not for
+//! physics nobody modelled.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{DMatrix, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::identify::{IdentifyOptions, geometric::candidates as free_candidates, identifiability};
+use crate::kinematics::JointParam;
+use crate::kinematics::chain::OutputFrame;
+use crate::model::{Rig, Robot};
+use crate::physics::Kind;
+use crate::physics::effects::{Basis, Context, PoseInput, approach_directions};
+use crate::report::FixedParam;
+use crate::rng::Rng;
+
+pub mod candidates;
+pub mod design;
+pub mod tour;
+
+pub use candidates::{Candidate, KeepOut, Rejection, Scene, Workspace};
+
+/// The report's format tag.
+pub const PLAN_FORMAT: &str = "drawcal plan v1";
+
+/// Effects a plan can be made for.
+pub const PLANNABLE_EFFECTS: &[&str] = &[
+    "joint_compliance",
+    "backlash",
+    "joint_scale",
+    "sensor_scale",
+    "cable_sag",
+];
+
+/// What to plan.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanOptions {
+    /// Poses to choose for the identification.
+    pub n_poses: usize,
+    /// Random valid poses added and marked `test`, to measure the held-out
+    /// RMS; default `max(5, n_poses / 4)`.
+    #[serde(default)]
+    pub n_check: Option<usize>,
+    /// Where poses may go.
+    #[serde(default)]
+    pub workspace: Workspace,
+    /// Effects the poses must also determine ([`PLANNABLE_EFFECTS`]).
+    #[serde(default)]
+    pub effects: Vec<String>,
+    /// Candidate poses drawn (valid ones).
+    #[serde(default = "default_candidates")]
+    pub candidates: usize,
+    /// Seed of the draws.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// Noise of one string reading (mm), or of each coordinate of a
+    /// measured point; default 0.02 mm (strings, plus the resolution's
+    /// quantisation) or 0.03 mm (a point instrument).
+    #[serde(default)]
+    pub noise_mm: Option<f64>,
+    /// Where the tour starts (deg); default every joint at 0, inside its
+    /// limits.
+    #[serde(default)]
+    pub home_deg: Option<Vec<f64>>,
+}
+
+fn default_candidates() -> usize {
+    10_000
+}
+fn default_seed() -> u64 {
+    1
+}
+
+impl PlanOptions {
+    /// Options for `n_poses` with every default.
+    pub fn new(n_poses: usize) -> Self {
+        PlanOptions {
+            n_poses,
+            n_check: None,
+            workspace: Workspace::default(),
+            effects: vec![],
+            candidates: default_candidates(),
+            seed: default_seed(),
+            noise_mm: None,
+            home_deg: None,
+        }
+    }
+}
+
+/// One pose of the plan, in visiting order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlannedPose {
+    /// Id (`p01`..., `c01`... for check poses).
+    pub id: String,
+    /// Nominal joint targets (deg).
+    pub q_deg: Vec<f64>,
+    /// `train` (chosen for the identification) or `test` (a check pose).
+    pub split: String,
+}
+
+/// A parameter's predicted uncertainty.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PredictedParam {
+    /// Report name (`j2.theta`, `base.x`, `tool.z`, or an effect's).
+    pub name: String,
+    /// Predicted 1-sigma in `unit`.
+    pub sigma: f64,
+    /// `mm`, `deg` or the effect's coefficient unit.
+    pub unit: String,
+}
+
+/// The prediction for a number of poses.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PredictionAtN {
+    /// Poses.
+    pub n_poses: usize,
+    /// RMS error of the calibrated model's T at random valid poses (mm).
+    pub model_rms_mm: f64,
+    /// Predicted held-out RMS: the model's error and the located point's
+    /// noise together (mm).
+    pub holdout_rms_mm: f64,
+}
+
+/// Approach directions of a joint over the tour (for backlash).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ApproachBalance {
+    /// Joint (1-based).
+    pub joint: usize,
+    /// Poses reached with the joint moving up.
+    pub from_below: usize,
+    /// Poses reached moving down.
+    pub from_above: usize,
+}
+
+/// What the plan predicts and why.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PlanReport {
+    /// [`PLAN_FORMAT`].
+    pub format: String,
+    /// Robot name.
+    pub robot: String,
+    /// Poses chosen for the identification.
+    pub n_poses: usize,
+    /// Check poses (split `test`).
+    pub n_check: usize,
+    /// The selection criterion, in words.
+    pub criterion: String,
+    /// Noise assumed per reading (mm).
+    pub noise_mm: f64,
+    /// Candidates drawn, kept, and why the others were not.
+    pub candidates_drawn: usize,
+    /// Valid candidates the poses were chosen from.
+    pub candidates_kept: usize,
+    /// Drawn poses refused, by reason.
+    pub rejected: BTreeMap<Rejection, usize>,
+    /// Predicted 1-sigma of each parameter the poses determine.
+    pub parameters: Vec<PredictedParam>,
+    /// Parameters neither this rig nor any poses can separate, held at
+    /// nominal by the identification, with what they move T like.
+    pub undetermined: Vec<FixedParam>,
+    /// The chosen poses' prediction.
+    pub predicted: PredictionAtN,
+    /// The same number of random valid poses (mean of five draws).
+    pub random: PredictionAtN,
+    /// RMS of the located point's noise at random valid poses (mm).
+    pub point_noise_rms_mm: f64,
+    /// The prediction as N changes (the greedy selection's nested sets).
+    pub by_n: Vec<PredictionAtN>,
+    /// Effects planned for.
+    pub effects: Vec<String>,
+    /// Approach directions per joint when backlash is planned for.
+    pub approach: Vec<ApproachBalance>,
+    /// The tour's total slowest-joint travel (deg).
+    pub tour_travel_deg: f64,
+    /// Exchanges made after the greedy selection.
+    pub exchanges: usize,
+    /// What the user should know.
+    pub notes: Vec<String>,
+}
+
+/// A plan: the poses in visiting order and the report.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Plan {
+    /// Poses, in visiting order.
+    pub poses: Vec<PlannedPose>,
+    /// What they predict.
+    pub report: PlanReport,
+}
+
+impl Plan {
+    /// targets.csv of the plan: `target,q1_deg..qn_deg,split` (the split
+    /// column is drawcal's addition: `drawcal simulate --targets` and the
+    /// recording's poses.csv carry it over).
+    pub fn targets_csv(&self) -> String {
+        let n = self.poses.first().map_or(0, |p| p.q_deg.len());
+        let mut out = String::from("target");
+        for j in 1..=n {
+            out.push_str(&format!(",q{j}_deg"));
+        }
+        out.push_str(",split\n");
+        for p in &self.poses {
+            out.push_str(&p.id);
+            for v in &p.q_deg {
+                out.push_str(&format!(",{v:.4}"));
+            }
+            out.push_str(&format!(",{}\n", p.split));
+        }
+        out
+    }
+}
+
+/// Valid random poses drawn before giving up on finding enough, per pose
+/// asked for.
+const DRAWS_PER_CANDIDATE: usize = 50;
+/// Random valid poses the prediction is averaged over.
+const PREDICTION_POSES: usize = 400;
+/// Exchange passes after the greedy selection.
+const EXCHANGE_PASSES: usize = 3;
+
+/// The columns the design determines: parameters of the identification
+/// and effect coefficients.
+struct Columns {
+    /// Parameter indices, identification priority order.
+    params: Vec<usize>,
+    /// Prior size of each parameter (mm or rad).
+    param_scale: Vec<f64>,
+    /// Effects (kind, name) with their coefficient count.
+    effects: Vec<(Kind, String)>,
+    /// Prior size of each effect coefficient (its unit).
+    effect_scale: Vec<f64>,
+}
+
+impl Columns {
+    fn len(&self) -> usize {
+        self.params.len() + self.effect_scale.len()
+    }
+}
+
+/// Plan a session for `robot` on `rig`.
+pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
+    check_options(robot, opts)?;
+    let scene = Scene::new(robot, rig, &opts.workspace)?;
+    let m = rig.n_strings();
+    let noise = opts.noise_mm.unwrap_or_else(|| default_noise(rig));
+    let mut rng = Rng::new(opts.seed);
+    let want = opts.candidates + PREDICTION_POSES;
+    let (mut pool, drawn, rejected) = scene.sample(want, want * DRAWS_PER_CANDIDATE, &mut rng);
+    let n_check = opts.n_check.unwrap_or((opts.n_poses / 4).max(5));
+    if pool.len() < PREDICTION_POSES + 2 * (opts.n_poses + n_check) {
+        return Err(Error::InsufficientData(format!(
+            "only {} of {drawn} drawn poses are inside the joint limits, the strings' range and the workspace ({}): too few to plan {} poses; relax the floor or keep-out boxes or check base_in_rig",
+            pool.len(),
+            rejection_words(&rejected),
+            opts.n_poses
+        )));
+    }
+    let validation: Vec<Candidate> = pool.split_off(pool.len() - PREDICTION_POSES);
+    let cols = columns(&scene, &pool, opts, noise)?;
+    let design_pool = design_pool(&scene, &cols, &pool, &validation, noise);
+    let n_greedy = (2 * opts.n_poses).min(pool.len() - n_check);
+    let sel = design::select(&design_pool, opts.n_poses, n_greedy, EXCHANGE_PASSES);
+
+    // Check poses: random valid poses not chosen.
+    let mut rest: Vec<usize> = (0..pool.len())
+        .filter(|i| !sel.chosen.contains(i))
+        .collect();
+    rng.shuffle(&mut rest);
+    let checks: Vec<usize> = rest[..n_check].to_vec();
+
+    // The tour over both.
+    let home = home_pose(robot, opts)?;
+    let all: Vec<(usize, bool)> = sel
+        .chosen
+        .iter()
+        .map(|&i| (i, false))
+        .chain(checks.iter().map(|&i| (i, true)))
+        .collect();
+    let refs: Vec<&[f64]> = all.iter().map(|&(i, _)| pool[i].q_deg.as_slice()).collect();
+    let order = tour::order(&home, &refs);
+    let (mut n_train, mut n_test) = (0, 0);
+    let poses: Vec<PlannedPose> = order
+        .iter()
+        .map(|&k| {
+            let (i, check) = all[k];
+            let id = if check {
+                n_test += 1;
+                format!("c{n_test:02}")
+            } else {
+                n_train += 1;
+                format!("p{n_train:02}")
+            };
+            PlannedPose {
+                id,
+                q_deg: pool[i].q_deg.clone(),
+                split: if check { "test" } else { "train" }.into(),
+            }
+        })
+        .collect();
+    let toured: Vec<&[f64]> = poses.iter().map(|p| p.q_deg.as_slice()).collect();
+    let tour_travel_deg = tour::path_travel_deg(&home, &toured);
+
+    // Predictions (without the prior: what least squares will give).
+    let point_noise_rms_mm = point_noise_rms(&scene, &validation, noise, m);
+    let at = |set: &[usize]| prediction(&design_pool, set, point_noise_rms_mm);
+    let predicted = at(&sel.chosen);
+    let mut random_model = 0.0;
+    for _ in 0..5 {
+        let mut idx: Vec<usize> = (0..pool.len()).collect();
+        rng.shuffle(&mut idx);
+        random_model += at(&idx[..opts.n_poses]).model_rms_mm.powi(2) / 5.0;
+    }
+    let random = PredictionAtN {
+        n_poses: opts.n_poses,
+        model_rms_mm: random_model.sqrt(),
+        holdout_rms_mm: (random_model + point_noise_rms_mm.powi(2)).sqrt(),
+    };
+    let mut by_n: Vec<PredictionAtN> = curve_sizes(opts.n_poses, sel.greedy_order.len())
+        .into_iter()
+        .map(|k| at(&sel.greedy_order[..k]))
+        .filter(|p| p.model_rms_mm.is_finite())
+        .collect();
+    by_n.retain(|p| p.n_poses != opts.n_poses);
+    by_n.push(predicted.clone());
+    by_n.sort_by_key(|p| p.n_poses);
+
+    let parameters = predicted_sigmas(&design_pool, &cols, &sel.chosen, &scene, noise);
+    let undetermined = structural_aliases(&scene, &pool);
+    let approach = if opts.effects.iter().any(|e| e == "backlash") {
+        approach_balance(&toured, &home)
+    } else {
+        vec![]
+    };
+    let mut notes = Vec::new();
+    if opts.effects.iter().any(|e| e == "joint_compliance") {
+        notes.push("compliance is planned with the robot's own link masses; a payload changed part-way (payload_kg) separates it further".into());
+    }
+    if let Some(b) = approach
+        .iter()
+        .find(|b| b.from_below.min(b.from_above) * 3 < b.from_below.max(b.from_above))
+    {
+        notes.push(format!(
+            "joint {} is approached {} times from below and {} from above: backlash is best seen with both directions in similar numbers",
+            b.joint, b.from_below, b.from_above
+        ));
+    }
+    let report = PlanReport {
+        format: PLAN_FORMAT.into(),
+        robot: robot.name.clone(),
+        n_poses: opts.n_poses,
+        n_check,
+        criterion: format!(
+            "I-optimal: the {} poses minimising the mean squared error of the calibrated model's T at {PREDICTION_POSES} random valid poses (linear least squares, {noise} mm per reading), chosen greedily from {} candidates then improved by exchanges",
+            opts.n_poses,
+            pool.len()
+        ),
+        noise_mm: noise,
+        candidates_drawn: drawn,
+        candidates_kept: pool.len() + validation.len(),
+        rejected,
+        parameters,
+        undetermined,
+        predicted,
+        random,
+        point_noise_rms_mm,
+        by_n,
+        effects: opts.effects.clone(),
+        approach,
+        tour_travel_deg,
+        exchanges: sel.swaps,
+        notes,
+    };
+    Ok(Plan { poses, report })
+}
+
+fn check_options(robot: &Robot, opts: &PlanOptions) -> Result<()> {
+    if opts.n_poses < 3 || opts.n_poses > 2000 {
+        return Err(Error::field(
+            "n_poses",
+            format!("{}: between 3 and 2000", opts.n_poses),
+        ));
+    }
+    if !(100..=200_000).contains(&opts.candidates) {
+        return Err(Error::field(
+            "candidates",
+            format!("{}: between 100 and 200000", opts.candidates),
+        ));
+    }
+    if opts.candidates < 4 * opts.n_poses {
+        return Err(Error::field(
+            "candidates",
+            format!(
+                "{}: at least four per pose planned ({})",
+                opts.candidates,
+                4 * opts.n_poses
+            ),
+        ));
+    }
+    if let Some(c) = opts.n_check {
+        if c > opts.n_poses {
+            return Err(Error::field("n_check", format!("{c}: at most n_poses")));
+        }
+    }
+    if let Some(s) = opts.noise_mm {
+        if !(s.is_finite() && s > 0.0 && s < 100.0) {
+            return Err(Error::field(
+                "noise_mm",
+                format!("{s}: a positive number of mm"),
+            ));
+        }
+    }
+    if let Some(h) = &opts.home_deg {
+        if h.len() != robot.dof() {
+            return Err(Error::field(
+                "home_deg",
+                format!("{} angles for a robot with {} joints", h.len(), robot.dof()),
+            ));
+        }
+    }
+    for e in &opts.effects {
+        if !PLANNABLE_EFFECTS.contains(&e.as_str()) {
+            return Err(Error::field(
+                "effects",
+                format!(
+                    "'{e}' cannot be planned for: one of {} (time and temperature effects depend on the session, not on the poses)",
+                    PLANNABLE_EFFECTS.join(", ")
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn default_noise(rig: &Rig) -> f64 {
+    if rig.n_strings() == 0 {
+        return 0.03;
+    }
+    let res = rig.sensor.and_then(|s| s.resolution_mm).unwrap_or(0.0);
+    (0.02f64.powi(2) + res * res / 12.0).sqrt()
+}
+
+fn home_pose(robot: &Robot, opts: &PlanOptions) -> Result<Vec<f64>> {
+    Ok(match &opts.home_deg {
+        Some(h) => h.clone(),
+        None => robot
+            .joints
+            .iter()
+            .map(|j| 0.0f64.clamp(j.q_min_deg, j.q_max_deg))
+            .collect(),
+    })
+}
+
+fn rejection_words(rejected: &BTreeMap<Rejection, usize>) -> String {
+    let words: Vec<String> = rejected
+        .iter()
+        .map(|(r, n)| {
+            format!(
+                "{n} {}",
+                serde_json::to_value(r)
+                    .ok()
+                    .and_then(|v| v.as_str().map(String::from))
+                    .unwrap_or_default()
+            )
+        })
+        .collect();
+    if words.is_empty() {
+        "none refused".into()
+    } else {
+        format!("refused: {}", words.join(", "))
+    }
+}
+
+/// The parameters the identification frees that the pool can determine,
+/// with their prior sizes, and the effects' coefficients.
+fn columns(scene: &Scene, pool: &[Candidate], opts: &PlanOptions, noise: f64) -> Result<Columns> {
+    let l = scene.chain.layout;
+    let cand = free_candidates(l, &IdentifyOptions::default());
+    let jtj = normal_matrix(scene, pool, &cand);
+    let sel = identifiability::select(&jtj, &cand, &l, identifiability::DEFAULT_TOLERANCE);
+    let param_scale = sel.free.iter().map(|&i| prior_size(l, i)).collect();
+    let ctx = effect_context(scene, pool);
+    let mut effects = Vec::new();
+    let n = scene.robot.dof();
+    for e in &opts.effects {
+        match e.as_str() {
+            "joint_compliance" => {
+                for j in 0..n {
+                    let regressors = if ctx.has_masses {
+                        vec![]
+                    } else {
+                        ctx.compliance_regressors(j, &(0..pool.len()).collect::<Vec<_>>())
+                    };
+                    effects.push((
+                        Kind::JointCompliance {
+                            joint_index: j,
+                            regressors,
+                        },
+                        format!("j{}.compliance", j + 1),
+                    ));
+                }
+            }
+            "joint_scale" => {
+                effects.extend((0..n).map(|j| {
+                    (
+                        Kind::JointScale { joint_index: j },
+                        format!("j{}.scale", j + 1),
+                    )
+                }));
+            }
+            "sensor_scale" => effects.extend((0..l.n_strings).map(|k| {
+                (
+                    Kind::SensorScale { sensor_index: k },
+                    format!("{}.scale", scene.rig.sensor_name(k)),
+                )
+            })),
+            "cable_sag" => effects.push((Kind::CableSag, "cable_sag".into())),
+            _ => {} // backlash: a matter of the tour's approach directions
+        }
+    }
+    let mut cols = Columns {
+        params: sel.free,
+        param_scale,
+        effects,
+        effect_scale: vec![],
+    };
+    // An effect coefficient's prior: the size at which it moves the
+    // readings by three times their noise (RMS over the candidates).
+    let mut buf = Basis::default();
+    let mut scales = Vec::new();
+    for (kind, _) in &cols.effects {
+        let nc = kind.n_coef();
+        let mut sq = vec![0.0; nc];
+        for (i, c) in pool.iter().enumerate() {
+            let rows = effect_rows(scene, &ctx, kind, i, c, &mut buf);
+            let per = rows.len() / nc;
+            for (k, r) in rows.iter().enumerate() {
+                sq[k / per] += r * r;
+            }
+        }
+        let rows_per = (scene.rig.n_strings().max(3) * pool.len()) as f64;
+        for s in sq {
+            let rms = (s / rows_per).sqrt();
+            scales.push(if rms > 0.0 { 3.0 * noise / rms } else { 0.0 });
+        }
+    }
+    cols.effect_scale = scales;
+    Ok(cols)
+}
+
+/// Prior size of parameter `i`: a manufacturing tolerance (the
+/// simulator's deviations: 0.5 mm, 0.1 deg; the base 2 mm, 0.5 deg).
+fn prior_size(l: crate::kinematics::Layout, i: usize) -> f64 {
+    let b = l.base();
+    if (b..b + 3).contains(&i) {
+        2.0
+    } else if (b + 3..b + 6).contains(&i) {
+        0.5f64.to_radians()
+    } else if l.is_angle(i) {
+        0.1f64.to_radians()
+    } else {
+        0.5
+    }
+}
+
+/// Normal matrix of the readings over `pool` for parameters `cand`
+/// (natural units).
+fn normal_matrix(scene: &Scene, pool: &[Candidate], cand: &[usize]) -> DMatrix<f64> {
+    let p = cand.len();
+    let mut jtj = DMatrix::zeros(p, p);
+    let mut jac = scene.chain.new_jacobian();
+    let mut row = vec![0.0; p];
+    for c in pool {
+        scene
+            .chain
+            .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
+        for dir in reading_directions(scene, &c.t_rig) {
+            for (k, &i) in cand.iter().enumerate() {
+                row[k] = dir.dot(&jac.d_params[i]);
+            }
+            for a in 0..p {
+                for b in 0..p {
+                    jtj[(a, b)] += row[a] * row[b];
+                }
+            }
+        }
+    }
+    jtj
+}
+
+/// The direction each reading measures T along: the strings' unit
+/// vectors, or the three axes for a point instrument.
+fn reading_directions(scene: &Scene, t: &Vector3<f64>) -> Vec<Vector3<f64>> {
+    if scene.anchors().is_empty() {
+        vec![Vector3::x(), Vector3::y(), Vector3::z()]
+    } else {
+        scene
+            .anchors()
+            .iter()
+            .map(|a| (t - a).normalize())
+            .collect()
+    }
+}
+
+fn effect_context(scene: &Scene, poses: &[Candidate]) -> Context {
+    let inputs: Vec<PoseInput> = poses
+        .iter()
+        .map(|c| PoseInput {
+            q_rad: &c.q_rad,
+            time_s: None,
+            temp_c: None,
+            payload_kg: None,
+            point_rig: c.t_rig,
+        })
+        .collect();
+    let (r, _) = scene.nominal.base_rt();
+    Context::new(
+        scene.robot,
+        scene.anchors().to_vec(),
+        scene.rig.r_mm,
+        &r,
+        &inputs,
+    )
+}
+
+/// An effect's reading rows at candidate `i` (per coefficient, per
+/// reading, coefficient-major): the joint changes through T, plus the
+/// readings' own change.
+fn effect_rows(
+    scene: &Scene,
+    ctx: &Context,
+    kind: &Kind,
+    i: usize,
+    c: &Candidate,
+    buf: &mut Basis,
+) -> Vec<f64> {
+    let (dt, dl) = effect_displacement(scene, ctx, kind, i, c, buf);
+    let dirs = reading_directions(scene, &c.t_rig);
+    let nc = kind.n_coef();
+    let mut out = Vec::with_capacity(nc * dirs.len());
+    for (k, d) in dt.iter().enumerate() {
+        for (s, u) in dirs.iter().enumerate() {
+            out.push(
+                u.dot(d)
+                    + dl.get(k * scene.anchors().len() + s)
+                        .copied()
+                        .unwrap_or(0.0),
+            );
+        }
+    }
+    out
+}
+
+/// Per coefficient: T's displacement (rig frame, mm) and the readings'
+/// change (mm, `n_coef × m`).
+fn effect_displacement(
+    scene: &Scene,
+    ctx: &Context,
+    kind: &Kind,
+    i: usize,
+    c: &Candidate,
+    buf: &mut Basis,
+) -> (Vec<Vector3<f64>>, Vec<f64>) {
+    ctx.basis(kind, i, buf);
+    let n = scene.robot.dof();
+    let l = scene.chain.layout;
+    let mut jac = scene.chain.new_jacobian();
+    scene
+        .chain
+        .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
+    let nc = kind.n_coef();
+    let dt = (0..nc)
+        .map(|k| {
+            (0..n).fold(Vector3::zeros(), |acc, j| {
+                acc + jac.d_params[l.joint(j, JointParam::Theta)] * buf.dq[k * n + j]
+            }) + Vector3::new(buf.dp[k * 3], buf.dp[k * 3 + 1], buf.dp[k * 3 + 2])
+        })
+        .collect();
+    (dt, buf.dl.clone())
+}
+
+/// The design pool: each candidate's readings over the columns, scaled by
+/// the priors and divided by the noise, and the prediction weight from the
+/// validation poses.
+fn design_pool(
+    scene: &Scene,
+    cols: &Columns,
+    pool: &[Candidate],
+    validation: &[Candidate],
+    noise: f64,
+) -> design::Pool {
+    let p = cols.len();
+    let m = scene.anchors().len().max(3);
+    let mut jac = scene.chain.new_jacobian();
+    let mut buf = Basis::default();
+    let ctx = effect_context(scene, pool);
+    let rows = pool
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            scene
+                .chain
+                .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
+            let dirs = reading_directions(scene, &c.t_rig);
+            let mut r = vec![0.0; m * p];
+            for (s, u) in dirs.iter().enumerate() {
+                for (k, (&pi, sc)) in cols.params.iter().zip(&cols.param_scale).enumerate() {
+                    r[s * p + k] = u.dot(&jac.d_params[pi]) * sc / noise;
+                }
+            }
+            let mut k0 = cols.params.len();
+            for (kind, _) in &cols.effects {
+                let er = effect_rows(scene, &ctx, kind, i, c, &mut buf);
+                let nc = kind.n_coef();
+                for k in 0..nc {
+                    for s in 0..m {
+                        r[s * p + k0 + k] =
+                            er[k * m + s] * cols.effect_scale[k0 - cols.params.len() + k] / noise;
+                    }
+                }
+                k0 += nc;
+            }
+            r
+        })
+        .collect();
+    // W: mean of J_Tᵀ J_T at the validation poses, same scaling (no noise).
+    let vctx = effect_context(scene, validation);
+    let mut w = DMatrix::zeros(p, p);
+    for (i, c) in validation.iter().enumerate() {
+        scene
+            .chain
+            .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
+        let mut jt = DMatrix::zeros(3, p);
+        for (k, (&pi, sc)) in cols.params.iter().zip(&cols.param_scale).enumerate() {
+            for a in 0..3 {
+                jt[(a, k)] = jac.d_params[pi][a] * sc;
+            }
+        }
+        let mut k0 = cols.params.len();
+        for (kind, _) in &cols.effects {
+            let (dt, _) = effect_displacement(scene, &vctx, kind, i, c, &mut buf);
+            for (k, d) in dt.iter().enumerate() {
+                for a in 0..3 {
+                    jt[(a, k0 + k)] = d[a] * cols.effect_scale[k0 - cols.params.len() + k];
+                }
+            }
+            k0 += dt.len();
+        }
+        w += jt.transpose() * jt;
+    }
+    w /= validation.len() as f64;
+    design::Pool { m, p, rows, w }
+}
+
+/// Information of a set without the prior (what least squares gives);
+/// a column no pose of the set determines keeps its prior.
+fn information(pool: &design::Pool, set: &[usize]) -> DMatrix<f64> {
+    let mut mm = DMatrix::zeros(pool.p, pool.p);
+    for &i in set {
+        let j = DMatrix::from_row_slice(pool.m, pool.p, &pool.rows[i]);
+        mm += j.transpose() * j;
+    }
+    for c in 0..pool.p {
+        if mm[(c, c)] < 1e-9 {
+            mm[(c, c)] = 1.0;
+        }
+    }
+    mm
+}
+
+fn prediction(pool: &design::Pool, set: &[usize], point_noise_rms_mm: f64) -> PredictionAtN {
+    let model = information(pool, set)
+        .try_inverse()
+        .map_or(f64::INFINITY, |inv| (&pool.w * inv).trace().max(0.0));
+    PredictionAtN {
+        n_poses: set.len(),
+        model_rms_mm: model.sqrt(),
+        holdout_rms_mm: (model + point_noise_rms_mm.powi(2)).sqrt(),
+    }
+}
+
+fn predicted_sigmas(
+    pool: &design::Pool,
+    cols: &Columns,
+    set: &[usize],
+    scene: &Scene,
+    noise: f64,
+) -> Vec<PredictedParam> {
+    let _ = noise; // rows are already in noise units
+    let Some(inv) = information(pool, set).try_inverse() else {
+        return vec![];
+    };
+    let l = scene.chain.layout;
+    let mut out: Vec<PredictedParam> = cols
+        .params
+        .iter()
+        .zip(&cols.param_scale)
+        .enumerate()
+        .map(|(k, (&i, sc))| {
+            let s = inv[(k, k)].max(0.0).sqrt() * sc;
+            let angle = l.is_angle(i);
+            PredictedParam {
+                name: l.name(i),
+                sigma: if angle { s.to_degrees() } else { s },
+                unit: if angle { "deg" } else { "mm" }.into(),
+            }
+        })
+        .collect();
+    let mut k = cols.params.len();
+    for (kind, name) in &cols.effects {
+        for c in 0..kind.n_coef() {
+            out.push(PredictedParam {
+                name: if kind.n_coef() > 1 {
+                    format!("{name}[{c}]")
+                } else {
+                    name.clone()
+                },
+                sigma: inv[(k, k)].max(0.0).sqrt() * cols.effect_scale[k - cols.params.len()],
+                unit: "coefficient (rad per N·m, per unit)".into(),
+            });
+            k += 1;
+        }
+    }
+    out
+}
+
+/// What no pose of this rig can separate: the identification's structural
+/// selection over the whole pool.
+fn structural_aliases(scene: &Scene, pool: &[Candidate]) -> Vec<FixedParam> {
+    let l = scene.chain.layout;
+    let cand = free_candidates(l, &IdentifyOptions::default());
+    let jtj = normal_matrix(scene, pool, &cand);
+    identifiability::select(&jtj, &cand, &l, identifiability::DEFAULT_TOLERANCE).fixed
+}
+
+fn point_noise_rms(scene: &Scene, poses: &[Candidate], noise: f64, m: usize) -> f64 {
+    if m == 0 {
+        return noise * 3f64.sqrt();
+    }
+    let mean: f64 = poses
+        .iter()
+        .map(|c| {
+            let g = DMatrix::from_fn(m, 3, |k, a| (c.t_rig - scene.anchors()[k]).normalize()[a]);
+            (g.transpose() * g)
+                .try_inverse()
+                .map_or(0.0, |inv| inv.trace())
+        })
+        .sum::<f64>()
+        / poses.len() as f64;
+    noise * mean.sqrt()
+}
+
+fn curve_sizes(n: usize, max: usize) -> Vec<usize> {
+    let mut v: Vec<usize> = [0.5, 0.67, 1.0, 1.33, 1.67, 2.0]
+        .iter()
+        .map(|f| ((n as f64) * f).round() as usize)
+        .filter(|&k| k >= 3 && k <= max)
+        .collect();
+    v.dedup();
+    v
+}
+
+fn approach_balance(toured: &[&[f64]], home: &[f64]) -> Vec<ApproachBalance> {
+    let mut path: Vec<&[f64]> = vec![home];
+    path.extend_from_slice(toured);
+    let dirs = approach_directions(&path);
+    (0..home.len())
+        .map(|j| ApproachBalance {
+            joint: j + 1,
+            from_below: dirs[1..].iter().filter(|d| d[j] > 0.0).count(),
+            from_above: dirs[1..].iter().filter(|d| d[j] < 0.0).count(),
+        })
+        .collect()
+}
