@@ -83,44 +83,40 @@ impl<'a> State<'a> {
     /// refresh their rounding reorders the late gains.
     fn refresh(&mut self) {
         let (m, p) = (self.pool.m, self.pool.p);
+        // Row-major M⁻¹ and M⁻¹ W M⁻¹ (both symmetric).
         let a = &self.minv * &self.pool.w * &self.minv;
+        let minv: Vec<f64> = (0..p * p).map(|k| self.minv[(k / p, k % p)]).collect();
+        let a: Vec<f64> = (0..p * p).map(|k| a[(k / p, k % p)]).collect();
+        let mut x = vec![0.0; m * p];
+        let mut y = vec![0.0; m * p];
         for (i, rows) in self.pool.rows.iter().enumerate() {
-            let j = DMatrix::from_row_slice(m, p, rows);
-            let g = &j * &self.minv * j.transpose();
-            let h = &j * &a * j.transpose();
-            for x in 0..m {
-                for y in 0..m {
-                    self.g[i][x * m + y] = g[(x, y)];
-                    self.h[i][x * m + y] = h[(x, y)];
+            for r in 0..m {
+                let jr = &rows[r * p..(r + 1) * p];
+                for c in 0..p {
+                    x[r * p + c] = dot(jr, &minv[c * p..(c + 1) * p]);
+                    y[r * p + c] = dot(jr, &a[c * p..(c + 1) * p]);
+                }
+            }
+            for r in 0..m {
+                for c in 0..m {
+                    let jc = &rows[c * p..(c + 1) * p];
+                    self.g[i][r * m + c] = dot(&x[r * p..(r + 1) * p], jc);
+                    self.h[i][r * m + c] = dot(&y[r * p..(r + 1) * p], jc);
                 }
             }
         }
     }
 
-    /// Reduction of the objective if `i` were added.
+    /// Reduction of the objective if `i` were added:
+    /// `trace((I + G_i)⁻¹ H_i)`.
     fn gain(&self, i: usize) -> f64 {
-        let m = self.pool.m;
-        let s = DMatrix::from_fn(m, m, |a, b| {
-            self.g[i][a * m + b] + if a == b { 1.0 } else { 0.0 }
-        });
-        let h = DMatrix::from_row_slice(m, m, &self.h[i]);
-        match s.cholesky() {
-            Some(c) => c.solve(&h).trace(),
-            None => f64::NEG_INFINITY,
-        }
+        trace_solve(&self.g[i], &self.h[i], self.pool.m, 1.0).unwrap_or(f64::NEG_INFINITY)
     }
 
-    /// Increase of the objective if chosen `i` were removed.
+    /// Increase of the objective if chosen `i` were removed:
+    /// `trace((I - G_i)⁻¹ H_i)`.
     fn loss(&self, i: usize) -> f64 {
-        let m = self.pool.m;
-        let s = DMatrix::from_fn(m, m, |a, b| {
-            (if a == b { 1.0 } else { 0.0 }) - self.g[i][a * m + b]
-        });
-        let h = DMatrix::from_row_slice(m, m, &self.h[i]);
-        match s.cholesky() {
-            Some(c) => c.solve(&h).trace(),
-            None => f64::INFINITY,
-        }
+        trace_solve(&self.g[i], &self.h[i], self.pool.m, -1.0).unwrap_or(f64::INFINITY)
     }
 
     /// Add (`sign` +1) or remove (-1) candidate `s`.
@@ -140,44 +136,51 @@ impl<'a> State<'a> {
         let core = &sinv * &uwu * &sinv;
         self.objective -= (&sinv * &uwu).trace();
         self.minv -= &u * &sinv * u.transpose();
-        let (ut, rt) = (u.transpose(), r.transpose()); // m × p, rows contiguous per column of u
+        // Row-major copies: the loop below runs over every candidate.
+        let ut: Vec<f64> = (0..m)
+            .flat_map(|b| (0..p).map(move |k| (b, k)))
+            .map(|(b, k)| u[(k, b)])
+            .collect();
+        let rt: Vec<f64> = (0..m)
+            .flat_map(|b| (0..p).map(move |k| (b, k)))
+            .map(|(b, k)| r[(k, b)])
+            .collect();
+        let sinv: Vec<f64> = (0..m * m).map(|k| sinv[(k / m, k % m)]).collect();
+        let core: Vec<f64> = (0..m * m).map(|k| core[(k / m, k % m)]).collect();
         let mut pm = vec![0.0; m * m];
         let mut qm = vec![0.0; m * m];
         let mut ps = vec![0.0; m * m];
+        let mut pc = vec![0.0; m * m];
         for i in 0..self.pool.rows.len() {
             let j = &self.pool.rows[i];
             for a in 0..m {
                 let ja = &j[a * p..(a + 1) * p];
                 for b in 0..m {
-                    let (mut x, mut y) = (0.0, 0.0);
-                    for k in 0..p {
-                        x += ja[k] * ut[(b, k)];
-                        y += ja[k] * rt[(b, k)];
-                    }
-                    pm[a * m + b] = x;
-                    qm[a * m + b] = y;
+                    pm[a * m + b] = dot(ja, &ut[b * p..(b + 1) * p]);
+                    qm[a * m + b] = dot(ja, &rt[b * p..(b + 1) * p]);
                 }
             }
-            // ps = P Sinv
+            // ps = P Sinv, pc = P core.
             for a in 0..m {
                 for b in 0..m {
-                    ps[a * m + b] = (0..m).map(|k| pm[a * m + k] * sinv[(k, b)]).sum();
+                    let (mut x, mut y) = (0.0, 0.0);
+                    for k in 0..m {
+                        x += pm[a * m + k] * sinv[k * m + b];
+                        y += pm[a * m + k] * core[k * m + b];
+                    }
+                    ps[a * m + b] = x;
+                    pc[a * m + b] = y;
                 }
             }
             let (gi, hi) = (&mut self.g[i], &mut self.h[i]);
             for a in 0..m {
                 for b in 0..m {
-                    let mut dg = 0.0;
-                    let mut dh = 0.0;
+                    let (mut dg, mut dh, mut quad) = (0.0, 0.0, 0.0);
                     for k in 0..m {
-                        // P Sinv Pᵀ, P Sinv Qᵀ, Q Sinv Pᵀ = (P Sinv Qᵀ)ᵀ.
+                        // P Sinv Pᵀ; P Sinv Qᵀ + Q Sinv Pᵀ; P core Pᵀ.
                         dg += ps[a * m + k] * pm[b * m + k];
                         dh += ps[a * m + k] * qm[b * m + k] + ps[b * m + k] * qm[a * m + k];
-                    }
-                    let mut quad = 0.0;
-                    for k in 0..m {
-                        let pck: f64 = (0..m).map(|l| pm[a * m + l] * core[(l, k)]).sum();
-                        quad += pck * pm[b * m + k];
+                        quad += pc[a * m + k] * pm[b * m + k];
                     }
                     gi[a * m + b] -= dg;
                     hi[a * m + b] += quad - dh;
@@ -197,13 +200,65 @@ impl<'a> State<'a> {
     }
 }
 
+/// `trace((I + sign·G)⁻¹ H)` for `m × m` row-major `g` and `h` by an
+/// in-place Cholesky factorisation (no allocation up to 8 rows); `None`
+/// when `I + sign·G` is not positive definite.
+fn trace_solve(g: &[f64], h: &[f64], m: usize, sign: f64) -> Option<f64> {
+    if m > 8 {
+        let s = DMatrix::from_fn(m, m, |a, b| {
+            sign * g[a * m + b] + if a == b { 1.0 } else { 0.0 }
+        });
+        return s
+            .cholesky()
+            .map(|c| c.solve(&DMatrix::from_row_slice(m, m, h)).trace());
+    }
+    let mut l = [0.0; 64];
+    for a in 0..m {
+        for b in 0..=a {
+            let mut v = sign * g[a * m + b] + if a == b { 1.0 } else { 0.0 };
+            for k in 0..b {
+                v -= l[a * 8 + k] * l[b * 8 + k];
+            }
+            if a == b {
+                if v <= 0.0 {
+                    return None;
+                }
+                l[a * 8 + a] = v.sqrt();
+            } else {
+                l[a * 8 + b] = v / l[b * 8 + b];
+            }
+        }
+    }
+    // trace(S⁻¹ H) = Σ_c (S⁻¹ H)[c][c]: solve L Lᵀ x = H e_c per column c.
+    let mut total = 0.0;
+    let mut x = [0.0; 8];
+    for c in 0..m {
+        for a in 0..m {
+            let mut v = h[a * m + c];
+            for k in 0..a {
+                v -= l[a * 8 + k] * x[k];
+            }
+            x[a] = v / l[a * 8 + a];
+        }
+        for a in (0..m).rev() {
+            let mut v = x[a];
+            for k in a + 1..m {
+                v -= l[k * 8 + a] * x[k];
+            }
+            x[a] = v / l[a * 8 + a];
+        }
+        total += x[c];
+    }
+    Some(total)
+}
+
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// Fall of the objective after which the kept `G_i`, `H_i` are recomputed
 /// (see `State::refresh`).
-const REFRESH_DROP: f64 = 0.5;
+const REFRESH_DROP: f64 = 0.25;
 
 /// The selection and what it predicts.
 #[derive(Debug, Clone)]
