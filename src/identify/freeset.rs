@@ -394,3 +394,78 @@ fn capitalised(s: &str) -> String {
         .map(|f| f.to_uppercase().chain(c).collect())
         .unwrap_or_default()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scores(cv: [f64; 3]) -> (Vec<(FreeSet, Vec<usize>)>, Vec<FreeSetScore>) {
+        let sets = FreeSet::NESTED
+            .iter()
+            .zip([9, 15, 21])
+            .map(|(&s, n)| (s, (0..n).collect()))
+            .collect();
+        let scores = FreeSet::NESTED
+            .iter()
+            .zip(cv)
+            .zip([9, 15, 21])
+            .map(|((s, cv_rms_mm), n_free)| FreeSetScore {
+                name: s.name().into(),
+                n_free,
+                cv_rms_mm,
+            })
+            .collect();
+        (sets, scores)
+    }
+
+    fn chosen(cv: [f64; 3]) -> FreeSet {
+        let (sets, s) = scores(cv);
+        decide(&sets, &s, 21, CV_MARGIN).0
+    }
+
+    #[test]
+    fn a_smaller_set_must_beat_the_one_it_replaces_by_the_margin() {
+        // Within the margin of the full set: the full set stays.
+        assert_eq!(chosen([0.97, 0.96, 1.0]), FreeSet::All);
+        // The lengths clearly better; the offsets not clearly better still.
+        assert_eq!(chosen([0.88, 0.90, 1.0]), FreeSet::Lengths);
+        // Both steps clear the margin.
+        assert_eq!(chosen([0.80, 0.90, 1.0]), FreeSet::Offsets);
+        // The lengths no better, the offsets clearly better than all.
+        assert_eq!(chosen([0.90, 0.99, 1.0]), FreeSet::Offsets);
+        // The full set could not be fitted without a fold.
+        assert_eq!(chosen([0.90, 0.95, f64::NAN]), FreeSet::Lengths);
+        assert_eq!(chosen([f64::NAN, f64::NAN, f64::NAN]), FreeSet::All);
+        let (sets, s) = scores([0.80, 0.90, 1.0]);
+        let why = decide(&sets, &s, 21, CV_MARGIN).1;
+        assert!(why.contains("20 % better"), "{why}");
+    }
+
+    #[test]
+    fn nested_sets_keep_what_is_not_a_joint_parameter() {
+        let l = Layout {
+            n_joints: 2,
+            n_strings: 4,
+        };
+        let free: Vec<usize> = (0..l.len()).collect();
+        let off = FreeSet::Offsets.restrict(l, &free);
+        assert_eq!(
+            off.iter().filter(|&&k| k < l.base()).count(),
+            2,
+            "one θ per joint"
+        );
+        // Base, tool, string offsets and r all stay.
+        assert!(off.ends_with(&(l.base()..l.len()).collect::<Vec<_>>()));
+        let len = FreeSet::Lengths.restrict(l, &free);
+        assert_eq!(len.iter().filter(|&&k| k < l.base()).count(), 6);
+        assert_eq!(FreeSet::All.restrict(l, &free), free);
+        for s in [
+            FreeSet::Auto,
+            FreeSet::All,
+            FreeSet::Lengths,
+            FreeSet::Offsets,
+        ] {
+            assert_eq!(FreeSet::parse(s.name()), Some(s));
+        }
+    }
+}
