@@ -249,3 +249,35 @@ fn simulated_sessions_keep_every_parameter() {
 fn simulated_sessions_keep_every_parameter_ten_seeds() {
     simulated_sessions_keep_their_figures(10);
 }
+
+/// The command line: `--free` takes the four names and refuses others, and
+/// the summary says in one line which set was freed.
+#[test]
+fn the_cli_option_and_the_summary_line() {
+    let d = common::dir("er3a_paper_like");
+    let run = |free: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_drawcal"))
+            .args(["identify", "--physics", "off", "--free", free])
+            .arg("--robot")
+            .arg(d.join("robot.json"))
+            .arg("--rig")
+            .arg(d.join("rig.json"))
+            .arg("--poses")
+            .arg(d.join("poses.csv"))
+            .output()
+            .unwrap()
+    };
+    let out = run("offsets");
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("\nfree set: offsets as asked\n"), "{text}");
+    assert!(text.contains("by the free-set choice"), "{text}");
+    let text = String::from_utf8(run("auto").stdout).unwrap();
+    assert!(
+        text.contains("\nfree set: all, chosen by 8-fold cross-validation"),
+        "{text}"
+    );
+    let out = run("twists");
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--free"));
+}
