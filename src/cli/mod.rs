@@ -20,6 +20,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::Vector3;
 
 use crate::compensate::{Applied, Approach, Compensator, ConditionNames, Note, NoteKind};
+use crate::identify::freeset::FreeSet;
 use crate::identify::{self, IdentifyOptions, Method, Progress};
 use crate::measure;
 use crate::model::compensated::{Compensated, CompensationStatus, write_csv};
@@ -120,6 +121,31 @@ impl ValueEnum for Approach {
     }
 }
 
+/// `--free`: which identifiable parameters the geometric fit frees.
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum FreeArg {
+    /// Cross-validation on the train poses chooses, when they are few;
+    /// every identifiable parameter otherwise (default).
+    Auto,
+    /// Every identifiable parameter (drawcal before the choice existed).
+    All,
+    /// The joint offsets, link lengths and link offsets (θ, a, d).
+    Lengths,
+    /// The joint offsets (θ) alone.
+    Offsets,
+}
+
+impl From<FreeArg> for FreeSet {
+    fn from(a: FreeArg) -> FreeSet {
+        match a {
+            FreeArg::Auto => FreeSet::Auto,
+            FreeArg::All => FreeSet::All,
+            FreeArg::Lengths => FreeSet::Lengths,
+            FreeArg::Offsets => FreeSet::Offsets,
+        }
+    }
+}
+
 /// On or off.
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
 pub enum Switch {
@@ -192,6 +218,11 @@ pub struct IdentifyArgs {
     /// separated report names (`--hold j5.a,j5.d`).
     #[arg(long, value_delimiter = ',')]
     pub hold: Vec<String>,
+    /// Which identifiable joint parameters to free (the base pose, the
+    /// tool point and the sensor parameters always are): `auto` chooses
+    /// by cross-validation on the train poses when they are few.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub free: FreeArg,
     /// Also identify the rig's anchor coordinates (four strings or more),
     /// less the rigid motion the base pose takes; the report gets each
     /// anchor's correction and `calibrated_rig`, the rig.json of the next
@@ -314,6 +345,7 @@ fn run_identify(a: IdentifyArgs) -> Result<(), CliError> {
         undetermined_z: a.undetermined_z,
         hold: a.hold.clone(),
         rig_anchors: a.rig_anchors,
+        free_set: a.free.into(),
     };
     // What --rig-anchors cannot do is the option's fault, not the files'.
     if a.rig_anchors {

@@ -34,6 +34,7 @@ pub fn render(r: &Report, input: &Input, verbose: bool) -> String {
     header(&mut s, r, input);
     accuracy(&mut s, r);
     method(&mut s, r, verbose);
+    free_set(&mut s, r, verbose);
     rig(&mut s, r, verbose);
     precision(&mut s, r, verbose);
     error_table(&mut s, r);
@@ -178,6 +179,7 @@ fn method(s: &mut String, r: &Report, verbose: bool) {
     for reason in [
         FixedReason::Aliased,
         FixedReason::Undetermined,
+        FixedReason::FreeSet,
         FixedReason::Requested,
     ] {
         let group: Vec<_> = id.fixed.iter().filter(|f| f.reason == reason).collect();
@@ -202,6 +204,7 @@ fn method(s: &mut String, r: &Report, verbose: bool) {
                 FixedReason::Aliased => "aliased",
                 FixedReason::Undetermined => "undetermined",
                 FixedReason::Requested => "as asked",
+                FixedReason::FreeSet => "by the free-set choice",
             };
             line(
                 s,
@@ -214,6 +217,39 @@ fn method(s: &mut String, r: &Report, verbose: bool) {
             );
         }
     }
+}
+
+/// Which identifiable parameters were freed (one line; none for reports
+/// written before the choice): the cross-validation's scores when it ran,
+/// with `verbose` its reason too.
+fn free_set(s: &mut String, r: &Report, verbose: bool) {
+    let Some(f) = &r.free_set else {
+        return;
+    };
+    let text = match f.how.as_str() {
+        "cross_validation" => {
+            let scores: Vec<String> = f
+                .candidates
+                .iter()
+                .map(|c| format!("{} ({}) {:.4}", c.name, c.n_free, c.cv_rms_mm))
+                .collect();
+            format!(
+                "free set: {}, chosen by {}-fold cross-validation on the train poses (RMS of \
+                 the left-out readings: {} mm){}",
+                f.chosen,
+                f.folds,
+                scores.join(", "),
+                if verbose {
+                    format!("; {}", f.reason)
+                } else {
+                    String::new()
+                }
+            )
+        }
+        "requested" => format!("free set: {} as asked", f.chosen),
+        _ => format!("free set: {} ({})", f.chosen, f.reason),
+    };
+    line(s, &text, 4);
 }
 
 /// The rig's anchors, when identified (`--rig-anchors`): one line, the

@@ -7,12 +7,12 @@ use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::lm::{self, LmResult, LmSettings};
 use super::problem::CalibrationProblem;
-use super::{IdentifyOptions, Method, Observations, Progress, identifiability, rig};
+use super::{IdentifyOptions, Method, Observations, Progress, freeset, identifiability, rig};
 use crate::error::{Error, Result};
 use crate::kinematics::chain::OutputFrame;
 use crate::kinematics::{JointParam, Layout, Params};
 use crate::model::{BasePose, Split};
-use crate::report::{FixedParam, FixedReason};
+use crate::report::{FixedParam, FixedReason, FreeSetChoice};
 use crate::stats;
 
 /// Rigid transform (R, t) minimising `Σ |R a + t - b|²` (Kabsch).
@@ -36,7 +36,11 @@ pub fn rigid_fit(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Option<(Matrix3<f64>
     Some((r, cb - r * ca))
 }
 
-fn run_lm(problem: &CalibrationProblem, progress: &dyn Progress, stage: &str) -> Result<LmResult> {
+pub(super) fn run_lm(
+    problem: &CalibrationProblem,
+    progress: &dyn Progress,
+    stage: &str,
+) -> Result<LmResult> {
     let settings = LmSettings::default();
     lm::minimize(problem, &problem.x0(), &settings, |it, _| {
         progress.update(stage, (it as f64 / 30.0).min(0.95));
@@ -68,6 +72,9 @@ pub struct Geometric {
     /// (`rig_anchors`): the rest of this fit is then the robot's part (see
     /// [`rig::reduce`]), and holds for T located with these anchors.
     pub rig: Option<rig::RigFit>,
+    /// Which identifiable parameters were freed, and why (see
+    /// [`freeset`]).
+    pub free_set: FreeSetChoice,
 }
 
 /// The parameters `opts.hold` names (for a robot and rig of layout `l`), as
@@ -173,6 +180,8 @@ pub fn geometric(
         start.values.extend(std::iter::repeat_n(0.0, m.len()));
     }
     let mut selection = select_parameters(obs, &start, opts)?;
+    let free_set = freeset::choose(obs, &start, &selection, opts, progress)?;
+    freeset::apply(&free_set, l, &mut selection);
     progress.update("identifying", 0.0);
     let mut problem = obs.problem(start.values.clone(), selection.free.clone());
     let mut result = run_lm(&problem, progress, "identifying")?;
@@ -190,6 +199,7 @@ pub fn geometric(
     );
     hold_undetermined(
         obs,
+        &obs.train,
         opts,
         &start,
         &mut selection,
@@ -213,6 +223,7 @@ pub fn geometric(
         _ => None,
     };
     Ok(Geometric {
+        free_set,
         rig,
         before,
         after,
@@ -341,8 +352,9 @@ fn residual_scale(problem: &CalibrationProblem, result: &LmResult) -> f64 {
 /// what it carried). The robust weights stay those of the fit before:
 /// holding a parameter moves T by its deviation times its sine, a fraction
 /// of the noise, which leaves every pose's weight where it was.
-fn hold_undetermined<'a>(
+pub(super) fn hold_undetermined<'a>(
     obs: &Observations<'a>,
+    poses: &[usize],
     opts: &IdentifyOptions,
     before: &Params,
     selection: &mut identifiability::Selection,
@@ -376,7 +388,7 @@ fn hold_undetermined<'a>(
         selection.free.remove(held.at);
         selection.fixed.push(held.fixed);
         let weights = std::mem::take(&mut problem.weights);
-        *problem = obs.problem(start, selection.free.clone());
+        *problem = obs.problem_on(poses, start, selection.free.clone());
         problem.weights = weights;
         let iterations = result.iterations;
         *result = run_lm(problem, progress, "identifying")?;
@@ -423,7 +435,7 @@ fn more_poses_advice(obs: &Observations, opts: &IdentifyOptions, k: usize) -> St
 
 /// How many of the poses `idx` differ in their joint angles (a pose
 /// recorded twice adds readings, not information about the geometry).
-fn distinct_poses(obs: &Observations, idx: &[usize]) -> usize {
+pub(super) fn distinct_poses(obs: &Observations, idx: &[usize]) -> usize {
     let mut keys: Vec<Vec<i64>> = idx
         .iter()
         .map(|&i| {

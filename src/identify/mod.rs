@@ -6,7 +6,9 @@
 //! - [`geometric()`]: base and tool first, then every identifiable parameter
 //!   by Levenberg-Marquardt ([`lm`]) on the raw readings
 //!   ([`problem`]), the parameters the data cannot separate held at nominal
-//!   ([`identifiability`]);
+//!   ([`identifiability`]); with few train poses, a smaller nested set of
+//!   joint parameters when cross-validation says it predicts better
+//!   ([`freeset`]);
 //! - [`rig`]: the rig's anchors identified with the robot (`rig_anchors`),
 //!   less the rigid motion the base pose takes;
 //! - [`paper`]: the paper's one-step method beside it; [`warnings`]: input
@@ -15,6 +17,7 @@
 //! The whole calibration (this, then the physics analysis, then the report)
 //! is [`crate::pipeline`]; this module knows nothing of the steps after it.
 
+pub mod freeset;
 pub mod geometric;
 pub mod identifiability;
 pub mod lm;
@@ -70,6 +73,10 @@ pub struct IdentifyOptions {
     /// not with measured points nor the paper's method), less the rigid
     /// motion the base pose takes: see [`rig`].
     pub rig_anchors: bool,
+    /// Which identifiable parameters to free: chosen by cross-validation
+    /// on the train poses when they are few (the default), or a set asked
+    /// for; see [`freeset`].
+    pub free_set: freeset::FreeSet,
 }
 
 impl Default for IdentifyOptions {
@@ -84,6 +91,7 @@ impl Default for IdentifyOptions {
             undetermined_z: identifiability::UNDETERMINED_Z,
             hold: vec![],
             rig_anchors: false,
+            free_set: freeset::FreeSet::Auto,
         }
     }
 }

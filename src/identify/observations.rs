@@ -130,11 +130,22 @@ impl<'a> Observations<'a> {
     /// layout moves the anchors by their shape modes (see
     /// [`Observations::anchor_modes`]).
     pub fn problem(&self, full: Vec<f64>, free: Vec<usize>) -> CalibrationProblem<'a> {
+        self.problem_on(&self.train, full, free)
+    }
+
+    /// As [`Observations::problem`], over the poses `idx` (indices into
+    /// `data.poses`): the folds of a cross-validation.
+    pub fn problem_on(
+        &self,
+        idx: &[usize],
+        full: Vec<f64>,
+        free: Vec<usize>,
+    ) -> CalibrationProblem<'a> {
         let with_modes = full.len() > self.chain.layout.len();
         let p = CalibrationProblem::new(
             self.chain,
             self.anchors.clone(),
-            self.train_poses(),
+            idx.iter().map(|&i| &self.data.poses[i]).collect(),
             full,
             free,
         );

@@ -164,6 +164,7 @@ pub fn report(
             .map(|f| f.name.clone())
             .collect(),
         identifiability,
+        free_set: Some(geo.free_set.clone()),
         stats: obs.stats_of(&eb, &model.errors),
         paper_stats,
         noise_floor_mm: obs.noise_floor(string_sigma),

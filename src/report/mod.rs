@@ -176,6 +176,10 @@ pub enum FixedReason {
     /// Nearly aliased, and its deviation from nominal was under
     /// `undetermined_z` sigmas: these data do not determine it.
     Undetermined,
+    /// Held by the choice of the free set ([`FreeSetChoice`]): with these
+    /// few poses, the model without it predicted the train poses left out
+    /// of each fit clearly better than the model with it.
+    FreeSet,
     /// Held by the caller (`hold`).
     Requested,
 }
@@ -189,8 +193,50 @@ impl FixedReason {
                 "held at nominal (nearly aliased and not significantly off nominal: this data does not determine them)"
             }
             FixedReason::Requested => "held at nominal by request",
+            FixedReason::FreeSet => {
+                "held at nominal by the free-set choice (with these few poses the smaller model predicts better)"
+            }
         }
     }
+}
+
+/// Which identifiable parameters the geometric fit freed, and why: every
+/// one (the default, and always with enough poses), or a smaller nested
+/// set that cross-validation on the train poses chose (see
+/// `identify::freeset`), or the set the caller asked for.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FreeSetChoice {
+    /// The set freed: `all` (every identifiable parameter), `lengths`
+    /// (the joint offsets, link lengths and link offsets: θ, d, a) or
+    /// `offsets` (the joint offsets θ alone); the base pose, the tool point
+    /// and the sensor parameters asked for are free in every set.
+    pub chosen: String,
+    /// How it was chosen: `cross_validation`, `requested`, or
+    /// `not_tried` (enough poses for every parameter, the paper's method,
+    /// or no smaller set to try).
+    pub how: String,
+    /// Why, in one sentence.
+    pub reason: String,
+    /// Folds of the cross-validation (0 when not tried).
+    pub folds: usize,
+    /// Each candidate set with its cross-validated RMS (empty when not
+    /// tried).
+    pub candidates: Vec<FreeSetScore>,
+}
+
+/// One candidate free set and how well it predicted the train poses left
+/// out of each fold's fit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FreeSetScore {
+    /// `offsets`, `lengths` or `all` (see [`FreeSetChoice::chosen`]).
+    pub name: String,
+    /// Parameters it frees (base, tool and sensor parameters included).
+    pub n_free: usize,
+    /// RMS of the left-out train poses' residuals (string lengths or point
+    /// coordinates, mm), each predicted by the fit without its fold; NaN
+    /// when a fold had too few poses to fit the set.
+    #[serde(deserialize_with = "nan_if_null")]
+    pub cv_rms_mm: f64,
 }
 
 /// What the data can identify.
@@ -726,6 +772,10 @@ pub struct Report {
     pub fixed: Vec<String>,
     /// Rank analysis behind `fixed`.
     pub identifiability: Identifiability,
+    /// Which identifiable parameters were freed and why (absent in
+    /// reports written before the choice existed, which freed all).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub free_set: Option<FreeSetChoice>,
     /// Before/after figures, train and test.
     pub stats: Stats,
     /// The paper's one-step method on the same split, for comparison

@@ -15,6 +15,7 @@ mod export;
 mod fuzz_parsers;
 mod fuzz_physics;
 mod identify_datasets;
+mod identify_freeset;
 mod identify_rig;
 mod identify_small;
 mod identify_synthetic;
