@@ -154,7 +154,10 @@ pub fn summary(r: &plan::PlanReport) -> String {
         let names: Vec<String> = r
             .undetermined
             .iter()
-            .map(|f| format!("{} (moves T like {})", f.name, f.aliased_with.join(" + ")))
+            .map(|f| match f.aliased_with.first() {
+                Some(w) if w.starts_with('(') => format!("{} {w}", f.name),
+                _ => format!("{} (moves T like {})", f.name, f.aliased_with.join(" + ")),
+            })
             .collect();
         s += &format!("no poses on this rig can determine: {}\n", names.join("; "));
     }

@@ -1030,3 +1030,52 @@ fn cli_urdf_robot_and_export() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The README's walkthrough before and after a session, run as written:
+/// plan 30 poses from the ER3A's URDF, simulate them from the plan's
+/// targets.csv, calibrate, export a URDF; the verdict is green.
+#[test]
+fn readme_plan_walkthrough() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let section = readme
+        .split_once("## Before and after a session")
+        .expect("the README's plan section")
+        .1;
+    let block = section
+        .split_once("```sh\n")
+        .and_then(|(_, rest)| rest.split_once("```"))
+        .expect("its shell block")
+        .0;
+    let dir = scratch("plan-walkthrough");
+    let _ = std::fs::remove_file(dir.join("tests"));
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(root.join("tests"), dir.join("tests")).unwrap();
+    let script = block.replace(
+        "cargo run --release --",
+        &format!("'{}'", env!("CARGO_BIN_EXE_drawcal")),
+    );
+    let out = Command::new("sh")
+        .args(["-euc", &script])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let planned = std::fs::read_to_string(dir.join("planned.csv")).unwrap();
+    assert_eq!(
+        planned.lines().filter(|l| l.ends_with(",train")).count(),
+        30
+    );
+    assert!(dir.join("planned.plan.json").exists());
+    let poses = std::fs::read_to_string(dir.join("session/poses.csv")).unwrap();
+    assert!(poses.lines().nth(1).unwrap().starts_with("p01,") || poses.contains("\np01,"));
+    assert!(stdout.contains("verdict: GREEN"), "{stdout}");
+    let urdf = std::fs::read_to_string(dir.join("er3a_calibrated.urdf")).unwrap();
+    drawcal::model::urdf::Urdf::parse(&urdf).unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+}

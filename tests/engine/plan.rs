@@ -208,9 +208,15 @@ fn planned_against_random_sweep() {
         "| robot | N | planned/random RMS | planned/random worst | planned/random(1.5N) RMS | predicted/realised held-out | sessions |"
     );
     println!("|---|---|---|---|---|---|---|");
+    let sessions: u64 = std::env::var("PLAN_SWEEP_SESSIONS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(30);
     for name in ["er3a", "ur5", "arm4_mdh"] {
         for n in [20, 30, 50] {
-            let runs: Vec<Comparison> = (1..=30).map(|s| compare(name, n, s, 10_000)).collect();
+            let runs: Vec<Comparison> = (1..=sessions)
+                .map(|s| compare(name, n, s, 10_000))
+                .collect();
             let rms = mean(&runs.iter().map(|c| c.planned.rms_mm).collect::<Vec<_>>())
                 / mean(&runs.iter().map(|c| c.random.rms_mm).collect::<Vec<_>>());
             let worst = mean(&runs.iter().map(|c| c.planned.worst_mm).collect::<Vec<_>>())
