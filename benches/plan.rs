@@ -12,7 +12,7 @@ fn planning(c: &mut Criterion) {
     let (robot, rig, _) = preset("er3a").expect("a preset");
     let mut g = c.benchmark_group("plan");
     g.sample_size(10);
-    for (candidates, n) in [(10_000, 30), (2_500, 30), (40_000, 30), (10_000, 60)] {
+    for (candidates, n) in [(10_000, 30), (2_500, 30), (20_000, 30), (10_000, 60)] {
         let mut opts = PlanOptions::new(n);
         opts.candidates = candidates;
         g.bench_function(format!("er3a_{candidates}_candidates_to_{n}"), |b| {

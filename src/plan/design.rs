@@ -42,6 +42,9 @@ struct State<'a> {
     chosen: Vec<bool>,
     /// `trace(W M⁻¹)`.
     objective: f64,
+    /// The candidates kept up to date and compared (all, until the
+    /// exchange narrows them to a shortlist).
+    active: Vec<usize>,
 }
 
 impl<'a> State<'a> {
@@ -73,6 +76,7 @@ impl<'a> State<'a> {
             g,
             h,
             chosen: vec![false; pool.rows.len()],
+            active: (0..pool.rows.len()).collect(),
             objective: pool.w.trace(),
         }
     }
@@ -89,7 +93,8 @@ impl<'a> State<'a> {
         let a: Vec<f64> = (0..p * p).map(|k| a[(k / p, k % p)]).collect();
         let mut x = vec![0.0; m * p];
         let mut y = vec![0.0; m * p];
-        for (i, rows) in self.pool.rows.iter().enumerate() {
+        for &i in &self.active {
+            let rows = &self.pool.rows[i];
             for r in 0..m {
                 let jr = &rows[r * p..(r + 1) * p];
                 for c in 0..p {
@@ -151,7 +156,7 @@ impl<'a> State<'a> {
         let mut qm = vec![0.0; m * m];
         let mut ps = vec![0.0; m * m];
         let mut pc = vec![0.0; m * m];
-        for i in 0..self.pool.rows.len() {
+        for &i in &self.active {
             let j = &self.pool.rows[i];
             for a in 0..m {
                 let ja = &j[a * p..(a + 1) * p];
@@ -192,7 +197,9 @@ impl<'a> State<'a> {
 
     /// The unchosen candidate with the largest gain.
     fn best(&self) -> Option<(usize, f64)> {
-        (0..self.pool.rows.len())
+        self.active
+            .iter()
+            .copied()
             .filter(|&i| !self.chosen[i])
             .map(|i| (i, self.gain(i)))
             .filter(|(_, g)| g.is_finite())
@@ -256,6 +263,9 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// Candidates (besides the chosen) the exchange compares.
+const EXCHANGE_SHORTLIST: usize = 1000;
+
 /// Fall of the objective after which the kept `G_i`, `H_i` are recomputed
 /// (see `State::refresh`).
 const REFRESH_DROP: f64 = 0.25;
@@ -305,6 +315,7 @@ pub fn select(pool: &Pool, n: usize, n_greedy: usize, passes: usize) -> Selectio
                 h: st.h.clone(),
                 chosen: st.chosen.clone(),
                 objective: st.objective,
+                active: st.active.clone(),
             });
         }
     }
@@ -318,6 +329,19 @@ pub fn select(pool: &Pool, n: usize, n_greedy: usize, passes: usize) -> Selectio
         };
     };
     let mut chosen: Vec<usize> = order[..n].to_vec();
+    // The exchange compares the chosen poses with the candidates that
+    // would help most now: a swap from outside them is rare, and each
+    // exchange step costs an update of every candidate compared.
+    let mut ranked: Vec<(usize, f64)> = (0..pool.rows.len())
+        .filter(|&i| !st.chosen[i])
+        .map(|i| (i, st.gain(i)))
+        .collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    st.active = chosen
+        .iter()
+        .copied()
+        .chain(ranked.iter().take(EXCHANGE_SHORTLIST).map(|&(i, _)| i))
+        .collect();
     let mut swaps = 0;
     for _ in 0..passes {
         st.refresh();
