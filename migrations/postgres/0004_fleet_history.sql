@@ -17,3 +17,6 @@ ALTER TABLE calibrations DROP COLUMN report;
 -- count are read from this index alone.
 CREATE INDEX calibrations_history ON calibrations(robot_id, created_at)
     INCLUDE (test_rms_after_mm, model_id, id);
+
+-- A line without its site (robots_fleet leads with the site).
+CREATE INDEX robots_line ON robots(line);

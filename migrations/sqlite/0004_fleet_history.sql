@@ -18,3 +18,6 @@ ALTER TABLE calibrations DROP COLUMN report;
 -- filters reach calibrations through their robots): a page's ids and a
 -- count are read from this index alone. The row id is in every index.
 CREATE INDEX calibrations_history ON calibrations(robot_id, created_at, test_rms_after_mm, model_id);
+
+-- A line without its site (robots_fleet leads with the site).
+CREATE INDEX robots_line ON robots(line);
