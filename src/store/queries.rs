@@ -132,9 +132,14 @@ fn calibration_list_sql(f: &CalibrationFilter) -> (String, String, Vec<FilterArg
     };
     // The page's ids first, from the indexes alone (`calibrations_history`
     // holds every filtered column), then only their rows: sorting whole
-    // rows to keep 50 of a site's 5,000 read every one of them.
+    // rows to keep 50 of a site's 5,000 read every one of them. With a
+    // filter the ids are sorted as numbers (`c.id + 0`), so that no planner
+    // walks the primary key in order hoping to meet the filter's rows
+    // early: dates grow with ids, so a month of the fleet's history was
+    // a walk through every calibration before it (PostgreSQL: 82 ms p99).
+    let order = if args.is_empty() { "c.id" } else { "c.id + 0" };
     let page = format!(
-        "{}WHERE c.id IN (SELECT c.id {from} {filter}ORDER BY c.id LIMIT ${} OFFSET ${}) \
+        "{}WHERE c.id IN (SELECT c.id {from} {filter}ORDER BY {order} LIMIT ${} OFFSET ${}) \
          ORDER BY c.id",
         calibration_select!(),
         n + 1,
