@@ -31,6 +31,11 @@ const SQLITE: &[File] = &[
         "job interruptions",
         include_str!("../../migrations/sqlite/0003_job_interruptions.sql"),
     ),
+    (
+        4,
+        "fleet history",
+        include_str!("../../migrations/sqlite/0004_fleet_history.sql"),
+    ),
 ];
 
 const POSTGRES: &[File] = &[
@@ -48,6 +53,11 @@ const POSTGRES: &[File] = &[
         3,
         "job interruptions",
         include_str!("../../migrations/postgres/0003_job_interruptions.sql"),
+    ),
+    (
+        4,
+        "fleet history",
+        include_str!("../../migrations/postgres/0004_fleet_history.sql"),
     ),
 ];
 

@@ -677,6 +677,18 @@ impl Store {
     ) -> Result<(Vec<CalibrationRec>, i64)> {
         dispatch!(self.list_calibrations(f, page))
     }
+    /// The database's plan of [`Store::list_calibrations`]'s two queries
+    /// (the page and its count) for a filter, one line a step: `EXPLAIN
+    /// QUERY PLAN` on SQLite, `EXPLAIN` on PostgreSQL. For the fleet-scale
+    /// figures (BENCHMARKS.md) and the test that the history filters use
+    /// indexes.
+    pub async fn explain_calibrations(
+        &self,
+        f: &CalibrationFilter,
+        page: Page,
+    ) -> Result<Vec<String>> {
+        dispatch!(self.explain_calibrations(f, page))
+    }
     /// Make `calibration_id` (which must belong to the robot; `None`: the
     /// nominal model) the robot's active calibration and record it, in
     /// the activation history and the audit log, as done by `actor`.

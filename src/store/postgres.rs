@@ -40,6 +40,17 @@ const CLAIM_SQL: &str = concat!(
 /// numbering and activation per robot across replicas).
 const LOCK_ROBOT_SQL: &str = "SELECT model_id FROM robots WHERE id = $1 FOR UPDATE";
 
+/// How a query's plan is asked for.
+const EXPLAIN: &str = "EXPLAIN";
+
+/// `EXPLAIN`'s rows, one line of the plan each.
+fn explain_lines(rows: &[sqlx::postgres::PgRow]) -> super::Result<Vec<String>> {
+    use sqlx::Row;
+    rows.iter()
+        .map(|r| Ok(r.try_get::<String, _>(0)?))
+        .collect()
+}
+
 impl Backend {
     /// Connect and migrate.
     pub async fn connect(url: &str) -> super::Result<Self> {

@@ -43,6 +43,26 @@ const CLAIM_SQL: &str = concat!(
 /// holds the database's write lock).
 const LOCK_ROBOT_SQL: &str = "SELECT model_id FROM robots WHERE id = $1";
 
+/// How a query's plan is asked for.
+const EXPLAIN: &str = "EXPLAIN QUERY PLAN";
+
+/// `EXPLAIN QUERY PLAN`'s rows (id, parent, notused, detail) as lines, each
+/// step indented under its parent.
+fn explain_lines(rows: &[sqlx::sqlite::SqliteRow]) -> super::Result<Vec<String>> {
+    use sqlx::Row;
+    let mut depth = std::collections::HashMap::new();
+    let mut out = Vec::new();
+    for row in rows {
+        let id: i64 = row.try_get(0)?;
+        let parent: i64 = row.try_get(1)?;
+        let detail: String = row.try_get(3)?;
+        let d = depth.get(&parent).map_or(0, |d| d + 1);
+        depth.insert(id, d);
+        out.push(format!("{}{detail}", "  ".repeat(d)));
+    }
+    Ok(out)
+}
+
 impl Backend {
     /// Open (creating the file if needed) and migrate.
     pub async fn connect(url: &str) -> super::Result<Self> {
