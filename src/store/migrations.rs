@@ -31,6 +31,11 @@ const SQLITE: &[File] = &[
         "job interruptions",
         include_str!("../../migrations/sqlite/0003_job_interruptions.sql"),
     ),
+    (
+        5,
+        "plans",
+        include_str!("../../migrations/sqlite/0005_plans.sql"),
+    ),
 ];
 
 const POSTGRES: &[File] = &[
@@ -48,6 +53,11 @@ const POSTGRES: &[File] = &[
         3,
         "job interruptions",
         include_str!("../../migrations/postgres/0003_job_interruptions.sql"),
+    ),
+    (
+        5,
+        "plans",
+        include_str!("../../migrations/postgres/0005_plans.sql"),
     ),
 ];
 
