@@ -341,6 +341,12 @@ mod tests {
             Some(Role::Engineer)
         );
         assert_eq!(r(Method::POST, "/jobs/{id}/cancel"), Some(Role::Engineer));
+        assert_eq!(r(Method::POST, "/plans"), Some(Role::Engineer));
+        assert_eq!(r(Method::GET, "/plans/{id}"), Some(Role::Reader));
+        assert_eq!(
+            r(Method::GET, "/plans/{id}/targets.csv"),
+            Some(Role::Reader)
+        );
         assert_eq!(r(Method::POST, "/robots/{id}/activate"), Some(Role::Admin));
         assert_eq!(r(Method::POST, "/robots/{id}/rollback"), Some(Role::Admin));
         assert_eq!(r(Method::GET, "/keys"), Some(Role::Admin));

@@ -24,6 +24,7 @@ pub mod guard;
 pub mod keys;
 pub mod limits;
 pub mod ops;
+pub mod plans;
 pub mod resources;
 pub mod sessions;
 pub mod ui;
@@ -117,6 +118,8 @@ pub struct App {
     pub store: Store,
     /// The job pool (to wake it on enqueue).
     pub jobs: Jobs,
+    /// The pose plans running or waiting in this process.
+    pub plans: crate::jobs::plans::Plans,
     /// Built compensators and robots' active calibration ids, with the
     /// rules of when each is dropped.
     pub cache: cache::CompensationCache,
@@ -212,7 +215,7 @@ impl<T: ToSchema> Paged<T> {
 #[openapi(
     info(
         title = "drawcal service",
-        description = "Robot kinematic calibration: sessions, identification jobs, calibrations, activation, compensation and fleet history. Lengths in mm, angles in degrees. Every error answers `{error, message, field?, row?}`.",
+        description = "Robot kinematic calibration: pose plans, sessions, identification jobs, calibrations, activation, compensation and fleet history. Lengths in mm, angles in degrees. Every error answers `{error, message, field?, row?}`.",
         license(name = "MIT OR Apache-2.0")
     ),
     // Format is referenced only by query parameters, which utoipa does
@@ -261,6 +264,9 @@ fn api() -> OpenApiRouter<AppState> {
         .routes(routes!(sessions::list_jobs))
         .routes(routes!(sessions::get_job))
         .routes(routes!(sessions::cancel_job))
+        .routes(routes!(plans::create_plan))
+        .routes(routes!(plans::get_plan))
+        .routes(routes!(plans::get_plan_targets))
         .routes(routes!(calibrations::list_calibrations))
         .routes(routes!(calibrations::get_calibration))
         .routes(routes!(ui::calibration_report_html))
@@ -507,9 +513,11 @@ impl Service {
             );
         }
         let addr = listener.local_addr()?;
+        let plans = crate::jobs::plans::Plans::new(store.clone(), cfg.jobs.workers, cfg.jobs.lease);
         let state = AppState(Arc::new(App {
             store,
             jobs,
+            plans,
             cache: cache::CompensationCache::new(cfg.max_joint_change_deg),
             compute: compute::ComputePool::new(compute_threads()),
             insecure_no_auth: cfg.insecure_no_auth,
@@ -570,6 +578,7 @@ impl Service {
         .await;
         tracing::info!("HTTP server stopped; stopping job workers");
         self.state.jobs.shutdown().await;
+        self.state.plans.shutdown(self.drain_timeout).await;
         self.state.store.close().await;
         tracing::info!("shutdown complete");
         Ok(())

@@ -21,6 +21,8 @@
 //! crashes its process every time still ends, saying so. Leases are read
 //! and written on the database's clock, never a host's.
 
+pub mod plans;
+
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;

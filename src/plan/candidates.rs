@@ -191,7 +191,7 @@ impl<'a> Scene<'a> {
         for (k, b) in workspace.keep_out.iter().enumerate() {
             if (0..3).any(|c| !(b.min_mm[c] <= b.max_mm[c])) {
                 return Err(Error::field(
-                    format!("keep_out[{k}]"),
+                    format!("workspace.keep_out[{k}]"),
                     "min_mm must not exceed max_mm on any axis",
                 ));
             }

@@ -257,6 +257,17 @@ impl Columns {
     }
 }
 
+/// Most keep-out boxes a plan takes.
+pub const MAX_KEEP_OUT: usize = 100;
+
+/// Check a plan's options against the robot and the rig without planning
+/// (cheap: no poses drawn), so that a service can refuse a bad request
+/// before queueing it. [`plan`] runs the same check first.
+pub fn check(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<()> {
+    check_options(robot, opts)?;
+    Scene::new(robot, rig, &opts.workspace).map(|_| ())
+}
+
 /// Plan a session for `robot` on `rig`.
 pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
     check_options(robot, opts)?;
@@ -437,7 +448,7 @@ fn check_options(robot: &Robot, opts: &PlanOptions) -> Result<()> {
             ));
         }
     }
-    for e in &opts.effects {
+    for (i, e) in opts.effects.iter().enumerate() {
         if !PLANNABLE_EFFECTS.contains(&e.as_str()) {
             return Err(Error::field(
                 "effects",
@@ -446,6 +457,34 @@ fn check_options(robot: &Robot, opts: &PlanOptions) -> Result<()> {
                     PLANNABLE_EFFECTS.join(", ")
                 ),
             ));
+        }
+        if opts.effects[..i].contains(e) {
+            return Err(Error::field("effects", format!("'{e}' given twice")));
+        }
+    }
+    let w = &opts.workspace;
+    if w.keep_out.len() > MAX_KEEP_OUT {
+        return Err(Error::field(
+            "workspace.keep_out",
+            format!("{} boxes: at most {MAX_KEEP_OUT}", w.keep_out.len()),
+        ));
+    }
+    for (name, v) in [
+        ("min_string_mm", w.min_string_mm),
+        ("range_margin_mm", w.range_margin_mm),
+        ("anchor_plane_clearance_mm", w.anchor_plane_clearance_mm),
+        ("string_clearance_mm", w.string_clearance_mm),
+    ] {
+        if !(0.0..=100_000.0).contains(&v) {
+            return Err(Error::field(
+                format!("workspace.{name}"),
+                format!("{v}: between 0 and 100000 mm"),
+            ));
+        }
+    }
+    if let Some(z) = w.floor_z_mm {
+        if !z.is_finite() {
+            return Err(Error::field("workspace.floor_z_mm", "not a finite number"));
         }
     }
     Ok(())

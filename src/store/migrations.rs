@@ -36,6 +36,11 @@ const SQLITE: &[File] = &[
         "fleet history",
         include_str!("../../migrations/sqlite/0004_fleet_history.sql"),
     ),
+    (
+        5,
+        "plans",
+        include_str!("../../migrations/sqlite/0005_plans.sql"),
+    ),
 ];
 
 const POSTGRES: &[File] = &[
@@ -58,6 +63,11 @@ const POSTGRES: &[File] = &[
         4,
         "fleet history",
         include_str!("../../migrations/postgres/0004_fleet_history.sql"),
+    ),
+    (
+        5,
+        "plans",
+        include_str!("../../migrations/postgres/0005_plans.sql"),
     ),
 ];
 

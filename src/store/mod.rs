@@ -17,6 +17,7 @@
 //! same version numbers (a test checks that).
 
 mod migrations;
+mod plans;
 mod postgres;
 mod record;
 mod sqlite;
@@ -28,6 +29,7 @@ use utoipa::ToSchema;
 
 use record::record;
 
+pub use plans::{NewPlan, PLAN_INTERRUPTED, PlanEnd, PlanRec};
 pub use time::{now_ms, now_rfc3339};
 
 /// Result alias for the store.

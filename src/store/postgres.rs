@@ -13,6 +13,7 @@ macro_rules! db_now_ms {
 }
 
 include!("queries.rs");
+include!("plan_queries.rs");
 
 type Db = sqlx::Postgres;
 

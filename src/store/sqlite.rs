@@ -17,6 +17,7 @@ macro_rules! db_now_ms {
 }
 
 include!("queries.rs");
+include!("plan_queries.rs");
 
 type Db = sqlx::Sqlite;
 

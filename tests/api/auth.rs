@@ -101,7 +101,24 @@ async fn every_route_but_health_needs_a_key_of_the_right_role() {
         "forbidden",
     )
     .await;
-    // engineer: models and jobs, not activation or keys.
+    // Plans: an engineer's to make, anyone's to read.
+    let plan = json!({"robot_id": robot, "rig_id": 1, "n_poses": 8, "candidates": 400});
+    for c in [&reader, &operator] {
+        err_json(
+            send(c.post(app.url("/plans")).json(&plan)).await,
+            403,
+            "forbidden",
+        )
+        .await;
+    }
+    let plan = ok_json(
+        send(engineer.post(app.url("/plans")).json(&plan)).await,
+        202,
+    )
+    .await;
+    let plan_url = app.url(&format!("/plans/{}", plan["id"]));
+    ok_json(send(reader.get(&plan_url)).await, 200).await;
+    // engineer: models, plans and jobs, not activation or keys.
     ok_json(
         send(engineer.post(app.url("/models")).json(&robot_json)).await,
         201,

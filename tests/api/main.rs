@@ -24,6 +24,7 @@ mod jobs;
 mod limits;
 mod logs;
 mod openapi;
+mod plans;
 mod requires;
 mod slow_clients;
 mod store;

@@ -484,9 +484,73 @@ async fn suite(store: Store) {
     let (items, total) = store.list_calibrations(&all, PAGE).await.unwrap();
     assert_eq!((items.len(), total), (1, 1));
     assert_eq!(items[0].id, b.id, "the calibration of RMS 0.1");
+    plans(&store, m.id, r1.id, rig.id).await;
     keys_and_audit(&store).await;
     concurrent_claims(&store, s.id, r1.id).await;
     store.close().await;
+}
+
+/// Plans: queued with a lease, renewed, started and finished by their
+/// runner only; one whose lease ran out reads as interrupted.
+async fn plans(store: &Store, model: i64, robot: i64, rig: i64) {
+    use drawcal::store::{NewPlan, PLAN_INTERRUPTED, PlanEnd};
+    let new = |robot_id| NewPlan {
+        model_id: model,
+        robot_id,
+        rig_id: rig,
+        options: r#"{"n_poses":30}"#.into(),
+        runner: "me".into(),
+        created_by: "eve".into(),
+    };
+    let p = store.create_plan(&new(Some(robot)), 60_000).await.unwrap();
+    assert_eq!((p.state.as_str(), p.robot_id), ("queued", Some(robot)));
+    assert_eq!(store.count_queued_plans().await.unwrap(), 1);
+    assert!(store.renew_plan(p.id, "me", 60_000).await.unwrap());
+    assert!(!store.renew_plan(p.id, "other", 60_000).await.unwrap());
+    assert!(!store.start_plan(p.id, "other", 60_000).await.unwrap());
+    assert!(store.start_plan(p.id, "me", 60_000).await.unwrap());
+    let running = store.get_plan(p.id).await.unwrap();
+    assert_eq!(running.state, "running");
+    assert!(running.started_at.is_some());
+    assert_eq!(store.count_queued_plans().await.unwrap(), 0);
+    let end = PlanEnd::Succeeded {
+        plan_json: "{}".into(),
+    };
+    assert!(!store.finish_plan(p.id, "other", &end).await.unwrap());
+    assert!(store.finish_plan(p.id, "me", &end).await.unwrap());
+    let done = store.get_plan(p.id).await.unwrap();
+    assert_eq!(done.state, "succeeded");
+    assert_eq!(done.result.as_deref(), Some("{}"));
+    assert!(done.finished_at.is_some() && done.runner.is_none());
+    // Ended: neither renewed nor finished again.
+    assert!(!store.renew_plan(p.id, "me", 60_000).await.unwrap());
+    assert!(!store.finish_plan(p.id, "me", &end).await.unwrap());
+
+    // A plan whose lease has run out (its process stopped): failed, once
+    // read, and its runner can no longer store a result.
+    let q = store.create_plan(&new(None), -1).await.unwrap();
+    assert_eq!(q.robot_id, None);
+    assert_eq!(store.count_queued_plans().await.unwrap(), 0, "not alive");
+    let gone = store.get_plan(q.id).await.unwrap();
+    assert_eq!(gone.state, "failed");
+    assert_eq!(gone.error.as_deref(), Some(PLAN_INTERRUPTED));
+    let failed = PlanEnd::Failed {
+        error: "x".into(),
+        field: Some("n_poses".into()),
+    };
+    assert!(!store.finish_plan(q.id, "me", &failed).await.unwrap());
+    // A failure names its field.
+    let f = store.create_plan(&new(None), 60_000).await.unwrap();
+    assert!(store.finish_plan(f.id, "me", &failed).await.unwrap());
+    let f = store.get_plan(f.id).await.unwrap();
+    assert_eq!(
+        (f.state.as_str(), f.error_field.as_deref()),
+        ("failed", Some("n_poses"))
+    );
+    assert!(matches!(
+        store.get_plan(f.id + 100).await,
+        Err(StoreError::NotFound { .. })
+    ));
 }
 
 /// Many workers claiming at once: every job is claimed exactly once.
