@@ -101,6 +101,34 @@ impl<'a> EffectProblem<'a> {
     /// Visit every residual row at `x`: `f(position in poses, residual,
     /// derivative row)`. Residuals are predicted minus measured (mm).
     pub fn rows(&self, x: &[f64], mut f: impl FnMut(usize, f64, &[f64])) {
+        self.visit::<false>(x, |_, _| {}, |pos, r, row, _| f(pos, r, row));
+    }
+
+    /// [`Self::rows`], with what a further effect's columns need: before a
+    /// pose's rows, `pose_f(position in poses, frame)` (T's derivatives by
+    /// each joint angle and by the thermal multiplier), and with each row
+    /// its [`RowDir`]. A further effect's column at a row is then
+    /// [`PoseFrame::column`] (the same arithmetic as the rows' own effect
+    /// columns), so candidates can be fitted against a linearisation made
+    /// once (`physics::analyse`'s fixed base).
+    pub fn rows_framed(
+        &self,
+        x: &[f64],
+        pose_f: impl FnMut(usize, &PoseFrame),
+        f: impl FnMut(usize, f64, &[f64], RowDir),
+    ) {
+        self.visit::<true>(x, pose_f, f);
+    }
+
+    /// The one pass behind [`Self::rows`] and [`Self::rows_framed`]; with
+    /// `FRAMES` false no frame is built (the thermal derivative only when
+    /// an effect uses it).
+    fn visit<const FRAMES: bool>(
+        &self,
+        x: &[f64],
+        mut pose_f: impl FnMut(usize, &PoseFrame),
+        mut f: impl FnMut(usize, f64, &[f64], RowDir),
+    ) {
         let (p, effects) = self.unpack(x);
         let l = self.chain.layout;
         let g = l.n_geometric();
@@ -118,6 +146,7 @@ impl<'a> EffectProblem<'a> {
         let nc = ncol - self.free.len();
         let mut dt = vec![Vector3::zeros(); nc];
         let mut dl = vec![0.0; nc * self.data.n_strings.max(1)];
+        let mut frame = PoseFrame::default();
         for (pos, &i) in self.poses.iter().enumerate() {
             let pose = &self.data.poses[i];
             let delta = self.ctx.apply(&effects, i, &mut buf);
@@ -129,7 +158,7 @@ impl<'a> EffectProblem<'a> {
             self.chain
                 .point_jacobian(&pp, &q, OutputFrame::Rig, &mut jac);
             let t = jac.point + delta.dp;
-            let dlen = if thermal_used {
+            let dlen = if thermal_used || FRAMES {
                 self.ctx
                     .lengths
                     .iter()
@@ -156,6 +185,14 @@ impl<'a> EffectProblem<'a> {
                     }
                 }
                 c0 += e.kind.n_coef();
+            }
+            if FRAMES {
+                frame.d_theta.clear();
+                frame
+                    .d_theta
+                    .extend((0..n).map(|j| jac.d_params[l.joint(j, JointParam::Theta)]));
+                frame.dlen = dlen;
+                pose_f(pos, &frame);
             }
             let nf = self.free.len();
             match &pose.measurement {
@@ -184,7 +221,7 @@ impl<'a> EffectProblem<'a> {
                         for c in 0..nc {
                             row[nf + c] = u.dot(&dt[c]) + dl[c * m + k];
                         }
-                        f(pos, res, &row);
+                        f(pos, res, &row, RowDir::String { u, k });
                     }
                 }
                 Measurement::Point(meas) => {
@@ -196,7 +233,7 @@ impl<'a> EffectProblem<'a> {
                         for c in 0..nc {
                             row[nf + c] = dt[c][comp];
                         }
-                        f(pos, res, &row);
+                        f(pos, res, &row, RowDir::Point { comp });
                     }
                 }
             }
@@ -244,9 +281,10 @@ impl LeastSquares for EffectProblem<'_> {
         let mut upper = vec![0.0; n * n];
         let mut g = vec![0.0; n];
         let mut cost = 0.0;
+        let mut nz = Vec::with_capacity(n);
         self.rows(x, |_, r, row| {
             cost += r * r;
-            accumulate(&mut upper, &mut g, n, row, r);
+            accumulate(&mut upper, &mut g, n, row, r, &mut nz);
         });
         for a in 0..n {
             jtr[a] = g[a];
@@ -259,12 +297,76 @@ impl LeastSquares for EffectProblem<'_> {
     }
 }
 
+/// What a residual row measures: string `k`'s length along the unit
+/// vector `u` from its anchor to T (rig frame), or T's coordinate `comp`.
+#[derive(Debug, Clone, Copy)]
+pub enum RowDir {
+    /// A string reading.
+    String {
+        /// Unit vector from the anchor to T.
+        u: Vector3<f64>,
+        /// The string.
+        k: usize,
+    },
+    /// A coordinate of a measured point.
+    Point {
+        /// 0, 1 or 2.
+        comp: usize,
+    },
+}
+
+/// What an effect's columns need at one pose, beside its basis: T's
+/// derivative (rig frame, mm) by each joint's angle and by the thermal
+/// multiplier of the nominal lengths.
+#[derive(Debug, Clone, Default)]
+pub struct PoseFrame {
+    /// `dT/dθ_j` for every joint `j` (mm/rad).
+    pub d_theta: Vec<Vector3<f64>>,
+    /// `dT/d(thermal multiplier)` (mm).
+    pub dlen: Vector3<f64>,
+}
+
+impl PoseFrame {
+    /// T's derivative by coefficient `c` of an effect whose basis at this
+    /// pose is `buf` (as [`EffectProblem::rows`] forms it).
+    pub fn d_point(&self, buf: &Basis, c: usize) -> Vector3<f64> {
+        let n = self.d_theta.len();
+        let mut v = self.dlen * buf.thermal[c];
+        for j in 0..n {
+            let b = buf.dq[c * n + j];
+            if b != 0.0 {
+                v += self.d_theta[j] * b;
+            }
+        }
+        v + Vector3::new(buf.dp[c * 3], buf.dp[c * 3 + 1], buf.dp[c * 3 + 2])
+    }
+
+    /// The column of coefficient `c` at a row `dir`, from its
+    /// [`Self::d_point`] `dt` and the basis `buf` of `m` strings: the same
+    /// value [`EffectProblem::rows`] gives that column.
+    pub fn column(dir: RowDir, dt: &Vector3<f64>, buf: &Basis, c: usize, m: usize) -> f64 {
+        match dir {
+            RowDir::String { u, k } => u.dot(dt) + buf.dl[c * m + k],
+            RowDir::Point { comp } => dt[comp],
+        }
+    }
+}
+
 /// Add `row rowᵀ` (upper triangle) and `row · r` to flat accumulators.
+/// `nz` is scratch space (reused between rows: no allocation per row).
 #[inline]
-pub fn accumulate(upper: &mut [f64], g: &mut [f64], n: usize, row: &[f64], r: f64) {
+pub fn accumulate(
+    upper: &mut [f64],
+    g: &mut [f64],
+    n: usize,
+    row: &[f64],
+    r: f64,
+    nz: &mut Vec<usize>,
+) {
     // Rows are sparse where effects are local (a change point, a
     // data-driven correction's two knots): visit the nonzeros only.
-    let nz: Vec<usize> = (0..n).filter(|&a| row[a] != 0.0).collect();
+    nz.clear();
+    nz.extend((0..n).filter(|&a| row[a] != 0.0));
     for (k, &a) in nz.iter().enumerate() {
         let ra = row[a];
         g[a] += ra * r;

@@ -37,6 +37,7 @@ mod candidates;
 mod data_driven;
 mod findings;
 mod finish;
+mod fixed;
 mod gates;
 mod magnitude;
 mod naming;
