@@ -136,7 +136,6 @@ impl<'a> EffectProblem<'a> {
         let ncol = x.len();
         let mut row = vec![0.0; ncol];
         let mut jac: PointJacobian = self.chain.new_jacobian();
-        let mut buf = Basis::default();
         let mut pp = p.clone();
         let mut q = vec![0.0; n];
         let thermal_used = effects
@@ -147,9 +146,15 @@ impl<'a> EffectProblem<'a> {
         let mut dt = vec![Vector3::zeros(); nc];
         let mut dl = vec![0.0; nc * self.data.n_strings.max(1)];
         let mut frame = PoseFrame::default();
+        let mut bases = vec![Basis::default(); effects.len()];
         for (pos, &i) in self.poses.iter().enumerate() {
             let pose = &self.data.poses[i];
-            let delta = self.ctx.apply(&effects, i, &mut buf);
+            // Each effect's basis once: the delta and the columns both
+            // read it.
+            for (e, b) in effects.iter().zip(bases.iter_mut()) {
+                self.ctx.basis(&e.kind, i, b);
+            }
+            let delta = self.ctx.apply_bases(&effects, &bases);
             pp.copy_from_slice(&p);
             self.ctx.apply_thermal(&mut pp, delta.thermal);
             for j in 0..n {
@@ -168,8 +173,7 @@ impl<'a> EffectProblem<'a> {
             };
             let m = self.data.n_strings;
             let mut c0 = 0;
-            for e in &effects {
-                self.ctx.basis(&e.kind, i, &mut buf);
+            for (e, buf) in effects.iter().zip(&bases) {
                 for c in 0..e.kind.n_coef() {
                     let mut v = dlen * buf.thermal[c];
                     for j in 0..n {

@@ -887,46 +887,162 @@ fn joint_components(
 /// Each train pose (position in `train`) paired with its nearest other
 /// train pose in joint space, each pair once (mutual neighbours would
 /// otherwise count twice and inflate the agreement statistic). Above
-/// 12,000 poses a deterministic stride subsample bounds this quadratic
-/// search.
+/// 12,000 poses a deterministic stride subsample bounds the search.
 fn nearest_in_joint_space(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)> {
-    let stride = train.len().div_ceil(12_000).max(1);
-    let pick: Vec<usize> = (0..train.len()).step_by(stride).collect();
     let q = |a: usize| &ctx.poses[train[a]].q_rad;
-    pick.iter()
-        .filter_map(|&a| {
-            pick.iter()
-                .filter(|&&b| b != a)
-                .map(|&b| {
-                    let d: f64 = q(a).iter().zip(q(b)).map(|(x, y)| (x - y).powi(2)).sum();
-                    (d, b)
-                })
-                .min_by(|x, y| x.0.total_cmp(&y.0))
-                .map(|(_, b)| (a.min(b), a.max(b)))
-        })
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect()
+    let n = ctx.n_joints;
+    nearest_pairs(
+        train.len(),
+        n,
+        |a, c| q(a)[c],
+        |a, b| q(a).iter().zip(q(b)).map(|(x, y)| (x - y).powi(2)).sum(),
+    )
 }
 
 /// Each train pose paired with its nearest other train pose by T's
 /// position (rig frame), each pair once; subsampled like
 /// [`nearest_in_joint_space`].
 fn nearest_in_workspace(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)> {
-    let stride = train.len().div_ceil(12_000).max(1);
-    let pick: Vec<usize> = (0..train.len()).step_by(stride).collect();
     let t = |a: usize| ctx.poses[train[a]].point_rig;
-    pick.iter()
-        .filter_map(|&a| {
+    nearest_pairs(
+        train.len(),
+        3,
+        |a, c| t(a)[c],
+        |a, b| (t(a) - t(b)).norm_squared(),
+    )
+}
+
+/// Each of `n` items (every `stride`-th above 12,000) paired with its
+/// nearest other by `dist` (a sum of squared differences of the `dim`
+/// coordinates `coord`; among equals the first in order), each pair once.
+/// The same pairs as comparing every two items, found by sweeping out from
+/// each item in order of the coordinate that spreads most and stopping
+/// where that coordinate's squared difference alone exceeds the nearest
+/// distance so far (a sum of non-negative terms is never below one of
+/// them, also in floating point): a quadratic search took seconds on the
+/// 11,911-pose grid.
+fn nearest_pairs(
+    n: usize,
+    dim: usize,
+    coord: impl Fn(usize, usize) -> f64,
+    dist: impl Fn(usize, usize) -> f64,
+) -> Vec<(usize, usize)> {
+    let stride = n.div_ceil(12_000).max(1);
+    let pick: Vec<usize> = (0..n).step_by(stride).collect();
+    let spread = |c: usize| {
+        let (lo, hi) = pick
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &a| {
+                (lo.min(coord(a, c)), hi.max(coord(a, c)))
+            });
+        hi - lo
+    };
+    let finite = pick
+        .iter()
+        .all(|&a| (0..dim).all(|c| coord(a, c).is_finite()));
+    let axis = (0..dim).max_by(|&x, &y| spread(x).total_cmp(&spread(y)));
+    let nearest: Vec<Option<usize>> = match axis {
+        Some(axis) if finite => {
+            let key = |a: usize| coord(a, axis);
+            let mut order = pick.clone();
+            order.sort_by(|&x, &y| key(x).total_cmp(&key(y)).then(x.cmp(&y)));
+            let mut rank = vec![0; n];
+            for (r, &a) in order.iter().enumerate() {
+                rank[a] = r;
+            }
             pick.iter()
-                .filter(|&&b| b != a)
-                .map(|&b| ((t(a) - t(b)).norm_squared(), b))
-                .min_by(|x, y| x.0.total_cmp(&y.0))
-                .map(|(_, b)| (a.min(b), a.max(b)))
-        })
+                .map(|&a| {
+                    let mut best: Option<(f64, usize)> = None;
+                    let better = |d: f64, b: usize, best: &Option<(f64, usize)>| match best {
+                        None => true,
+                        Some((bd, bb)) => d.total_cmp(bd).then(b.cmp(bb)).is_lt(),
+                    };
+                    // Outward in both directions until the bound passes.
+                    for dir in [-1isize, 1] {
+                        let mut r = rank[a] as isize + dir;
+                        while r >= 0 && (r as usize) < order.len() {
+                            let b = order[r as usize];
+                            let bound = (key(a) - key(b)).powi(2);
+                            if best.is_some_and(|(bd, _)| bound > bd) {
+                                break;
+                            }
+                            let d = dist(a, b);
+                            if better(d, b, &best) {
+                                best = Some((d, b));
+                            }
+                            r += dir;
+                        }
+                    }
+                    best.map(|(_, b)| b)
+                })
+                .collect()
+        }
+        _ => pick
+            .iter()
+            .map(|&a| {
+                pick.iter()
+                    .filter(|&&b| b != a)
+                    .map(|&b| (dist(a, b), b))
+                    .min_by(|x, y| x.0.total_cmp(&y.0))
+                    .map(|(_, b)| b)
+            })
+            .collect(),
+    };
+    pick.iter()
+        .zip(nearest)
+        .filter_map(|(&a, b)| b.map(|b| (a.min(b), a.max(b))))
         .collect::<std::collections::BTreeSet<_>>()
         .into_iter()
         .collect()
+}
+
+#[cfg(test)]
+mod nearest_tests {
+    use super::nearest_pairs;
+
+    /// The pruned search finds the same pairs as comparing every two
+    /// points, ties included (repeated points, a coarse grid).
+    #[test]
+    fn pruned_nearest_pairs_equal_the_quadratic_search() {
+        let mut rng = crate::rng::Rng::new(11);
+        for (n, dim, grid) in [
+            (300, 6, false),
+            (500, 3, true),
+            (2, 2, false),
+            (1, 3, false),
+        ] {
+            let pts: Vec<Vec<f64>> = (0..n)
+                .map(|_| {
+                    (0..dim)
+                        .map(|_| {
+                            let v = rng.uniform() * 4.0 - 2.0;
+                            if grid { v.round() } else { v }
+                        })
+                        .collect()
+                })
+                .collect();
+            let dist = |a: usize, b: usize| -> f64 {
+                pts[a]
+                    .iter()
+                    .zip(&pts[b])
+                    .map(|(x, y)| (x - y).powi(2))
+                    .sum()
+            };
+            let got = nearest_pairs(n, dim, |a, c| pts[a][c], dist);
+            let want: Vec<(usize, usize)> = (0..n)
+                .filter_map(|a| {
+                    (0..n)
+                        .filter(|&b| b != a)
+                        .map(|b| (dist(a, b), b))
+                        .min_by(|x, y| x.0.total_cmp(&y.0))
+                        .map(|(_, b)| (a.min(b), a.max(b)))
+                })
+                .collect::<std::collections::BTreeSet<_>>()
+                .into_iter()
+                .collect();
+            assert_eq!(got, want, "n = {n}, dim = {dim}, grid = {grid}");
+        }
+    }
 }
 
 /// Where in the workspace the residual is largest: the quarter of one

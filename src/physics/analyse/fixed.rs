@@ -30,10 +30,13 @@ pub(super) struct FixedBase {
     pub(super) n_base: usize,
     /// Its normal equations, by fold.
     pub(super) nm: Normals,
-    /// Its cross-validated SSE (the score a candidate must beat).
+    /// Its cross-validated SSE (the score a candidate must beat; made by
+    /// [`Self::new`] only).
     pub(super) cv0: f64,
     /// Strings of the rig (0 for points).
     m: usize,
+    /// Fold of each train position.
+    fold_of: Vec<usize>,
     /// Per train pose (position in `obs.train`): its frame.
     frames: Vec<PoseFrame>,
     /// Per row: the train position of its pose, its residual, what it
@@ -45,25 +48,35 @@ pub(super) struct FixedBase {
 }
 
 impl FixedBase {
-    /// One pass over the train rows at `state`'s model.
+    /// One pass over the train rows at `state`'s model, split by the
+    /// cross-validation folds.
     pub(super) fn new(inputs: &Inputs, state: &State) -> Self {
-        let Inputs {
-            obs,
-            ctx,
-            free,
-            fold_of,
-        } = inputs;
-        let problem = EffectProblem::of_observations(
-            obs,
-            ctx,
-            obs.train.clone(),
+        let mut fixed = Self::of(
+            inputs,
             &state.p,
-            free.clone(),
             state.accepted.clone(),
+            inputs.fold_of.clone(),
         );
+        let (a, b, _) = fixed.nm.total();
+        let base: Vec<usize> = (0..fixed.n_base).collect();
+        fixed.cv0 = cv_sse(&fixed.nm, &a, &b, &base);
+        fixed
+    }
+
+    /// One pass over the train rows of geometry `p` with `effects`, the
+    /// rows split by `fold_of` (fold of each train position).
+    pub(super) fn of(
+        inputs: &Inputs,
+        p: &[f64],
+        effects: Vec<EffectModel>,
+        fold_of: Vec<usize>,
+    ) -> Self {
+        let Inputs { obs, ctx, free, .. } = inputs;
+        let problem =
+            EffectProblem::of_observations(obs, ctx, obs.train.clone(), p, free.clone(), effects);
         let x0 = problem.x0();
         let n_base = x0.len();
-        let nm = normals(&problem, &x0, fold_of);
+        let nm = normals(&problem, &x0, &fold_of);
         let mut frames = vec![PoseFrame::default(); obs.train.len()];
         let n_rows = nm.rows;
         let mut row_pos = Vec::with_capacity(n_rows);
@@ -80,14 +93,12 @@ impl FixedBase {
                 rows.extend_from_slice(row);
             },
         );
-        let (a, b, _) = nm.total();
-        let base: Vec<usize> = (0..n_base).collect();
-        let cv0 = cv_sse(&nm, &a, &b, &base);
         FixedBase {
             n_base,
             nm,
-            cv0,
+            cv0: f64::NAN,
             m: obs.data.n_strings,
+            fold_of,
             frames,
             row_pos,
             r,
@@ -100,9 +111,8 @@ impl FixedBase {
     /// appended at zero: its columns after the base's. The same as
     /// [`normals`] of that augmented problem.
     pub(super) fn with(&self, inputs: &Inputs, kind: &Kind) -> Normals {
-        let Inputs {
-            obs, ctx, fold_of, ..
-        } = inputs;
+        let Inputs { obs, ctx, .. } = inputs;
+        let fold_of = &self.fold_of;
         let nb = self.n_base;
         let k = kind.n_coef();
         let n = nb + k;
@@ -221,7 +231,10 @@ mod tests {
         }))
         .unwrap();
         let sim = simulate::generate(&spec).unwrap();
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/real_ur10_ipa_random");
+        let dir = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/real_ur10_ipa_random"
+        );
         let read = |f: &str| std::fs::read_to_string(format!("{dir}/{f}")).unwrap();
         let robot = Robot::from_json(&read("robot.json")).unwrap();
         let rig = Rig::from_json(&read("rig.json")).unwrap();
@@ -356,7 +369,10 @@ mod tests {
                         xp[nb + c] += h;
                         xm[nb + c] -= h;
                         let (rp, rm) = (residuals(&xp), residuals(&xm));
-                        rp.iter().zip(&rm).map(|(p, m)| (p - m) / (2.0 * h)).collect()
+                        rp.iter()
+                            .zip(&rm)
+                            .map(|(p, m)| (p - m) / (2.0 * h))
+                            .collect()
                     })
                     .collect();
                 let got = fixed.with(inputs, &kind);
@@ -369,7 +385,10 @@ mod tests {
                     assert!((b[nb + c] - jr).abs() <= tol, "{kind:?} Jr {c}");
                     for c2 in 0..k {
                         let jj: f64 = (0..n_rows).map(|i| fd[c][i] * fd[c2][i]).sum();
-                        assert!((a[(nb + c, nb + c2)] - jj).abs() <= 1e-5 * scale, "{kind:?}");
+                        assert!(
+                            (a[(nb + c, nb + c2)] - jj).abs() <= 1e-5 * scale,
+                            "{kind:?}"
+                        );
                     }
                     for col in 0..nb {
                         let jb: f64 = (0..n_rows)
