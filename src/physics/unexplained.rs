@@ -915,12 +915,12 @@ fn nearest_in_workspace(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)> {
 /// Each of `n` items (every `stride`-th above 12,000) paired with its
 /// nearest other by `dist` (a sum of squared differences of the `dim`
 /// coordinates `coord`; among equals the first in order), each pair once.
-/// The same pairs as comparing every two items, found by sweeping out from
-/// each item in order of the coordinate that spreads most and stopping
-/// where that coordinate's squared difference alone exceeds the nearest
-/// distance so far (a sum of non-negative terms is never below one of
-/// them, also in floating point): a quadratic search took seconds on the
-/// 11,911-pose grid.
+/// The same pairs as comparing every two items (a quadratic search took
+/// seconds on the 11,911-pose grid), found in a k-d tree: a subtree is
+/// passed over only when the squared distance to its splitting plane alone
+/// exceeds the nearest distance so far (a sum of non-negative terms is
+/// never below one of them, also in floating point), so ties are still
+/// seen and broken by order.
 fn nearest_pairs(
     n: usize,
     dim: usize,
@@ -929,56 +929,20 @@ fn nearest_pairs(
 ) -> Vec<(usize, usize)> {
     let stride = n.div_ceil(12_000).max(1);
     let pick: Vec<usize> = (0..n).step_by(stride).collect();
-    let spread = |c: usize| {
-        let (lo, hi) = pick
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &a| {
-                (lo.min(coord(a, c)), hi.max(coord(a, c)))
-            });
-        hi - lo
-    };
     let finite = pick
         .iter()
         .all(|&a| (0..dim).all(|c| coord(a, c).is_finite()));
-    let axis = (0..dim).max_by(|&x, &y| spread(x).total_cmp(&spread(y)));
-    let nearest: Vec<Option<usize>> = match axis {
-        Some(axis) if finite => {
-            let key = |a: usize| coord(a, axis);
-            let mut order = pick.clone();
-            order.sort_by(|&x, &y| key(x).total_cmp(&key(y)).then(x.cmp(&y)));
-            let mut rank = vec![0; n];
-            for (r, &a) in order.iter().enumerate() {
-                rank[a] = r;
-            }
-            pick.iter()
-                .map(|&a| {
-                    let mut best: Option<(f64, usize)> = None;
-                    let better = |d: f64, b: usize, best: &Option<(f64, usize)>| match best {
-                        None => true,
-                        Some((bd, bb)) => d.total_cmp(bd).then(b.cmp(bb)).is_lt(),
-                    };
-                    // Outward in both directions until the bound passes.
-                    for dir in [-1isize, 1] {
-                        let mut r = rank[a] as isize + dir;
-                        while r >= 0 && (r as usize) < order.len() {
-                            let b = order[r as usize];
-                            let bound = (key(a) - key(b)).powi(2);
-                            if best.is_some_and(|(bd, _)| bound > bd) {
-                                break;
-                            }
-                            let d = dist(a, b);
-                            if better(d, b, &best) {
-                                best = Some((d, b));
-                            }
-                            r += dir;
-                        }
-                    }
-                    best.map(|(_, b)| b)
-                })
-                .collect()
-        }
-        _ => pick
-            .iter()
+    let nearest: Vec<Option<usize>> = if finite && dim > 0 {
+        let tree = KdTree::build(pick.clone(), dim, &coord);
+        pick.iter()
+            .map(|&a| {
+                let mut best = None;
+                tree.nearest(0, a, &coord, &dist, &mut best);
+                best.map(|(_, b)| b)
+            })
+            .collect()
+    } else {
+        pick.iter()
             .map(|&a| {
                 pick.iter()
                     .filter(|&&b| b != a)
@@ -986,7 +950,7 @@ fn nearest_pairs(
                     .min_by(|x, y| x.0.total_cmp(&y.0))
                     .map(|(_, b)| b)
             })
-            .collect(),
+            .collect()
     };
     pick.iter()
         .zip(nearest)
@@ -994,6 +958,122 @@ fn nearest_pairs(
         .collect::<std::collections::BTreeSet<_>>()
         .into_iter()
         .collect()
+}
+
+/// A k-d tree over items (see [`nearest_pairs`]).
+struct KdTree {
+    /// The items, each node's a contiguous range.
+    items: Vec<usize>,
+    nodes: Vec<KdNode>,
+}
+
+/// A leaf (a range of `KdTree::items`) or a split: items of `left` have
+/// coordinate `axis` at most `value`, those of `right` at least `value`.
+enum KdNode {
+    Leaf(usize, usize),
+    Split {
+        axis: usize,
+        value: f64,
+        left: usize,
+        right: usize,
+    },
+}
+
+impl KdTree {
+    /// Leaves of at most this many items.
+    const LEAF: usize = 8;
+
+    fn build(items: Vec<usize>, dim: usize, coord: &impl Fn(usize, usize) -> f64) -> Self {
+        let mut tree = KdTree {
+            items,
+            nodes: Vec::new(),
+        };
+        let len = tree.items.len();
+        tree.node(0, len, dim, coord);
+        tree
+    }
+
+    /// The node over `items[lo..hi]`, split at the median of the
+    /// coordinate that spreads most; its index.
+    fn node(
+        &mut self,
+        lo: usize,
+        hi: usize,
+        dim: usize,
+        coord: &impl Fn(usize, usize) -> f64,
+    ) -> usize {
+        let at = self.nodes.len();
+        self.nodes.push(KdNode::Leaf(lo, hi));
+        if hi - lo <= Self::LEAF {
+            return at;
+        }
+        let spread = |c: usize| {
+            let v = self.items[lo..hi].iter().map(|&a| coord(a, c));
+            v.clone().fold(f64::NEG_INFINITY, f64::max) - v.fold(f64::INFINITY, f64::min)
+        };
+        let axis = (0..dim)
+            .max_by(|&x, &y| spread(x).total_cmp(&spread(y)))
+            .unwrap_or(0);
+        self.items[lo..hi].sort_by(|&x, &y| coord(x, axis).total_cmp(&coord(y, axis)));
+        let mid = (lo + hi) / 2;
+        let value = coord(self.items[mid], axis);
+        let left = self.node(lo, mid, dim, coord);
+        let right = self.node(mid, hi, dim, coord);
+        self.nodes[at] = KdNode::Split {
+            axis,
+            value,
+            left,
+            right,
+        };
+        at
+    }
+
+    /// Search node `at` for the nearest item to `a` other than itself,
+    /// updating `best` (distance, item; among equals the smaller item).
+    fn nearest(
+        &self,
+        at: usize,
+        a: usize,
+        coord: &impl Fn(usize, usize) -> f64,
+        dist: &impl Fn(usize, usize) -> f64,
+        best: &mut Option<(f64, usize)>,
+    ) {
+        match self.nodes[at] {
+            KdNode::Leaf(lo, hi) => {
+                for &b in &self.items[lo..hi] {
+                    if b == a {
+                        continue;
+                    }
+                    let d = dist(a, b);
+                    let better = match best {
+                        None => true,
+                        Some((bd, bb)) => d.total_cmp(bd).then(b.cmp(bb)).is_lt(),
+                    };
+                    if better {
+                        *best = Some((d, b));
+                    }
+                }
+            }
+            KdNode::Split {
+                axis,
+                value,
+                left,
+                right,
+            } => {
+                let x = coord(a, axis);
+                let (near, far) = if x <= value {
+                    (left, right)
+                } else {
+                    (right, left)
+                };
+                self.nearest(near, a, coord, dist, best);
+                let plane = (x - value).powi(2);
+                if best.is_none_or(|(bd, _)| plane <= bd) {
+                    self.nearest(far, a, coord, dist, best);
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]

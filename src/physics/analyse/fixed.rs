@@ -116,7 +116,7 @@ impl FixedBase {
         let nb = self.n_base;
         let k = kind.n_coef();
         let n = nb + k;
-        // Cross block (nb × k, row-major), own block (k × k, upper) and
+        // Cross block (k × nb, one base row per candidate column), own block (k × k, upper) and
         // the candidate's `Jᵀr`, per fold.
         let mut cross = vec![vec![0.0; nb * k]; FOLDS];
         let mut own = vec![vec![0.0; k * k]; FOLDS];
@@ -151,11 +151,12 @@ impl FixedBase {
             let f = fold_of[pos];
             let (cross, own, g) = (&mut cross[f], &mut own[f], &mut g[f]);
             let r = self.r[row];
-            for (a, &ra) in self.rows[row * nb..(row + 1) * nb].iter().enumerate() {
-                if ra != 0.0 {
-                    for &(c, v) in &col {
-                        cross[a * k + c] += ra * v;
-                    }
+            // Column by column over the contiguous base row (a zero there
+            // adds a zero product: the same sums).
+            let base_row = &self.rows[row * nb..(row + 1) * nb];
+            for &(c, v) in &col {
+                for (x, &ra) in cross[c * nb..(c + 1) * nb].iter_mut().zip(base_row) {
+                    *x += ra * v;
                 }
             }
             for (i, &(c, v)) in col.iter().enumerate() {
@@ -173,7 +174,7 @@ impl FixedBase {
                     if j < nb {
                         base[(i, j)]
                     } else if i < nb {
-                        cross[f][i * k + (j - nb)]
+                        cross[f][(j - nb) * nb + i]
                     } else {
                         own[f][(i - nb) * k + (j - nb)]
                     }

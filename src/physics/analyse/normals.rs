@@ -68,10 +68,10 @@ pub(super) fn normals(problem: &EffectProblem, x: &[f64], fold_of: &[usize]) -> 
     let mut g = vec![vec![0.0; n]; FOLDS];
     let mut rr = vec![0.0; FOLDS];
     let mut rows = 0;
-    let mut nz = Vec::with_capacity(n);
+    let mut runs = Vec::new();
     problem.rows(x, |pos, r, row| {
         let f = fold_of[pos];
-        accumulate(&mut up[f], &mut g[f], n, row, r, &mut nz);
+        accumulate(&mut up[f], &mut g[f], n, row, r, &mut runs);
         rr[f] += r * r;
         rows += 1;
     });
