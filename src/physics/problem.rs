@@ -101,7 +101,13 @@ impl<'a> EffectProblem<'a> {
     /// Visit every residual row at `x`: `f(position in poses, residual,
     /// derivative row)`. Residuals are predicted minus measured (mm).
     pub fn rows(&self, x: &[f64], mut f: impl FnMut(usize, f64, &[f64])) {
-        self.visit::<false>(x, |_, _| {}, |pos, r, row, _| f(pos, r, row));
+        self.visit::<false, true>(x, |_, _| {}, |pos, r, row, _| f(pos, r, row));
+    }
+
+    /// [`Self::rows`] without the derivative rows: `f(position in poses,
+    /// residual)`, the same residuals (for costs and held-out errors).
+    pub fn residuals(&self, x: &[f64], mut f: impl FnMut(usize, f64)) {
+        self.visit::<false, false>(x, |_, _| {}, |pos, r, _, _| f(pos, r));
     }
 
     /// [`Self::rows`], with what a further effect's columns need: before a
@@ -117,13 +123,14 @@ impl<'a> EffectProblem<'a> {
         pose_f: impl FnMut(usize, &PoseFrame),
         f: impl FnMut(usize, f64, &[f64], RowDir),
     ) {
-        self.visit::<true>(x, pose_f, f);
+        self.visit::<true, true>(x, pose_f, f);
     }
 
-    /// The one pass behind [`Self::rows`] and [`Self::rows_framed`]; with
-    /// `FRAMES` false no frame is built (the thermal derivative only when
-    /// an effect uses it).
-    fn visit<const FRAMES: bool>(
+    /// The one pass behind [`Self::rows`], [`Self::rows_framed`] and
+    /// [`Self::residuals`]; with `FRAMES` false no frame is built (the
+    /// thermal derivative only when an effect uses it), with `DERIV` false
+    /// the derivative row is left unfilled (the residuals are the same).
+    fn visit<const FRAMES: bool, const DERIV: bool>(
         &self,
         x: &[f64],
         mut pose_f: impl FnMut(usize, &PoseFrame),
@@ -173,7 +180,7 @@ impl<'a> EffectProblem<'a> {
             };
             let m = self.data.n_strings;
             let mut c0 = 0;
-            for (e, buf) in effects.iter().zip(&bases) {
+            for (e, buf) in effects.iter().zip(&bases).filter(|_| DERIV) {
                 for c in 0..e.kind.n_coef() {
                     let mut v = dlen * buf.thermal[c];
                     for j in 0..n {
@@ -213,7 +220,7 @@ impl<'a> EffectProblem<'a> {
                             delta.dl[k],
                             readings[k],
                         );
-                        for (col, &fi) in self.free.iter().enumerate() {
+                        for (col, &fi) in self.free.iter().enumerate().filter(|_| DERIV) {
                             row[col] = if fi < g {
                                 u.dot(&jac.d_params[fi])
                             } else if fi < g + l.n_strings {
@@ -222,7 +229,7 @@ impl<'a> EffectProblem<'a> {
                                 -1.0
                             };
                         }
-                        for c in 0..nc {
+                        for c in (0..nc).filter(|_| DERIV) {
                             row[nf + c] = u.dot(&dt[c]) + dl[c * m + k];
                         }
                         f(pos, res, &row, RowDir::String { u, k });
@@ -231,10 +238,10 @@ impl<'a> EffectProblem<'a> {
                 Measurement::Point(meas) => {
                     for comp in 0..3 {
                         let res = t[comp] - meas[comp];
-                        for (col, &fi) in self.free.iter().enumerate() {
+                        for (col, &fi) in self.free.iter().enumerate().filter(|_| DERIV) {
                             row[col] = if fi < g { jac.d_params[fi][comp] } else { 0.0 };
                         }
-                        for c in 0..nc {
+                        for c in (0..nc).filter(|_| DERIV) {
                             row[nf + c] = dt[c][comp];
                         }
                         f(pos, res, &row, RowDir::Point { comp });
@@ -276,7 +283,7 @@ impl LeastSquares for EffectProblem<'_> {
 
     fn cost(&self, x: &[f64]) -> f64 {
         let mut c = 0.0;
-        self.rows(x, |_, r, _| c += r * r);
+        self.residuals(x, |_, r| c += r * r);
         0.5 * c
     }
 

@@ -258,7 +258,7 @@ fn train_residuals(
     let rpp = problem.rows_per_pose();
     let mut res = vec![0.0; obs.train.len() * rpp];
     let mut at = 0;
-    problem.rows(&x, |_, r, _| {
+    problem.residuals(&x, |_, r| {
         res[at] = r;
         at += 1;
     });

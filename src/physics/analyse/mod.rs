@@ -278,7 +278,7 @@ pub(super) fn reading_errors(
     let problem =
         EffectProblem::of_observations(obs, ctx, obs.test.clone(), p, vec![], effects.to_vec());
     let mut out = vec![(0.0, 0usize); obs.test.len()];
-    problem.rows(&problem.x0(), |pos, r, _| {
+    problem.residuals(&problem.x0(), |pos, r| {
         out[pos].0 += r * r;
         out[pos].1 += 1;
     });
