@@ -24,7 +24,8 @@
 //!    report an `unexplained` finding saying where.
 //!
 //! One file per step: `candidates` (what a round may add), `normals`
-//! (the linearised problem and its subset solves), `scoring` (each
+//! (the linearised problem and its subset solves), `fixed` (the model
+//! linearised once, candidates fitted against it), `scoring` (each
 //! candidate's chi-square drop), `proposals` (singles and pairs, ranked;
 //! a scanned change point refined), `trial` (the proposals tried in rank
 //! order), `gates` (cross-validation, the held-out paired test, the
