@@ -665,18 +665,25 @@ impl Context {
         };
         for e in effects {
             self.basis(&e.kind, i, buf);
-            for (c, &v) in e.coef.iter().enumerate() {
-                for j in 0..n {
-                    d.dq[j] += v * buf.dq[c * n + j];
-                }
-                d.thermal += v * buf.thermal[c];
-                for k in 0..m {
-                    d.dl[k] += v * buf.dl[c * m + k];
-                }
-                for r in 0..3 {
-                    d.dp[r] += v * buf.dp[c * 3 + r];
-                }
-            }
+            d.add(&e.coef, buf, n, m);
+        }
+        d
+    }
+
+    /// [`Self::apply`] from each effect's basis at the pose, already made
+    /// (`bases[e]` of `effects[e]`, as [`Self::basis`] gives it): the same
+    /// sums, for a caller that needs the bases too.
+    pub fn apply_bases(&self, effects: &[EffectModel], bases: &[Basis]) -> Delta {
+        let n = self.n_joints;
+        let m = self.anchors.len();
+        let mut d = Delta {
+            dq: vec![0.0; n],
+            thermal: 0.0,
+            dl: vec![0.0; m],
+            dp: Vector3::zeros(),
+        };
+        for (e, buf) in effects.iter().zip(bases) {
+            d.add(&e.coef, buf, n, m);
         }
         d
     }
@@ -728,4 +735,23 @@ pub struct Delta {
     pub dl: Vec<f64>,
     /// Displacement of T relative to the rig (mm, rig frame).
     pub dp: Vector3<f64>,
+}
+
+impl Delta {
+    /// Add one effect of coefficients `coef` and basis `buf` (`n` joints,
+    /// `m` strings).
+    fn add(&mut self, coef: &[f64], buf: &Basis, n: usize, m: usize) {
+        for (c, &v) in coef.iter().enumerate() {
+            for j in 0..n {
+                self.dq[j] += v * buf.dq[c * n + j];
+            }
+            self.thermal += v * buf.thermal[c];
+            for k in 0..m {
+                self.dl[k] += v * buf.dl[c * m + k];
+            }
+            for r in 0..3 {
+                self.dp[r] += v * buf.dp[c * 3 + r];
+            }
+        }
+    }
 }

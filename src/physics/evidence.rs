@@ -435,7 +435,7 @@ impl Fitted<'_> {
             EffectProblem::of_observations(obs, ctx, idx.to_vec(), p, vec![], self.without.clone());
         let mut res = vec![0.0; idx.len() * m];
         let mut seen = vec![0usize; idx.len()];
-        problem.rows(&problem.x0(), |pos, r, _| {
+        problem.residuals(&problem.x0(), |pos, r| {
             if seen[pos] < m {
                 res[pos * m + seen[pos]] = r;
             }

@@ -101,6 +101,41 @@ impl<'a> EffectProblem<'a> {
     /// Visit every residual row at `x`: `f(position in poses, residual,
     /// derivative row)`. Residuals are predicted minus measured (mm).
     pub fn rows(&self, x: &[f64], mut f: impl FnMut(usize, f64, &[f64])) {
+        self.visit::<false, true>(x, |_, _| {}, |pos, r, row, _| f(pos, r, row));
+    }
+
+    /// [`Self::rows`] without the derivative rows: `f(position in poses,
+    /// residual)`, the same residuals (for costs and held-out errors).
+    pub fn residuals(&self, x: &[f64], mut f: impl FnMut(usize, f64)) {
+        self.visit::<false, false>(x, |_, _| {}, |pos, r, _, _| f(pos, r));
+    }
+
+    /// [`Self::rows`], with what a further effect's columns need: before a
+    /// pose's rows, `pose_f(position in poses, frame)` (T's derivatives by
+    /// each joint angle and by the thermal multiplier), and with each row
+    /// its [`RowDir`]. A further effect's column at a row is then
+    /// [`PoseFrame::column`] (the same arithmetic as the rows' own effect
+    /// columns), so candidates can be fitted against a linearisation made
+    /// once (`physics::analyse`'s fixed base).
+    pub fn rows_framed(
+        &self,
+        x: &[f64],
+        pose_f: impl FnMut(usize, &PoseFrame),
+        f: impl FnMut(usize, f64, &[f64], RowDir),
+    ) {
+        self.visit::<true, true>(x, pose_f, f);
+    }
+
+    /// The one pass behind [`Self::rows`], [`Self::rows_framed`] and
+    /// [`Self::residuals`]; with `FRAMES` false no frame is built (the
+    /// thermal derivative only when an effect uses it), with `DERIV` false
+    /// the derivative row is left unfilled (the residuals are the same).
+    fn visit<const FRAMES: bool, const DERIV: bool>(
+        &self,
+        x: &[f64],
+        mut pose_f: impl FnMut(usize, &PoseFrame),
+        mut f: impl FnMut(usize, f64, &[f64], RowDir),
+    ) {
         let (p, effects) = self.unpack(x);
         let l = self.chain.layout;
         let g = l.n_geometric();
@@ -108,7 +143,6 @@ impl<'a> EffectProblem<'a> {
         let ncol = x.len();
         let mut row = vec![0.0; ncol];
         let mut jac: PointJacobian = self.chain.new_jacobian();
-        let mut buf = Basis::default();
         let mut pp = p.clone();
         let mut q = vec![0.0; n];
         let thermal_used = effects
@@ -118,9 +152,16 @@ impl<'a> EffectProblem<'a> {
         let nc = ncol - self.free.len();
         let mut dt = vec![Vector3::zeros(); nc];
         let mut dl = vec![0.0; nc * self.data.n_strings.max(1)];
+        let mut frame = PoseFrame::default();
+        let mut bases = vec![Basis::default(); effects.len()];
         for (pos, &i) in self.poses.iter().enumerate() {
             let pose = &self.data.poses[i];
-            let delta = self.ctx.apply(&effects, i, &mut buf);
+            // Each effect's basis once: the delta and the columns both
+            // read it.
+            for (e, b) in effects.iter().zip(bases.iter_mut()) {
+                self.ctx.basis(&e.kind, i, b);
+            }
+            let delta = self.ctx.apply_bases(&effects, &bases);
             pp.copy_from_slice(&p);
             self.ctx.apply_thermal(&mut pp, delta.thermal);
             for j in 0..n {
@@ -129,7 +170,7 @@ impl<'a> EffectProblem<'a> {
             self.chain
                 .point_jacobian(&pp, &q, OutputFrame::Rig, &mut jac);
             let t = jac.point + delta.dp;
-            let dlen = if thermal_used {
+            let dlen = if thermal_used || FRAMES {
                 self.ctx
                     .lengths
                     .iter()
@@ -139,8 +180,7 @@ impl<'a> EffectProblem<'a> {
             };
             let m = self.data.n_strings;
             let mut c0 = 0;
-            for e in &effects {
-                self.ctx.basis(&e.kind, i, &mut buf);
+            for (e, buf) in effects.iter().zip(&bases).filter(|_| DERIV) {
                 for c in 0..e.kind.n_coef() {
                     let mut v = dlen * buf.thermal[c];
                     for j in 0..n {
@@ -157,6 +197,14 @@ impl<'a> EffectProblem<'a> {
                 }
                 c0 += e.kind.n_coef();
             }
+            if FRAMES {
+                frame.d_theta.clear();
+                frame
+                    .d_theta
+                    .extend((0..n).map(|j| jac.d_params[l.joint(j, JointParam::Theta)]));
+                frame.dlen = dlen;
+                pose_f(pos, &frame);
+            }
             let nf = self.free.len();
             match &pose.measurement {
                 Measurement::Strings(readings) => {
@@ -172,7 +220,7 @@ impl<'a> EffectProblem<'a> {
                             delta.dl[k],
                             readings[k],
                         );
-                        for (col, &fi) in self.free.iter().enumerate() {
+                        for (col, &fi) in self.free.iter().enumerate().filter(|_| DERIV) {
                             row[col] = if fi < g {
                                 u.dot(&jac.d_params[fi])
                             } else if fi < g + l.n_strings {
@@ -181,22 +229,22 @@ impl<'a> EffectProblem<'a> {
                                 -1.0
                             };
                         }
-                        for c in 0..nc {
+                        for c in (0..nc).filter(|_| DERIV) {
                             row[nf + c] = u.dot(&dt[c]) + dl[c * m + k];
                         }
-                        f(pos, res, &row);
+                        f(pos, res, &row, RowDir::String { u, k });
                     }
                 }
                 Measurement::Point(meas) => {
                     for comp in 0..3 {
                         let res = t[comp] - meas[comp];
-                        for (col, &fi) in self.free.iter().enumerate() {
+                        for (col, &fi) in self.free.iter().enumerate().filter(|_| DERIV) {
                             row[col] = if fi < g { jac.d_params[fi][comp] } else { 0.0 };
                         }
-                        for c in 0..nc {
+                        for c in (0..nc).filter(|_| DERIV) {
                             row[nf + c] = dt[c][comp];
                         }
-                        f(pos, res, &row);
+                        f(pos, res, &row, RowDir::Point { comp });
                     }
                 }
             }
@@ -235,7 +283,7 @@ impl LeastSquares for EffectProblem<'_> {
 
     fn cost(&self, x: &[f64]) -> f64 {
         let mut c = 0.0;
-        self.rows(x, |_, r, _| c += r * r);
+        self.residuals(x, |_, r| c += r * r);
         0.5 * c
     }
 
@@ -244,9 +292,10 @@ impl LeastSquares for EffectProblem<'_> {
         let mut upper = vec![0.0; n * n];
         let mut g = vec![0.0; n];
         let mut cost = 0.0;
+        let mut runs = Vec::new();
         self.rows(x, |_, r, row| {
             cost += r * r;
-            accumulate(&mut upper, &mut g, n, row, r);
+            accumulate(&mut upper, &mut g, n, row, r, &mut runs);
         });
         for a in 0..n {
             jtr[a] = g[a];
@@ -259,18 +308,141 @@ impl LeastSquares for EffectProblem<'_> {
     }
 }
 
-/// Add `row rowᵀ` (upper triangle) and `row · r` to flat accumulators.
-#[inline]
-pub fn accumulate(upper: &mut [f64], g: &mut [f64], n: usize, row: &[f64], r: f64) {
-    // Rows are sparse where effects are local (a change point, a
-    // data-driven correction's two knots): visit the nonzeros only.
-    let nz: Vec<usize> = (0..n).filter(|&a| row[a] != 0.0).collect();
-    for (k, &a) in nz.iter().enumerate() {
-        let ra = row[a];
-        g[a] += ra * r;
-        let base = a * n;
-        for &b in &nz[k..] {
-            upper[base + b] += ra * row[b];
+/// What a residual row measures: string `k`'s length along the unit
+/// vector `u` from its anchor to T (rig frame), or T's coordinate `comp`.
+#[derive(Debug, Clone, Copy)]
+pub enum RowDir {
+    /// A string reading.
+    String {
+        /// Unit vector from the anchor to T.
+        u: Vector3<f64>,
+        /// The string.
+        k: usize,
+    },
+    /// A coordinate of a measured point.
+    Point {
+        /// 0, 1 or 2.
+        comp: usize,
+    },
+}
+
+/// What an effect's columns need at one pose, beside its basis: T's
+/// derivative (rig frame, mm) by each joint's angle and by the thermal
+/// multiplier of the nominal lengths.
+#[derive(Debug, Clone, Default)]
+pub struct PoseFrame {
+    /// `dT/dθ_j` for every joint `j` (mm/rad).
+    pub d_theta: Vec<Vector3<f64>>,
+    /// `dT/d(thermal multiplier)` (mm).
+    pub dlen: Vector3<f64>,
+}
+
+impl PoseFrame {
+    /// T's derivative by coefficient `c` of an effect whose basis at this
+    /// pose is `buf` (as [`EffectProblem::rows`] forms it).
+    pub fn d_point(&self, buf: &Basis, c: usize) -> Vector3<f64> {
+        let n = self.d_theta.len();
+        let mut v = self.dlen * buf.thermal[c];
+        for j in 0..n {
+            let b = buf.dq[c * n + j];
+            if b != 0.0 {
+                v += self.d_theta[j] * b;
+            }
         }
+        v + Vector3::new(buf.dp[c * 3], buf.dp[c * 3 + 1], buf.dp[c * 3 + 2])
+    }
+
+    /// The column of coefficient `c` at a row `dir`, from its
+    /// [`Self::d_point`] `dt` and the basis `buf` of `m` strings: the same
+    /// value [`EffectProblem::rows`] gives that column.
+    pub fn column(dir: RowDir, dt: &Vector3<f64>, buf: &Basis, c: usize, m: usize) -> f64 {
+        match dir {
+            RowDir::String { u, k } => u.dot(dt) + buf.dl[c * m + k],
+            RowDir::Point { comp } => dt[comp],
+        }
+    }
+}
+
+/// Add `row rowᵀ` (upper triangle) and `row · r` to flat accumulators.
+/// `runs` is scratch space (reused between rows: no allocation per row).
+#[inline]
+pub fn accumulate(
+    upper: &mut [f64],
+    g: &mut [f64],
+    n: usize,
+    row: &[f64],
+    r: f64,
+    runs: &mut Vec<(usize, usize)>,
+) {
+    // Rows are sparse where effects are local (a change point, a
+    // data-driven correction's two knots): visit the nonzeros only, as
+    // runs of consecutive columns (the geometry's are one run), so the
+    // inner loops are over contiguous slices. Each entry adds the same
+    // products in the same row order as an entry-by-entry loop.
+    runs.clear();
+    let mut a = 0;
+    while a < n {
+        if row[a] == 0.0 {
+            a += 1;
+            continue;
+        }
+        let start = a;
+        while a < n && row[a] != 0.0 {
+            a += 1;
+        }
+        runs.push((start, a));
+    }
+    for (k, &(s, e)) in runs.iter().enumerate() {
+        for a in s..e {
+            let ra = row[a];
+            g[a] += ra * r;
+            let urow = &mut upper[a * n..(a + 1) * n];
+            for (u, &rb) in urow[a..e].iter_mut().zip(&row[a..e]) {
+                *u += ra * rb;
+            }
+            for &(s2, e2) in &runs[k + 1..] {
+                for (u, &rb) in urow[s2..e2].iter_mut().zip(&row[s2..e2]) {
+                    *u += ra * rb;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::accumulate;
+
+    /// The run-wise accumulation gives exactly the sums of an entry-by-
+    /// entry loop over the nonzeros, on rows with dense and sparse parts.
+    #[test]
+    fn accumulate_equals_the_entrywise_sums() {
+        let mut rng = crate::rng::Rng::new(5);
+        let n = 23;
+        let (mut up, mut g) = (vec![0.0; n * n], vec![0.0; n]);
+        let (mut up0, mut g0) = (vec![0.0; n * n], vec![0.0; n]);
+        let mut runs = Vec::new();
+        for _ in 0..200 {
+            let row: Vec<f64> = (0..n)
+                .map(|i| {
+                    if i < 8 || rng.uniform() < 0.2 {
+                        rng.normal()
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            let r = rng.normal();
+            accumulate(&mut up, &mut g, n, &row, r, &mut runs);
+            for a in (0..n).filter(|&a| row[a] != 0.0) {
+                g0[a] += row[a] * r;
+                for b in (a..n).filter(|&b| row[b] != 0.0) {
+                    up0[a * n + b] += row[a] * row[b];
+                }
+            }
+        }
+        assert_eq!(up, up0);
+        assert_eq!(g, g0);
+        assert!(up.iter().any(|&v| v != 0.0));
     }
 }

@@ -20,6 +20,7 @@
 use nalgebra::DMatrix;
 
 use super::candidates::Candidate;
+use super::fixed::{FixedBase, with_candidate};
 use super::gates::{self, Before};
 use super::magnitude::magnitude;
 use super::normals::{Normals, cv_sse, normals, solve_subset, unaliased};
@@ -204,41 +205,33 @@ struct Linearised<'a> {
 }
 
 /// The candidate `kind` linearised with the geometry and the accepted
-/// effects; `None` when all its columns are aliased or it does not solve.
-fn linearise<'a>(inputs: &'a Inputs, state: &State, kind: &Kind) -> Option<Linearised<'a>> {
-    let Inputs {
-        obs,
-        ctx,
-        free,
-        fold_of,
-    } = inputs;
-    let mut effects = state.accepted.clone();
-    effects.push(EffectModel::zero(kind.clone()));
+/// effects (their rows made once, in `fixed`); `None` when all its columns
+/// are aliased or it does not solve.
+fn linearise<'a>(
+    inputs: &'a Inputs,
+    fixed: &FixedBase,
+    state: &State,
+    kind: &Kind,
+) -> Option<Linearised<'a>> {
+    let Inputs { obs, ctx, free, .. } = inputs;
     let problem = EffectProblem::of_observations(
         obs,
         ctx,
         obs.train.clone(),
         &state.p,
         free.clone(),
-        effects,
+        with_candidate(&state.accepted, kind),
     );
-    let nm = normals(&problem, &problem.x0(), fold_of);
+    let nm = fixed.with(inputs, kind);
     let (a, b, rr) = nm.total();
-    let n_base = free.len()
-        + state
-            .accepted
-            .iter()
-            .map(|e| e.kind.n_coef())
-            .sum::<usize>();
-    let base: Vec<usize> = (0..n_base).collect();
-    let cols = own_columns(&a, &base, kind, n_base);
+    let base: Vec<usize> = (0..fixed.n_base).collect();
+    let cols = own_columns(&a, &base, kind, fixed.n_base);
     if cols.is_empty() {
         return None;
     }
     let mut all = base.clone();
     all.extend(&cols);
     let cv = cv_sse(&nm, &a, &b, &all);
-    let cv0 = cv_sse(&nm, &a, &b, &base);
     Some(Linearised {
         problem,
         nm,
@@ -248,7 +241,7 @@ fn linearise<'a>(inputs: &'a Inputs, state: &State, kind: &Kind) -> Option<Linea
         base,
         cols,
         cv,
-        cv0,
+        cv0: fixed.cv0,
     })
 }
 
@@ -258,16 +251,17 @@ fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: 
     // Ranked by cross-validation; only the scores are kept (the normal
     // equations of a long session's many-knot candidates are large), and
     // the best that also solves in full is linearised again.
+    let fixed = FixedBase::new(inputs, state);
     let mut ranked: Vec<(Kind, f64)> = families
         .iter()
         .flatten()
-        .filter_map(|k| linearise(inputs, state, k).map(|l| (k.clone(), l.cv, l.cv0)))
+        .filter_map(|k| linearise(inputs, &fixed, state, k).map(|l| (k.clone(), l.cv, l.cv0)))
         .filter(|(_, cv, cv0)| cv.is_finite() && cv < cv0)
         .map(|(k, cv, _)| (k, cv))
         .collect();
     ranked.sort_by(|x, y| x.1.total_cmp(&y.1));
     let Some((kind, lin, (p_new, eff_new, fit))) = ranked.into_iter().find_map(|(k, _)| {
-        let l = linearise(inputs, state, &k)?;
+        let l = linearise(inputs, &fixed, state, &k)?;
         let s = stepped(&l)?;
         Some((k, l, s))
     }) else {

@@ -24,7 +24,8 @@
 //!    report an `unexplained` finding saying where.
 //!
 //! One file per step: `candidates` (what a round may add), `normals`
-//! (the linearised problem and its subset solves), `scoring` (each
+//! (the linearised problem and its subset solves), `fixed` (the model
+//! linearised once, candidates fitted against it), `scoring` (each
 //! candidate's chi-square drop), `proposals` (singles and pairs, ranked;
 //! a scanned change point refined), `trial` (the proposals tried in rank
 //! order), `gates` (cross-validation, the held-out paired test, the
@@ -37,6 +38,7 @@ mod candidates;
 mod data_driven;
 mod findings;
 mod finish;
+mod fixed;
 mod gates;
 mod magnitude;
 mod naming;
@@ -277,7 +279,7 @@ pub(super) fn reading_errors(
     let problem =
         EffectProblem::of_observations(obs, ctx, obs.test.clone(), p, vec![], effects.to_vec());
     let mut out = vec![(0.0, 0usize); obs.test.len()];
-    problem.rows(&problem.x0(), |pos, r, _| {
+    problem.residuals(&problem.x0(), |pos, r| {
         out[pos].0 += r * r;
         out[pos].1 += 1;
     });

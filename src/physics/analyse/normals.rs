@@ -33,10 +33,13 @@ pub(super) fn train_normals(
 
 /// Normal equations of a column set, split by fold.
 pub(super) struct Normals {
-    n: usize,
-    a: Vec<DMatrix<f64>>,
-    b: Vec<Vec<f64>>,
-    rr: Vec<f64>,
+    pub(super) n: usize,
+    /// `JᵀJ` of each fold.
+    pub(super) a: Vec<DMatrix<f64>>,
+    /// `Jᵀr` of each fold.
+    pub(super) b: Vec<Vec<f64>>,
+    /// `rᵀr` of each fold.
+    pub(super) rr: Vec<f64>,
     pub(super) rows: usize,
 }
 
@@ -65,9 +68,10 @@ pub(super) fn normals(problem: &EffectProblem, x: &[f64], fold_of: &[usize]) -> 
     let mut g = vec![vec![0.0; n]; FOLDS];
     let mut rr = vec![0.0; FOLDS];
     let mut rows = 0;
+    let mut runs = Vec::new();
     problem.rows(x, |pos, r, row| {
         let f = fold_of[pos];
-        accumulate(&mut up[f], &mut g[f], n, row, r);
+        accumulate(&mut up[f], &mut g[f], n, row, r, &mut runs);
         rr[f] += r * r;
         rows += 1;
     });

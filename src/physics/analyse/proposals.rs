@@ -6,10 +6,10 @@
 use super::Inputs;
 use super::State;
 use super::candidates::{Candidate, MIN_SEGMENT_POSES, STEP_GRID, same_slot, sorted_train_times};
-use super::normals::{solve_subset, train_normals};
+use super::fixed::FixedBase;
+use super::normals::solve_subset;
 use super::scoring::Scores;
-use crate::identify::Observations;
-use crate::physics::effects::{Context, EffectModel, Kind};
+use crate::physics::effects::{EffectModel, Kind};
 
 /// Leading candidates for which a jointly tested partner is sought.
 const PAIR_LEADS: usize = 4;
@@ -123,7 +123,7 @@ fn best_partner(s: &Scores, w: usize) -> Option<Proposal> {
 /// between its grid neighbours, with the partner (if any) fitted
 /// alongside: the coarse grid places a step only roughly.
 pub(super) fn refine_change_points(inputs: &Inputs, state: &State, cs: &mut [Candidate]) {
-    let Inputs { obs, ctx, free, .. } = inputs;
+    let ctx = &inputs.ctx;
     for i in 0..cs.len() {
         if let Some(t0_s) = cs[i].kind.change_time_s() {
             let mut ctx_eff = state.accepted.clone();
@@ -133,7 +133,7 @@ pub(super) fn refine_change_points(inputs: &Inputs, state: &State, cs: &mut [Can
                     .filter(|(j, _)| *j != i)
                     .map(|(_, c)| EffectModel::zero(c.kind.clone())),
             );
-            let t0 = refine_step(obs, ctx, &state.p, free, &ctx_eff, &cs[i].kind, t0_s);
+            let t0 = refine_step(inputs, &state.p, ctx_eff, &cs[i].kind, t0_s);
             cs[i].kind = cs[i].kind.with_change_time(t0);
             cs[i].what = match cs[i].kind.sensor() {
                 Some(k) => format!("a change {} on string {}", ctx.when(t0), k + 1),
@@ -144,16 +144,16 @@ pub(super) fn refine_change_points(inputs: &Inputs, state: &State, cs: &mut [Can
 }
 
 /// Scan the change point of an anchor step around `t0` over the train
-/// pose times between its coarse-grid neighbours.
+/// pose times between its coarse-grid neighbours. Each position's step is
+/// fitted against the model (`p` with `accepted`) linearised once.
 fn refine_step(
-    obs: &Observations,
-    ctx: &Context,
+    inputs: &Inputs,
     p: &[f64],
-    free: &[usize],
-    accepted: &[EffectModel],
+    accepted: Vec<EffectModel>,
     kind: &Kind,
     t0: f64,
 ) -> f64 {
+    let Inputs { obs, ctx, .. } = inputs;
     let times = sorted_train_times(obs, ctx);
     let n = times.len();
     let pos = times.iter().position(|&t| t > t0).unwrap_or(n - 1);
@@ -166,21 +166,12 @@ fn refine_step(
     // At most 24 evaluations: a finer grid inside the bracket.
     let stride = ((hi - lo) / 24).max(1);
     let mut best = (f64::NEG_INFINITY, t0);
-    let n_acc: usize = accepted.iter().map(|e| e.kind.n_coef()).sum();
-    let base: Vec<usize> = (0..free.len() + n_acc).collect();
-    let fold0 = vec![0usize; obs.train.len()];
+    let fixed = FixedBase::of(inputs, p, accepted, vec![0usize; obs.train.len()]);
+    let base: Vec<usize> = (0..fixed.n_base).collect();
     let mut at = lo;
     while at <= hi {
         let t = 0.5 * (times[at - 1] + times[at]);
-        let nm = train_normals(
-            obs,
-            ctx,
-            p,
-            free,
-            accepted,
-            [kind.with_change_time(t)],
-            &fold0,
-        );
+        let nm = fixed.with(inputs, &kind.with_change_time(t));
         let (a, b, _) = nm.total();
         let mut cols = base.clone();
         let nb = base.len();

@@ -1,0 +1,405 @@
+//! The model so far linearised once, and candidates fitted against it.
+//!
+//! A data-driven correction is tried at up to six targets times eight or
+//! more knot counts at each located place, each beside the same geometry
+//! and accepted effects. Linearising the whole model for every candidate
+//! (the robot's Jacobian at every train pose) cost most of the analysis of
+//! a long session. Here the train rows of the model so far are visited
+//! once: their residuals, their derivative rows and, per pose, T's
+//! derivatives by each joint angle ([`PoseFrame`]). A candidate's columns
+//! are then formed from its basis at each pose by the same arithmetic as
+//! [`EffectProblem::rows`], and only its own blocks of the normal
+//! equations (against the base columns and against itself) are
+//! accumulated; the base block is the one made once. The normal
+//! equations are the same numbers, summed in the same order, as a full
+//! pass with the candidate appended at zero (a candidate at zero does not
+//! move the model).
+
+use nalgebra::DMatrix;
+
+use super::normals::{FOLDS, Normals, cv_sse, normals};
+use super::{Inputs, State};
+use crate::physics::effects::{Basis, EffectModel, Kind};
+use crate::physics::problem::{EffectProblem, PoseFrame, RowDir};
+
+/// The train rows of the model so far (geometry and accepted effects at
+/// their fitted values), linearised once.
+pub(super) struct FixedBase {
+    /// Columns of the model so far (free geometry, then the accepted
+    /// effects' coefficients).
+    pub(super) n_base: usize,
+    /// Its normal equations, by fold.
+    pub(super) nm: Normals,
+    /// Its cross-validated SSE (the score a candidate must beat; made by
+    /// [`Self::new`] only).
+    pub(super) cv0: f64,
+    /// Strings of the rig (0 for points).
+    m: usize,
+    /// Fold of each train position.
+    fold_of: Vec<usize>,
+    /// Per train pose (position in `obs.train`): its frame.
+    frames: Vec<PoseFrame>,
+    /// Per row: the train position of its pose, its residual, what it
+    /// measures and its `n_base` derivatives.
+    row_pos: Vec<usize>,
+    r: Vec<f64>,
+    dirs: Vec<RowDir>,
+    rows: Vec<f64>,
+}
+
+impl FixedBase {
+    /// One pass over the train rows at `state`'s model, split by the
+    /// cross-validation folds.
+    pub(super) fn new(inputs: &Inputs, state: &State) -> Self {
+        let mut fixed = Self::of(
+            inputs,
+            &state.p,
+            state.accepted.clone(),
+            inputs.fold_of.clone(),
+        );
+        let (a, b, _) = fixed.nm.total();
+        let base: Vec<usize> = (0..fixed.n_base).collect();
+        fixed.cv0 = cv_sse(&fixed.nm, &a, &b, &base);
+        fixed
+    }
+
+    /// One pass over the train rows of geometry `p` with `effects`, the
+    /// rows split by `fold_of` (fold of each train position).
+    pub(super) fn of(
+        inputs: &Inputs,
+        p: &[f64],
+        effects: Vec<EffectModel>,
+        fold_of: Vec<usize>,
+    ) -> Self {
+        let Inputs { obs, ctx, free, .. } = inputs;
+        let problem =
+            EffectProblem::of_observations(obs, ctx, obs.train.clone(), p, free.clone(), effects);
+        let x0 = problem.x0();
+        let n_base = x0.len();
+        let nm = normals(&problem, &x0, &fold_of);
+        let mut frames = vec![PoseFrame::default(); obs.train.len()];
+        let n_rows = nm.rows;
+        let mut row_pos = Vec::with_capacity(n_rows);
+        let mut r = Vec::with_capacity(n_rows);
+        let mut dirs = Vec::with_capacity(n_rows);
+        let mut rows = Vec::with_capacity(n_rows * n_base);
+        problem.rows_framed(
+            &x0,
+            |pos, frame| frames[pos].clone_from(frame),
+            |pos, res, row, dir| {
+                row_pos.push(pos);
+                r.push(res);
+                dirs.push(dir);
+                rows.extend_from_slice(row);
+            },
+        );
+        FixedBase {
+            n_base,
+            nm,
+            cv0: f64::NAN,
+            m: obs.data.n_strings,
+            fold_of,
+            frames,
+            row_pos,
+            r,
+            dirs,
+            rows,
+        }
+    }
+
+    /// The normal equations, by fold, of the model so far with `kind`
+    /// appended at zero: its columns after the base's. The same as
+    /// [`normals`] of that augmented problem.
+    pub(super) fn with(&self, inputs: &Inputs, kind: &Kind) -> Normals {
+        let Inputs { obs, ctx, .. } = inputs;
+        let fold_of = &self.fold_of;
+        let nb = self.n_base;
+        let k = kind.n_coef();
+        let n = nb + k;
+        // Cross block (k × nb, one base row per candidate column), own block (k × k, upper) and
+        // the candidate's `Jᵀr`, per fold.
+        let mut cross = vec![vec![0.0; nb * k]; FOLDS];
+        let mut own = vec![vec![0.0; k * k]; FOLDS];
+        let mut g = vec![vec![0.0; k]; FOLDS];
+        let mut buf = Basis::default();
+        // The coefficients live at the current pose and T's derivative by
+        // each; then their columns at the current row.
+        let mut live: Vec<(usize, nalgebra::Vector3<f64>)> = Vec::new();
+        let mut col: Vec<(usize, f64)> = Vec::new();
+        let mut last = usize::MAX;
+        for (row, &pos) in self.row_pos.iter().enumerate() {
+            if pos != last {
+                last = pos;
+                ctx.basis(kind, obs.train[pos], &mut buf);
+                live.clear();
+                let frame = &self.frames[pos];
+                live.extend(
+                    (0..k)
+                        .filter(|&c| touches(&buf, c, frame.d_theta.len(), self.m))
+                        .map(|c| (c, frame.d_point(&buf, c))),
+                );
+            }
+            col.clear();
+            col.extend(
+                live.iter()
+                    .map(|(c, dt)| (*c, PoseFrame::column(self.dirs[row], dt, &buf, *c, self.m)))
+                    .filter(|&(_, v)| v != 0.0),
+            );
+            if col.is_empty() {
+                continue;
+            }
+            let f = fold_of[pos];
+            let (cross, own, g) = (&mut cross[f], &mut own[f], &mut g[f]);
+            let r = self.r[row];
+            // Column by column over the contiguous base row (a zero there
+            // adds a zero product: the same sums).
+            let base_row = &self.rows[row * nb..(row + 1) * nb];
+            for &(c, v) in &col {
+                for (x, &ra) in cross[c * nb..(c + 1) * nb].iter_mut().zip(base_row) {
+                    *x += ra * v;
+                }
+            }
+            for (i, &(c, v)) in col.iter().enumerate() {
+                g[c] += v * r;
+                for &(c2, v2) in &col[i..] {
+                    own[c * k + c2] += v * v2;
+                }
+            }
+        }
+        let a = (0..FOLDS)
+            .map(|f| {
+                let base = &self.nm.a[f];
+                DMatrix::from_fn(n, n, |i, j| {
+                    let (i, j) = if i <= j { (i, j) } else { (j, i) };
+                    if j < nb {
+                        base[(i, j)]
+                    } else if i < nb {
+                        cross[f][(j - nb) * nb + i]
+                    } else {
+                        own[f][(i - nb) * k + (j - nb)]
+                    }
+                })
+            })
+            .collect();
+        let b = (0..FOLDS)
+            .map(|f| {
+                let mut b = self.nm.b[f].clone();
+                b.extend_from_slice(&g[f]);
+                b
+            })
+            .collect();
+        Normals {
+            n,
+            a,
+            b,
+            rr: self.nm.rr.clone(),
+            rows: self.nm.rows,
+        }
+    }
+}
+
+/// Whether coefficient `c` of a basis over `n` joints and `m` strings
+/// moves anything at this pose (a local correction's other knots do not).
+fn touches(buf: &Basis, c: usize, n: usize, m: usize) -> bool {
+    buf.thermal[c] != 0.0
+        || buf.dq[c * n..(c + 1) * n].iter().any(|&v| v != 0.0)
+        || buf.dl[c * m..(c + 1) * m].iter().any(|&v| v != 0.0)
+        || buf.dp[c * 3..(c + 1) * 3].iter().any(|&v| v != 0.0)
+}
+
+/// The accepted effects with `kind` appended at zero: the effect list a
+/// candidate is linearised with.
+pub(super) fn with_candidate(accepted: &[EffectModel], kind: &Kind) -> Vec<EffectModel> {
+    let mut effects = accepted.to_vec();
+    effects.push(EffectModel::zero(kind.clone()));
+    effects
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identify::{IdentifyOptions, NoProgress, Observations, geometric};
+    use crate::model::{Dataset, Rig, Robot};
+    use crate::physics::effects::{CorrectionDriver, CorrectionTarget};
+    use crate::physics::simulate;
+
+    /// A simulated string session (ER3A, four strings) and the first 150
+    /// poses of the real UR10 tracker recording (points).
+    fn sessions() -> Vec<(Robot, Rig, Dataset)> {
+        let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
+            "robot": "er3a", "n_poses": 120, "seed": 3,
+            "effects": [{"effect": "joint_compliance", "joint": 2, "size_x_noise": 5}]
+        }))
+        .unwrap();
+        let sim = simulate::generate(&spec).unwrap();
+        let dir = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/real_ur10_ipa_random"
+        );
+        let read = |f: &str| std::fs::read_to_string(format!("{dir}/{f}")).unwrap();
+        let robot = Robot::from_json(&read("robot.json")).unwrap();
+        let rig = Rig::from_json(&read("rig.json")).unwrap();
+        let mut data = Dataset::from_csv(read("poses.csv").as_bytes(), &robot, &rig).unwrap();
+        data.poses.truncate(150);
+        vec![(sim.robot, sim.rig, sim.dataset), (robot, rig, data)]
+    }
+
+    /// Candidates of every target (a joint's angle, T, a string's reading)
+    /// and a named effect, for a session of `n` joints and `m` strings.
+    fn candidates(n: usize, m: usize) -> Vec<Kind> {
+        let mut kinds = vec![
+            Kind::DataDriven {
+                target: CorrectionTarget::JointAngle,
+                target_index: Some(n - 1),
+                driver: CorrectionDriver::JointAngle,
+                driver_index: Some(1),
+                knots: vec![-1.0, -0.3, 0.2, 1.1],
+            },
+            Kind::DataDriven {
+                target: CorrectionTarget::Point,
+                target_index: None,
+                driver: CorrectionDriver::Time,
+                driver_index: None,
+                knots: vec![0.0, 50.0, 100.0, 500.0],
+            },
+            Kind::JointPeriodic {
+                joint_index: 0,
+                harmonic: 2,
+            },
+        ];
+        if m > 0 {
+            kinds.push(Kind::DataDriven {
+                target: CorrectionTarget::StringReading,
+                target_index: Some(m - 1),
+                driver: CorrectionDriver::StringLength,
+                driver_index: Some(m - 1),
+                knots: vec![100.0, 400.0, 700.0, 1000.0],
+            });
+        }
+        kinds
+    }
+
+    /// For each session: its inputs' parts, the state with one accepted
+    /// effect, and `f` called with everything.
+    fn each_session(mut f: impl FnMut(&Inputs, &State, &FixedBase)) {
+        for (robot, rig, data) in sessions() {
+            let po = IdentifyOptions::default();
+            let obs = Observations::new(&robot, &rig, &data, &po).unwrap();
+            let geo = geometric(&obs, &po, &NoProgress).unwrap();
+            let inputs = Inputs::new(&obs, &geo);
+            let state = State {
+                p: geo.after.values.clone(),
+                accepted: vec![EffectModel {
+                    kind: Kind::JointPeriodic {
+                        joint_index: 1,
+                        harmonic: 1,
+                    },
+                    coef: vec![1e-4, -2e-4],
+                }],
+                findings: vec![],
+                notes: vec![],
+                rejected: vec![],
+                final_fit: None,
+            };
+            let fixed = FixedBase::new(&inputs, &state);
+            f(&inputs, &state, &fixed);
+        }
+    }
+
+    fn problem_with<'a>(inputs: &'a Inputs, state: &State, kind: &Kind) -> EffectProblem<'a> {
+        EffectProblem::of_observations(
+            inputs.obs,
+            &inputs.ctx,
+            inputs.obs.train.clone(),
+            &state.p,
+            inputs.free.clone(),
+            with_candidate(&state.accepted, kind),
+        )
+    }
+
+    /// The fixed base's normal equations of a candidate equal a full
+    /// linearisation of the model with the candidate appended, on a
+    /// string and a point session, for every correction target and a
+    /// named effect, with an effect already accepted.
+    #[test]
+    fn candidate_normals_equal_a_full_pass() {
+        each_session(|inputs, state, fixed| {
+            for kind in candidates(inputs.ctx.n_joints, inputs.ctx.anchors.len()) {
+                let problem = problem_with(inputs, state, &kind);
+                let full = normals(&problem, &problem.x0(), &inputs.fold_of);
+                let got = fixed.with(inputs, &kind);
+                assert_eq!((got.n, got.rows), (full.n, full.rows));
+                for f in 0..FOLDS {
+                    let scale = full.a[f].amax().max(1e-300);
+                    let diff = (&got.a[f] - &full.a[f]).amax();
+                    assert!(diff <= 1e-12 * scale, "{kind:?} fold {f}: A off by {diff}");
+                    for (x, y) in got.b[f].iter().zip(&full.b[f]) {
+                        assert!((x - y).abs() <= 1e-12 * (1.0 + y.abs()), "{kind:?}: b");
+                    }
+                    assert_eq!(got.rr[f], full.rr[f]);
+                }
+                let (a, _, _) = got.total();
+                assert!((fixed.n_base..got.n).any(|c| a[(c, c)] > 0.0), "{kind:?}");
+            }
+        });
+    }
+
+    /// The candidate's blocks of the normal equations (against the base
+    /// columns, against itself, against the residuals) equal those formed
+    /// from central finite differences of the residuals in each of its
+    /// coefficients: its derivative columns are right.
+    #[test]
+    fn candidate_columns_match_finite_differences() {
+        each_session(|inputs, state, fixed| {
+            for kind in candidates(inputs.ctx.n_joints, inputs.ctx.anchors.len()) {
+                let problem = problem_with(inputs, state, &kind);
+                let x0 = problem.x0();
+                let nb = fixed.n_base;
+                let k = kind.n_coef();
+                let residuals = |x: &[f64]| {
+                    let mut r = Vec::new();
+                    problem.rows(x, |_, v, _| r.push(v));
+                    r
+                };
+                // Coefficients are radians, mm or mm per knot: a step of
+                // 1e-6 is small against every one's scale of effect.
+                let h = 1e-6;
+                let fd: Vec<Vec<f64>> = (0..k)
+                    .map(|c| {
+                        let (mut xp, mut xm) = (x0.clone(), x0.clone());
+                        xp[nb + c] += h;
+                        xm[nb + c] -= h;
+                        let (rp, rm) = (residuals(&xp), residuals(&xm));
+                        rp.iter()
+                            .zip(&rm)
+                            .map(|(p, m)| (p - m) / (2.0 * h))
+                            .collect()
+                    })
+                    .collect();
+                let got = fixed.with(inputs, &kind);
+                let (a, b, _) = got.total();
+                let n_rows = fixed.r.len();
+                let scale = (0..k).map(|c| a[(nb + c, nb + c)]).fold(1e-300, f64::max);
+                for c in 0..k {
+                    let jr: f64 = (0..n_rows).map(|i| fd[c][i] * fixed.r[i]).sum();
+                    let tol = 1e-5 * (scale * fixed.nm.rr.iter().sum::<f64>()).sqrt();
+                    assert!((b[nb + c] - jr).abs() <= tol, "{kind:?} Jr {c}");
+                    for c2 in 0..k {
+                        let jj: f64 = (0..n_rows).map(|i| fd[c][i] * fd[c2][i]).sum();
+                        assert!(
+                            (a[(nb + c, nb + c2)] - jj).abs() <= 1e-5 * scale,
+                            "{kind:?}"
+                        );
+                    }
+                    for col in 0..nb {
+                        let jb: f64 = (0..n_rows)
+                            .map(|i| fixed.rows[i * nb + col] * fd[c][i])
+                            .sum();
+                        let tol = 1e-5 * (scale * a[(col, col)]).sqrt().max(1e-300);
+                        assert!((a[(col, nb + c)] - jb).abs() <= tol, "{kind:?} cross {col}");
+                    }
+                }
+            }
+        });
+    }
+}
