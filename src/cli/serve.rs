@@ -103,8 +103,8 @@ pub struct ServeArgs {
     #[arg(long, env = "DRAWCAL_MAX_JOBS_PER_MINUTE", default_value_t = 60,
           value_parser = clap::value_parser!(u32).range(1..))]
     pub max_jobs_per_minute: u32,
-    /// Jobs that may wait in the queue (all replicas together); a
-    /// submission past it is answered 429.
+    /// Jobs and plans that may wait in the queue (all replicas together);
+    /// a submission past it is answered 429.
     #[arg(long, env = "DRAWCAL_MAX_QUEUED_JOBS", default_value_t = 1000,
           value_parser = clap::value_parser!(i64).range(1..))]
     pub max_queued_jobs: i64,

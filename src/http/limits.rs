@@ -11,7 +11,7 @@ use std::collections::HashMap;
 use std::sync::Mutex;
 use std::time::Instant;
 
-use super::ApiError;
+use super::{ApiError, ApiResult, AppState};
 
 /// What is limited per key.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -117,19 +117,38 @@ impl Limits {
         })
     }
 
-    /// Refuse a job submission when `queued` jobs already wait.
+    /// Refuse a submission when `queued` jobs and plans already wait.
     pub fn check_queue(&self, queued: i64) -> Result<(), ApiError> {
         if queued < self.config.max_queued_jobs {
             return Ok(());
         }
         Err(ApiError::TooManyRequests {
             message: format!(
-                "{queued} jobs are already queued, the most the service takes \
+                "{queued} jobs and plans are already queued, the most the service takes \
                  (--max-queued-jobs); retry when some have run"
             ),
             retry_after_s: 30,
         })
     }
+}
+
+/// Refuse a job or plan submission when the queue is full: identification
+/// jobs queued and plans waiting count together against
+/// `--max-queued-jobs` (both wait for the same workers' time).
+pub(super) async fn queue_has_room(app: &AppState) -> ApiResult<()> {
+    let (_, queued_jobs) = app
+        .store
+        .list_jobs(
+            None,
+            Some("queued"),
+            crate::store::Page {
+                limit: 1,
+                offset: 0,
+            },
+        )
+        .await?;
+    let queued_plans = app.store.count_queued_plans().await?;
+    app.limits.check_queue(queued_jobs + queued_plans)
 }
 
 #[cfg(test)]

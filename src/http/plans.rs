@@ -19,7 +19,8 @@ use utoipa::ToSchema;
 use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, Id};
-use super::limits::Action;
+use super::limits::{Action, queue_has_room};
+use super::resources::{stored_rig, stored_robot};
 use super::{ApiError, ApiResult, AppState, ErrorBody};
 use crate::jobs::plans::PlanInput;
 use crate::model::{Rig, Robot};
@@ -277,30 +278,14 @@ fn answer(rec: PlanRec) -> ApiResult<PlanOut> {
     })
 }
 
-/// Plan the poses of a calibration session (`drawcal plan` as a job):
-/// answers at once with the plan's id and state; poll `GET /plans/{id}`.
-/// Plans share the identification jobs' rate per key
-/// (`--max-jobs-per-minute`) and queue bound (`--max-queued-jobs`, plans
-/// waiting counted with jobs queued), and run at most `--workers` at once
-/// in the process that took them. A plan queued or running when its
-/// service stops is not resumed: it reads as failed (`interrupted`);
-/// submit it again.
-#[utoipa::path(post, path = "/plans", tag = "plans", request_body = CreatePlan,
-    responses(
-        (status = 202, description = "Queued", body = PlanOut, headers(("Location" = String, description = "The plan's URL"))),
-        (status = 400, description = "Malformed JSON", body = ErrorBody),
-        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
-        (status = 409, description = "The stored model or rig no longer passes validation (stored by an earlier version)", body = ErrorBody),
-        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
-        (status = 415, description = "Not JSON", body = ErrorBody),
-        (status = 422, description = "A bad option, an unknown model, robot or rig (named in `field`), or a string rig without `base_in_rig`", body = ErrorBody),
-        (status = 429, description = "The key is over its jobs a minute (`--max-jobs-per-minute`), or the queue is full (`--max-queued-jobs`): error `too_many_requests`, `Retry-After` in seconds", body = ErrorBody, headers(("Retry-After" = u64, description = "Seconds until a retry can succeed")))))]
-pub async fn create_plan(
-    State(app): State<AppState>,
-    Extension(caller): Extension<Caller>,
-    ApiJson(req): ApiJson<CreatePlan>,
-) -> ApiResult<Response> {
-    let (model_id, robot_id) = match (req.model_id, req.robot_id) {
+/// The model a plan request names: `model_id`, or the model of
+/// `robot_id` after the key's site check (exactly one of the two).
+async fn model_of(
+    app: &AppState,
+    caller: &Caller,
+    req: &CreatePlan,
+) -> ApiResult<(i64, Option<i64>)> {
+    Ok(match (req.model_id, req.robot_id) {
         (Some(_), Some(_)) => {
             return Err(ApiError::invalid(
                 "robot_id",
@@ -324,7 +309,33 @@ pub async fn create_plan(
                 (robot.model_id, Some(r))
             }
         },
-    };
+    })
+}
+
+/// Plan the poses of a calibration session (`drawcal plan` as a job):
+/// answers at once with the plan's id and state; poll `GET /plans/{id}`.
+/// Plans share the identification jobs' rate per key
+/// (`--max-jobs-per-minute`) and queue bound (`--max-queued-jobs`, plans
+/// waiting counted with jobs queued), and run at most `--workers` at once
+/// in the process that took them. A plan queued or running when its
+/// service stops is not resumed: it reads as failed (`interrupted`);
+/// submit it again.
+#[utoipa::path(post, path = "/plans", tag = "plans", request_body = CreatePlan,
+    responses(
+        (status = 202, description = "Queued", body = PlanOut, headers(("Location" = String, description = "The plan's URL"))),
+        (status = 400, description = "Malformed JSON", body = ErrorBody),
+        (status = 408, description = BODY_TIMEOUT_408, body = ErrorBody),
+        (status = 409, description = "The stored model or rig no longer passes validation (stored by an earlier version)", body = ErrorBody),
+        (status = 413, description = BODY_TOO_LARGE_413, body = ErrorBody),
+        (status = 415, description = "Not JSON", body = ErrorBody),
+        (status = 422, description = "A bad option, an unknown model, robot or rig (named in `field`), or a string rig without `base_in_rig`", body = ErrorBody),
+        (status = 429, description = "The key is over its jobs a minute (`--max-jobs-per-minute`), or the queue is full (`--max-queued-jobs`): error `too_many_requests`, `Retry-After` in seconds", body = ErrorBody, headers(("Retry-After" = u64, description = "Seconds until a retry can succeed")))))]
+pub async fn create_plan(
+    State(app): State<AppState>,
+    Extension(caller): Extension<Caller>,
+    ApiJson(req): ApiJson<CreatePlan>,
+) -> ApiResult<Response> {
+    let (model_id, robot_id) = model_of(&app, &caller, &req).await?;
     let model = match app.store.get_model(model_id).await {
         Err(StoreError::NotFound { .. }) => {
             return Err(ApiError::invalid(
@@ -343,35 +354,13 @@ pub async fn create_plan(
         }
         other => other?,
     };
-    let robot = Robot::from_json(&model.robot_json).map_err(|e| {
-        ApiError::Conflict(format!(
-            "stored robot model {} no longer passes validation ({e}): register a corrected model",
-            model.id
-        ))
-    })?;
-    let rig = Rig::from_json(&rig_rec.rig_json).map_err(|e| {
-        ApiError::Conflict(format!(
-            "stored rig {} no longer passes validation ({e}): register a corrected rig",
-            rig_rec.id
-        ))
-    })?;
+    let robot = stored_robot(&model, "")?;
+    let rig = stored_rig(&rig_rec, "")?;
     let options = req.options();
     check_options(&robot, &rig, &options)?;
     // Counted after the request is known good, as a job's.
     app.limits.take(&caller.name, Action::Job)?;
-    let (_, queued_jobs) = app
-        .store
-        .list_jobs(
-            None,
-            Some("queued"),
-            crate::store::Page {
-                limit: 1,
-                offset: 0,
-            },
-        )
-        .await?;
-    let queued_plans = app.store.count_queued_plans().await?;
-    app.limits.check_queue(queued_jobs + queued_plans)?;
+    queue_has_room(&app).await?;
     let options_json =
         serde_json::to_string(&options).map_err(|e| ApiError::Internal(e.to_string()))?;
     let rec = app

@@ -302,3 +302,25 @@ pub async fn list_rigs(
 pub async fn get_rig(State(app): State<AppState>, Id(id): Id) -> ApiResult<Json<RigOut>> {
     Ok(Json(rig_out(app.store.get_rig(id).await?)?))
 }
+
+/// A stored model as the engine reads it. A model stored by an earlier
+/// version may fail checks added since: that is the client's to replace
+/// (409, with `then`: what to register after it), not a server fault.
+pub(super) fn stored_robot(model: &ModelRec, then: &str) -> ApiResult<Robot> {
+    Robot::from_json(&model.robot_json).map_err(|e| {
+        ApiError::Conflict(format!(
+            "stored robot model {} no longer passes validation ({e}): register a corrected model{then}",
+            model.id
+        ))
+    })
+}
+
+/// A stored rig as the engine reads it (see [`stored_robot`]).
+pub(super) fn stored_rig(rig: &RigRec, then: &str) -> ApiResult<Rig> {
+    Rig::from_json(&rig.rig_json).map_err(|e| {
+        ApiError::Conflict(format!(
+            "stored rig {} no longer passes validation ({e}): register a corrected rig{then}",
+            rig.id
+        ))
+    })
+}

@@ -19,7 +19,8 @@ use utoipa::{IntoParams, ToSchema};
 use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
 use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json, without_bom};
-use super::limits::Action;
+use super::limits::{Action, queue_has_room};
+use super::resources::{stored_rig, stored_robot};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
 use crate::jobs::{JobOptions, session_csv};
 use crate::model::{Dataset, Rig, Robot};
@@ -316,22 +317,9 @@ fn csv_body(rows: &[Vec<String>]) -> ApiResult<String> {
 async fn robot_and_rig(app: &AppState, session: &SessionRec) -> ApiResult<(Robot, Rig)> {
     let robot_rec = app.store.get_robot(session.robot_id).await?;
     let model = app.store.get_model(robot_rec.model_id).await?;
-    // A model or rig stored by an earlier version may fail checks added
-    // since: the session cannot take poses until it is replaced, which is
-    // the client's to do, not a server fault.
-    let robot = Robot::from_json(&model.robot_json).map_err(|e| {
-        ApiError::Conflict(format!(
-            "stored robot model {} no longer passes validation ({e}): register a corrected model, a robot and a new session",
-            model.id
-        ))
-    })?;
+    let robot = stored_robot(&model, ", a robot and a new session")?;
     let rig_rec = app.store.get_rig(session.rig_id).await?;
-    let rig = Rig::from_json(&rig_rec.rig_json).map_err(|e| {
-        ApiError::Conflict(format!(
-            "stored rig {} no longer passes validation ({e}): register a corrected rig and a new session",
-            rig_rec.id
-        ))
-    })?;
+    let rig = stored_rig(&rig_rec, " and a new session")?;
     Ok((robot, rig))
 }
 
@@ -611,18 +599,7 @@ pub async fn enqueue_job(
     // Counted after the request is known good: a refused request costs
     // the key nothing.
     app.limits.take(&caller.name, Action::Job)?;
-    let (_, queued) = app
-        .store
-        .list_jobs(
-            None,
-            Some("queued"),
-            crate::store::Page {
-                limit: 1,
-                offset: 0,
-            },
-        )
-        .await?;
-    app.limits.check_queue(queued)?;
+    queue_has_room(&app).await?;
     let opts = serde_json::to_string(&options).map_err(|e| ApiError::Internal(e.to_string()))?;
     let job = app
         .store

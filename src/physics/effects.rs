@@ -655,14 +655,8 @@ impl Context {
     /// Sum of the effects at pose `i`: joint angle changes (rad), thermal
     /// multiplier, reading changes (mm).
     pub fn apply(&self, effects: &[EffectModel], i: usize, buf: &mut Basis) -> Delta {
-        let n = self.n_joints;
-        let m = self.anchors.len();
-        let mut d = Delta {
-            dq: vec![0.0; n],
-            thermal: 0.0,
-            dl: vec![0.0; m],
-            dp: Vector3::zeros(),
-        };
+        let (n, m) = (self.n_joints, self.anchors.len());
+        let mut d = Delta::zeros(n, m);
         for e in effects {
             self.basis(&e.kind, i, buf);
             d.add(&e.coef, buf, n, m);
@@ -674,14 +668,8 @@ impl Context {
     /// (`bases[e]` of `effects[e]`, as [`Self::basis`] gives it): the same
     /// sums, for a caller that needs the bases too.
     pub fn apply_bases(&self, effects: &[EffectModel], bases: &[Basis]) -> Delta {
-        let n = self.n_joints;
-        let m = self.anchors.len();
-        let mut d = Delta {
-            dq: vec![0.0; n],
-            thermal: 0.0,
-            dl: vec![0.0; m],
-            dp: Vector3::zeros(),
-        };
+        let (n, m) = (self.n_joints, self.anchors.len());
+        let mut d = Delta::zeros(n, m);
         for (e, buf) in effects.iter().zip(bases) {
             d.add(&e.coef, buf, n, m);
         }
@@ -738,6 +726,16 @@ pub struct Delta {
 }
 
 impl Delta {
+    /// No change, for `n` joints and `m` strings.
+    fn zeros(n: usize, m: usize) -> Self {
+        Delta {
+            dq: vec![0.0; n],
+            thermal: 0.0,
+            dl: vec![0.0; m],
+            dp: Vector3::zeros(),
+        }
+    }
+
     /// Add one effect of coefficients `coef` and basis `buf` (`n` joints,
     /// `m` strings).
     fn add(&mut self, coef: &[f64], buf: &Basis, n: usize, m: usize) {

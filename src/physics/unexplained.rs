@@ -126,34 +126,7 @@ pub(super) fn unexplained(
     };
     let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
     let test = rms(&errors_with_effects(obs, ctx, p, effects, &obs.test));
-    let mut places = nb.places.clone();
-    if let Some(c) = &confined {
-        places.push(Place {
-            driver: "joint".into(),
-            joint: Some(c.joint + 1),
-            sensor: None,
-            side: if obs.anchors.is_empty() {
-                "point"
-            } else {
-                "strings"
-            }
-            .into(),
-            z: normal_quantile(1.0 - c.p),
-            threshold: normal_quantile(1.0 - c.alpha / ctx.n_joints.max(1) as f64),
-            range: Some([c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]),
-        });
-    }
-    if let Some(x) = excess.filter(|x| x.f > x.threshold && places.is_empty()) {
-        places.push(Place {
-            driver: "robot".into(),
-            joint: None,
-            sensor: None,
-            side: "robot".into(),
-            z: x.f,
-            threshold: x.threshold,
-            range: None,
-        });
-    }
+    let places = places(obs, ctx, &nb.places, confined.as_ref(), excess.as_ref());
     // The evidence plot knows the plain orderings up to the configuration.
     let plot_len = ctx.n_joints + 2 + usize::from(with_temp);
     let (ordering, z) = match winner {
@@ -200,6 +173,47 @@ pub(super) fn unexplained(
             &nb.zs[..plot_len],
         ),
     })
+}
+
+/// Every place the structure was located: the neighbour tests' places, a
+/// confined stretch of a joint's range, and, when nothing else placed it,
+/// the robot-side excess.
+fn places(
+    obs: &Observations,
+    ctx: &Context,
+    located: &[Place],
+    confined: Option<&Concentrated>,
+    excess: Option<&Excess>,
+) -> Vec<Place> {
+    let mut places = located.to_vec();
+    if let Some(c) = confined {
+        places.push(Place {
+            driver: "joint".into(),
+            joint: Some(c.joint + 1),
+            sensor: None,
+            side: if obs.anchors.is_empty() {
+                "point"
+            } else {
+                "strings"
+            }
+            .into(),
+            z: normal_quantile(1.0 - c.p),
+            threshold: normal_quantile(1.0 - c.alpha / ctx.n_joints.max(1) as f64),
+            range: Some([c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]),
+        });
+    }
+    if let Some(x) = excess.filter(|x| x.f > x.threshold && places.is_empty()) {
+        places.push(Place {
+            driver: "robot".into(),
+            joint: None,
+            sensor: None,
+            side: "robot".into(),
+            z: x.f,
+            threshold: x.threshold,
+            range: None,
+        });
+    }
+    places
 }
 
 /// True when every pose recorded a temperature (then it is an ordering).

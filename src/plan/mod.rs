@@ -249,6 +249,9 @@ struct Columns {
     effects: Vec<(Kind, String)>,
     /// Prior size of each effect coefficient (its unit).
     effect_scale: Vec<f64>,
+    /// What no pose of this rig can separate: the identification's
+    /// structural selection over the whole pool, held at nominal.
+    aliased: Vec<FixedParam>,
 }
 
 impl Columns {
@@ -272,7 +275,6 @@ pub fn check(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<()> {
 pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
     check_options(robot, opts)?;
     let scene = Scene::new(robot, rig, &opts.workspace)?;
-    let m = rig.n_strings();
     let noise = opts.noise_mm.unwrap_or_else(|| default_noise(rig));
     let mut rng = Rng::new(opts.seed);
     let want = opts.candidates + PREDICTION_POSES;
@@ -297,84 +299,26 @@ pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
         .filter(|i| !sel.chosen.contains(i))
         .collect();
     rng.shuffle(&mut rest);
-    let checks: Vec<usize> = rest[..n_check].to_vec();
-
-    // The tour over both.
-    let home = home_pose(robot, opts)?;
-    let all: Vec<(usize, bool)> = sel
-        .chosen
-        .iter()
-        .map(|&i| (i, false))
-        .chain(checks.iter().map(|&i| (i, true)))
-        .collect();
-    let refs: Vec<&[f64]> = all.iter().map(|&(i, _)| pool[i].q_deg.as_slice()).collect();
-    let order = tour::order(&home, &refs);
-    let (mut n_train, mut n_test) = (0, 0);
-    let poses: Vec<PlannedPose> = order
-        .iter()
-        .map(|&k| {
-            let (i, check) = all[k];
-            let id = if check {
-                n_test += 1;
-                format!("c{n_test:02}")
-            } else {
-                n_train += 1;
-                format!("p{n_train:02}")
-            };
-            PlannedPose {
-                id,
-                q_deg: pool[i].q_deg.clone(),
-                split: if check { "test" } else { "train" }.into(),
-            }
-        })
-        .collect();
+    let home = home_pose(robot, opts);
+    let poses = visiting_order(&pool, &sel.chosen, &rest[..n_check], &home);
     let toured: Vec<&[f64]> = poses.iter().map(|p| p.q_deg.as_slice()).collect();
     let tour_travel_deg = tour::path_travel_deg(&home, &toured);
 
-    // Predictions (without the prior: what least squares will give).
-    let point_noise_rms_mm = point_noise_rms(&scene, &validation, noise, m);
-    let at = |set: &[usize]| prediction(&design_pool, set, point_noise_rms_mm);
-    let predicted = at(&sel.chosen);
-    let mut random_model = 0.0;
-    for _ in 0..5 {
-        let mut idx: Vec<usize> = (0..pool.len()).collect();
-        rng.shuffle(&mut idx);
-        random_model += at(&idx[..opts.n_poses]).model_rms_mm.powi(2) / 5.0;
-    }
-    let random = PredictionAtN {
-        n_poses: opts.n_poses,
-        model_rms_mm: random_model.sqrt(),
-        holdout_rms_mm: (random_model + point_noise_rms_mm.powi(2)).sqrt(),
-    };
-    let mut by_n: Vec<PredictionAtN> = curve_sizes(opts.n_poses, sel.greedy_order.len())
-        .into_iter()
-        .map(|k| at(&sel.greedy_order[..k]))
-        .filter(|p| p.model_rms_mm.is_finite())
-        .collect();
-    by_n.retain(|p| p.n_poses != opts.n_poses);
-    by_n.push(predicted.clone());
-    by_n.sort_by_key(|p| p.n_poses);
-
-    let parameters = predicted_sigmas(&design_pool, &cols, &sel.chosen, &scene, noise);
-    let undetermined = structural_aliases(&scene, &pool);
+    let point_noise_rms_mm = point_noise_rms(&scene, &validation, noise);
+    let (predicted, random, by_n) = predictions(
+        &design_pool,
+        &sel,
+        opts.n_poses,
+        point_noise_rms_mm,
+        &mut rng,
+    );
+    let parameters = predicted_sigmas(&design_pool, &cols, &sel.chosen, &scene);
     let approach = if opts.effects.iter().any(|e| e == "backlash") {
         approach_balance(&toured, &home)
     } else {
         vec![]
     };
-    let mut notes = Vec::new();
-    if opts.effects.iter().any(|e| e == "joint_compliance") {
-        notes.push("compliance is planned with the robot's own link masses; a payload changed part-way (payload_kg) separates it further".into());
-    }
-    if let Some(b) = approach
-        .iter()
-        .find(|b| b.from_below.min(b.from_above) * 3 < b.from_below.max(b.from_above))
-    {
-        notes.push(format!(
-            "joint {} is approached {} times from below and {} from above: backlash is best seen with both directions in similar numbers",
-            b.joint, b.from_below, b.from_above
-        ));
-    }
+    let notes = notes(opts, &approach);
     let report = PlanReport {
         format: PLAN_FORMAT.into(),
         robot: robot.name.clone(),
@@ -390,7 +334,7 @@ pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
         candidates_kept: pool.len() + validation.len(),
         rejected,
         parameters,
-        undetermined,
+        undetermined: cols.aliased,
         predicted,
         random,
         point_noise_rms_mm,
@@ -402,6 +346,93 @@ pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
         notes,
     };
     Ok(Plan { poses, report })
+}
+
+/// The chosen poses (`p01`...) and the check poses (`c01`..., split
+/// `test`) in the tour's order from `home`.
+fn visiting_order(
+    pool: &[Candidate],
+    chosen: &[usize],
+    checks: &[usize],
+    home: &[f64],
+) -> Vec<PlannedPose> {
+    let all: Vec<(usize, bool)> = chosen
+        .iter()
+        .map(|&i| (i, false))
+        .chain(checks.iter().map(|&i| (i, true)))
+        .collect();
+    let refs: Vec<&[f64]> = all.iter().map(|&(i, _)| pool[i].q_deg.as_slice()).collect();
+    let (mut n_train, mut n_test) = (0, 0);
+    tour::order(home, &refs)
+        .into_iter()
+        .map(|k| {
+            let (i, check) = all[k];
+            let id = if check {
+                n_test += 1;
+                format!("c{n_test:02}")
+            } else {
+                n_train += 1;
+                format!("p{n_train:02}")
+            };
+            PlannedPose {
+                id,
+                q_deg: pool[i].q_deg.clone(),
+                split: if check { "test" } else { "train" }.into(),
+            }
+        })
+        .collect()
+}
+
+/// What least squares will give (without the prior): the chosen poses,
+/// the same number of random ones (mean square of five draws) and the
+/// greedy selection's nested sets from N/2 to 2N.
+fn predictions(
+    pool: &design::Pool,
+    sel: &design::Selection,
+    n: usize,
+    point_noise_rms_mm: f64,
+    rng: &mut Rng,
+) -> (PredictionAtN, PredictionAtN, Vec<PredictionAtN>) {
+    let at = |set: &[usize]| prediction(pool, set, point_noise_rms_mm);
+    let predicted = at(&sel.chosen);
+    let mut random_model = 0.0;
+    for _ in 0..5 {
+        let mut idx: Vec<usize> = (0..pool.rows.len()).collect();
+        rng.shuffle(&mut idx);
+        random_model += at(&idx[..n]).model_rms_mm.powi(2) / 5.0;
+    }
+    let random = PredictionAtN {
+        n_poses: n,
+        model_rms_mm: random_model.sqrt(),
+        holdout_rms_mm: (random_model + point_noise_rms_mm.powi(2)).sqrt(),
+    };
+    let mut by_n: Vec<PredictionAtN> = curve_sizes(n, sel.greedy_order.len())
+        .into_iter()
+        .filter(|&k| k != n)
+        .map(|k| at(&sel.greedy_order[..k]))
+        .filter(|p| p.model_rms_mm.is_finite())
+        .collect();
+    by_n.push(predicted.clone());
+    by_n.sort_by_key(|p| p.n_poses);
+    (predicted, random, by_n)
+}
+
+/// What the user should know about the effects planned for.
+fn notes(opts: &PlanOptions, approach: &[ApproachBalance]) -> Vec<String> {
+    let mut notes = Vec::new();
+    if opts.effects.iter().any(|e| e == "joint_compliance") {
+        notes.push("compliance is planned with the robot's own link masses; a payload changed part-way (payload_kg) separates it further".into());
+    }
+    if let Some(b) = approach
+        .iter()
+        .find(|b| b.from_below.min(b.from_above) * 3 < b.from_below.max(b.from_above))
+    {
+        notes.push(format!(
+            "joint {} is approached {} times from below and {} from above: backlash is best seen with both directions in similar numbers",
+            b.joint, b.from_below, b.from_above
+        ));
+    }
+    notes
 }
 
 fn check_options(robot: &Robot, opts: &PlanOptions) -> Result<()> {
@@ -498,15 +529,15 @@ fn default_noise(rig: &Rig) -> f64 {
     (0.02f64.powi(2) + res * res / 12.0).sqrt()
 }
 
-fn home_pose(robot: &Robot, opts: &PlanOptions) -> Result<Vec<f64>> {
-    Ok(match &opts.home_deg {
+fn home_pose(robot: &Robot, opts: &PlanOptions) -> Vec<f64> {
+    match &opts.home_deg {
         Some(h) => h.clone(),
         None => robot
             .joints
             .iter()
             .map(|j| 0.0f64.clamp(j.q_min_deg, j.q_max_deg))
             .collect(),
-    })
+    }
 }
 
 fn rejection_words(rejected: &BTreeMap<Rejection, usize>) -> String {
@@ -578,6 +609,7 @@ fn columns(scene: &Scene, pool: &[Candidate], opts: &PlanOptions, noise: f64) ->
     }
     let mut cols = Columns {
         params: sel.free,
+        aliased: sel.fixed,
         param_scale,
         effects,
         effect_scale: vec![],
@@ -842,9 +874,8 @@ fn predicted_sigmas(
     cols: &Columns,
     set: &[usize],
     scene: &Scene,
-    noise: f64,
 ) -> Vec<PredictedParam> {
-    let _ = noise; // rows are already in noise units
+    // The rows are in noise units: the inverse is the covariance.
     let Some(inv) = information(pool, set).try_inverse() else {
         return vec![];
     };
@@ -882,16 +913,8 @@ fn predicted_sigmas(
     out
 }
 
-/// What no pose of this rig can separate: the identification's structural
-/// selection over the whole pool.
-fn structural_aliases(scene: &Scene, pool: &[Candidate]) -> Vec<FixedParam> {
-    let l = scene.chain.layout;
-    let cand = free_candidates(l, &IdentifyOptions::default());
-    let jtj = normal_matrix(scene, pool, &cand);
-    identifiability::select(&jtj, &cand, &l, identifiability::DEFAULT_TOLERANCE).fixed
-}
-
-fn point_noise_rms(scene: &Scene, poses: &[Candidate], noise: f64, m: usize) -> f64 {
+fn point_noise_rms(scene: &Scene, poses: &[Candidate], noise: f64) -> f64 {
+    let m = scene.anchors().len();
     if m == 0 {
         return noise * 3f64.sqrt();
     }

@@ -1073,7 +1073,14 @@ fn readme_plan_walkthrough() {
     );
     assert!(dir.join("planned.plan.json").exists());
     let poses = std::fs::read_to_string(dir.join("session/poses.csv")).unwrap();
-    assert!(poses.lines().nth(1).unwrap().starts_with("p01,") || poses.contains("\np01,"));
+    // The recording carries the plan's ids, in the plan's order.
+    let ids = |csv: &str| -> Vec<String> {
+        csv.lines()
+            .skip(1)
+            .map(|l| l.split(',').next().unwrap().to_string())
+            .collect()
+    };
+    assert_eq!(ids(&poses), ids(&planned));
     assert!(stdout.contains("verdict: GREEN"), "{stdout}");
     let urdf = std::fs::read_to_string(dir.join("er3a_calibrated.urdf")).unwrap();
     drawcal::model::urdf::Urdf::parse(&urdf).unwrap();
