@@ -1,5 +1,6 @@
-//! `drawcal export report.json --format urdf|robot-json|csv --out FILE`:
-//! the calibrated model out of a report (the core's `export`), and the
+//! `drawcal export report.json --format urdf|robot-json|csv|extra-targets
+//! --out FILE`: the calibrated model (or the suggested extra poses) out of a
+//! report (the core's `export`), and the
 //! options that read a URDF wherever `--robot` takes a robot file.
 
 use std::path::{Path, PathBuf};
@@ -21,6 +22,8 @@ pub enum FormatArg {
     RobotJson,
     /// One row per parameter: nominal, calibrated, deviation, sigma.
     Csv,
+    /// The extra poses the verdict suggests, as targets.csv.
+    ExtraTargets,
 }
 
 /// Export a report's calibrated model:
@@ -45,6 +48,7 @@ pub fn run(a: ExportArgs) -> Result<(), CliError> {
         FormatArg::Urdf => ExportFormat::Urdf,
         FormatArg::RobotJson => ExportFormat::RobotJson,
         FormatArg::Csv => ExportFormat::Csv,
+        FormatArg::ExtraTargets => ExportFormat::ExtraTargets,
     };
     let text = core(&a.report, export::export(&report, format))?;
     match &a.out {

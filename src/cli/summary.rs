@@ -130,7 +130,7 @@ fn accuracy(s: &mut String, r: &Report) {
         }
         line(s, &text, 2);
     }
-    let v = Verdict::of(r);
+    let v = Verdict::read(r);
     line(
         s,
         &format!(

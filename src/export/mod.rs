@@ -28,19 +28,24 @@ pub enum ExportFormat {
     RobotJson,
     /// The per-parameter table of nominal, calibrated, deviation and sigma.
     Csv,
+    /// The extra poses the verdict suggests (`report.extra_poses`), as
+    /// targets.csv: what to record next.
+    ExtraTargets,
 }
 
 impl ExportFormat {
     /// The names `format` accepts.
-    pub const NAMES: &'static str = "urdf, robot-json, csv";
+    pub const NAMES: &'static str = "urdf, robot-json, csv, extra-targets";
 
-    /// From its name (`urdf`, `robot-json`, `csv`); an error on field
+    /// From its name (`urdf`, `robot-json`, `csv`, `extra-targets`); an
+    /// error on field
     /// `format` otherwise.
     pub fn parse(name: &str) -> Result<Self> {
         match name {
             "urdf" => Ok(ExportFormat::Urdf),
             "robot-json" | "robot_json" | "json" => Ok(ExportFormat::RobotJson),
             "csv" => Ok(ExportFormat::Csv),
+            "extra-targets" => Ok(ExportFormat::ExtraTargets),
             other => Err(Error::field(
                 "format",
                 format!(
@@ -56,7 +61,7 @@ impl ExportFormat {
         match self {
             ExportFormat::Urdf => "application/xml",
             ExportFormat::RobotJson => "application/json",
-            ExportFormat::Csv => "text/csv",
+            ExportFormat::Csv | ExportFormat::ExtraTargets => "text/csv",
         }
     }
 
@@ -65,17 +70,26 @@ impl ExportFormat {
         match self {
             ExportFormat::Urdf => "urdf",
             ExportFormat::RobotJson => "json",
-            ExportFormat::Csv => "csv",
+            ExportFormat::Csv | ExportFormat::ExtraTargets => "csv",
         }
     }
 }
 
-/// The report's calibrated model in `format`.
+/// The report's calibrated model in `format` (or its extra poses).
 pub fn export(report: &Report, format: ExportFormat) -> Result<String> {
     match format {
         ExportFormat::Urdf => Ok(urdf(report)),
         ExportFormat::RobotJson => robot_json(report),
         ExportFormat::Csv => Ok(deviations_csv(report)),
+        ExportFormat::ExtraTargets => match &report.extra_poses {
+            Some(x) if !x.poses.is_empty() => Ok(x.targets_csv()),
+            _ => Err(Error::field(
+                "format",
+                "this report suggests no extra poses: its poses determine every parameter \
+                 any pose of this rig could (or it was written before reports carried extra \
+                 poses)",
+            )),
+        },
     }
 }
 

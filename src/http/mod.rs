@@ -19,6 +19,7 @@ pub mod compensate;
 pub mod compute;
 pub mod conn;
 pub mod error;
+pub mod export;
 pub mod extract;
 pub mod guard;
 pub mod keys;
@@ -220,7 +221,7 @@ impl<T: ToSchema> Paged<T> {
     ),
     // Format is referenced only by query parameters, which utoipa does
     // not collect schemas from.
-    components(schemas(ErrorBody, calibrations::Format)),
+    components(schemas(ErrorBody, calibrations::Format, export::ExportFormatParam)),
     modifiers(&BearerKeys),
     security(("api_key" = []))
 )]
@@ -270,6 +271,7 @@ fn api() -> OpenApiRouter<AppState> {
         .routes(routes!(calibrations::list_calibrations))
         .routes(routes!(calibrations::get_calibration))
         .routes(routes!(ui::calibration_report_html))
+        .routes(routes!(export::export_calibration))
         .routes(routes!(calibrations::robot_accuracy))
         .routes(routes!(calibrations::activate))
         .routes(routes!(calibrations::rollback))

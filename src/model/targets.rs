@@ -38,6 +38,29 @@ pub enum TargetKind {
     },
 }
 
+/// targets.csv of joint targets: `target,q1_deg..qn_deg,split`, one row
+/// per `(id, q_deg, split)` (the split column is drawcal's addition, read
+/// by `drawcal simulate --targets` and carried into poses.csv).
+pub fn joint_targets_csv<'a>(
+    rows: impl IntoIterator<Item = (&'a str, &'a [f64], &'a str)>,
+) -> String {
+    let mut rows = rows.into_iter().peekable();
+    let n = rows.peek().map_or(0, |r| r.1.len());
+    let mut out = String::from("target");
+    for j in 1..=n {
+        out.push_str(&format!(",q{j}_deg"));
+    }
+    out.push_str(",split\n");
+    for (id, q_deg, split) in rows {
+        out.push_str(id);
+        for v in q_deg {
+            out.push_str(&format!(",{v:.4}"));
+        }
+        out.push_str(&format!(",{split}\n"));
+    }
+    out
+}
+
 /// Parse targets.csv for a robot with `dof` joints.
 pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
     let (mut rdr, headers) = super::csv_with_header(input)?;

@@ -195,6 +195,8 @@ pub fn report(
         physics: physics.run,
         physics_notes,
         warnings,
+        extra_poses: None,
+        verdict: None,
     })
 }
 

@@ -24,7 +24,9 @@ use crate::identify::warnings::InputCheck;
 use crate::identify::{self, Geometric, IdentifyOptions, Method, Observations, Progress, warnings};
 use crate::model::{Dataset, Rig, Robot};
 use crate::physics::{self, Analysis};
-use crate::report::{PhysicsRun, Report};
+use crate::plan;
+use crate::report::verdict::Verdict;
+use crate::report::{ExtraPoses, FixedReason, PhysicsRun, Report};
 
 /// Options of a whole calibration.
 #[derive(Debug, Clone)]
@@ -74,8 +76,68 @@ pub fn calibrate(
     progress: &dyn Progress,
 ) -> Result<Report> {
     let run = run(robot, rig, data, opts, progress)?;
-    assemble::report(&run.obs, &run.geo, &run.identify, run.physics, run.warnings)
+    let mut report =
+        assemble::report(&run.obs, &run.geo, &run.identify, run.physics, run.warnings)?;
+    report.extra_poses = extra_poses(&run.obs, &report);
+    report.verdict = Some(Verdict::of(&report));
+    Ok(report)
 }
+
+/// The poses that would determine what these poses left undetermined (the
+/// parameters held at nominal, neither by request nor by the free set,
+/// which the verdict treats apart: aliases of these poses may be separable
+/// by others), and which of those they called undetermined no pose would
+/// separate. A rig the planner cannot
+/// draw for gives none: this is advice, never a reason to fail a
+/// calibration.
+fn extra_poses(obs: &Observations, report: &Report) -> Option<ExtraPoses> {
+    let wanted: Vec<String> = report
+        .identifiability
+        .fixed
+        .iter()
+        .filter(|f| !matches!(f.reason, FixedReason::Requested | FixedReason::FreeSet))
+        .map(|f| f.name.clone())
+        .collect();
+    if wanted.is_empty() {
+        return None;
+    }
+    let recorded: Vec<Vec<f64>> = obs
+        .train
+        .iter()
+        .map(|&i| {
+            obs.data.poses[i]
+                .q_rad
+                .iter()
+                .map(|q| q.to_degrees())
+                .collect()
+        })
+        .collect();
+    let free: Vec<String> = report.parameters.iter().map(|p| p.name.clone()).collect();
+    let mut x = plan::extend(
+        obs.robot,
+        obs.rig,
+        &recorded,
+        &free,
+        &wanted,
+        report.string_sigma_mm,
+        EXTRA_POSES_SEED,
+    )
+    .ok()
+    .flatten()?;
+    // Aliases the session named as such stay in `identifiability.fixed`
+    // alone: inseparable is news only for what it called undetermined.
+    x.inseparable.retain(|i| {
+        report
+            .identifiability
+            .fixed
+            .iter()
+            .any(|f| f.name == i.name && f.reason != FixedReason::Aliased)
+    });
+    (!x.poses.is_empty() || !x.inseparable.is_empty()).then_some(x)
+}
+
+/// Seed of the extra poses' draws: a report is reproducible.
+const EXTRA_POSES_SEED: u64 = 2024;
 
 /// Steps 1-3, whose results the report is assembled from: for callers
 /// that look inside (the evaluation harness, tests).

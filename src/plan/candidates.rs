@@ -274,11 +274,8 @@ impl<'a> Scene<'a> {
                 return Err(Rejection::StringGeometry);
             }
         }
-        // The arm in the base frame: joint frame origins, the flange, T.
-        let frames = self.chain.link_frames(p, &q_rad, OutputFrame::Base);
-        let t_base = self.base_r.transpose() * (t - self.base_t);
-        let mut joints_base: Vec<Vector3<f64>> = frames.iter().map(|f| f.o).collect();
-        joints_base.push(t_base);
+        let joints_base = self.arm_points_base(&q_rad, &t);
+        let t_base = joints_base[joints_base.len() - 1];
         if let Some(z) = ws.floor_z_mm {
             if joints_base.iter().any(|o| o.z < z) {
                 return Err(Rejection::Floor);
@@ -344,6 +341,40 @@ impl<'a> Scene<'a> {
             q_rad,
             t_rig: t,
         })
+    }
+
+    /// The arm in the base frame at `q_rad` with T at `t_rig`: the joint
+    /// frames' origins, the flange, then T.
+    fn arm_points_base(&self, q_rad: &[f64], t_rig: &Vector3<f64>) -> Vec<Vector3<f64>> {
+        let frames = self
+            .chain
+            .link_frames(&self.nominal.values, q_rad, OutputFrame::Base);
+        let mut points: Vec<Vector3<f64>> = frames.iter().map(|f| f.o).collect();
+        points.push(self.base_r.transpose() * (t_rig - self.base_t));
+        points
+    }
+
+    /// A pose as a candidate without checking it (a recorded pose: it was
+    /// measured, whatever the checks would say).
+    pub fn recorded(&self, q_deg: &[f64]) -> Candidate {
+        let q_rad: Vec<f64> = q_deg.iter().map(|v| v.to_radians()).collect();
+        let (_, t_rig) = self
+            .chain
+            .point(&self.nominal.values, &q_rad, OutputFrame::Rig);
+        Candidate {
+            q_deg: q_deg.to_vec(),
+            q_rad,
+            t_rig,
+        }
+    }
+
+    /// The lowest point of the arm (joint frames, flange, T) at a pose, as
+    /// a height in the base frame (mm).
+    pub fn lowest_z_mm(&self, c: &Candidate) -> f64 {
+        self.arm_points_base(&c.q_rad, &c.t_rig)
+            .iter()
+            .map(|o| o.z)
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Draw until `n` poses pass (at most `max_draws` tries), counting the

@@ -286,6 +286,36 @@ pub struct Selection {
     pub swaps: usize,
 }
 
+/// Add candidates greedily to poses already recorded, whose information
+/// (`M = I + Σ JᵀJ` over them, in the pool's scaling, prior included) is
+/// `information`, until `done(objective)` or `max_n` poses: what to record
+/// next when a session leaves some parameters undetermined. Returns the
+/// candidates in the order chosen and `M⁻¹` after them; `None` when
+/// `information` is singular.
+pub fn extend(
+    pool: &Pool,
+    information: &DMatrix<f64>,
+    max_n: usize,
+    done: impl Fn(&DMatrix<f64>) -> bool,
+) -> Option<(Vec<usize>, DMatrix<f64>)> {
+    let mut st = State::new(pool);
+    st.minv = information.clone().try_inverse()?;
+    st.objective = (&pool.w * &st.minv).trace();
+    st.refresh();
+    let mut refreshed_at = st.objective;
+    let mut order = Vec::new();
+    while order.len() < max_n && !done(&st.minv) {
+        let Some((i, _)) = st.best() else { break };
+        st.update(i, 1.0);
+        if st.objective < REFRESH_DROP * refreshed_at {
+            st.refresh();
+            refreshed_at = st.objective;
+        }
+        order.push(i);
+    }
+    Some((order, st.minv))
+}
+
 /// Choose `n` of the pool's candidates: greedily up to `n_greedy >= n`
 /// (the prefixes give the curve over N), then improve the first `n` by
 /// exchanges (each chosen pose swapped for the candidate that lowers the
@@ -470,6 +500,41 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Extending from recorded poses equals the greedy choice made with
+    /// the recorded poses' information as the start, and stops as asked.
+    #[test]
+    fn extension_starts_from_the_recorded_information() {
+        let pool = random_pool(5, 80, 3, 8);
+        let recorded = [3usize, 17, 40];
+        let mut m0 = DMatrix::identity(8, 8);
+        for &i in &recorded {
+            let j = DMatrix::from_row_slice(3, 8, &pool.rows[i]);
+            m0 += j.transpose() * j;
+        }
+        let (order, minv) = extend(&pool, &m0, 4, |_| false).unwrap();
+        assert_eq!(order.len(), 4);
+        let mut set: Vec<usize> = recorded.to_vec();
+        for (k, &i) in order.iter().enumerate() {
+            // Each step is the best single addition to what is there (the
+            // recorded poses are not candidates: they may come again).
+            let best = (0..80)
+                .filter(|c| !order[..k].contains(c))
+                .map(|c| {
+                    let mut s = set.clone();
+                    s.push(c);
+                    (c, direct(&pool, &s))
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap();
+            assert_eq!(i, best.0);
+            set.push(i);
+        }
+        let d = direct(&pool, &set);
+        assert!(((&pool.w * &minv).trace() - d).abs() < 1e-8 * d.max(1.0));
+        let (none, _) = extend(&pool, &m0, 4, |_| true).unwrap();
+        assert!(none.is_empty());
     }
 
     #[test]

@@ -36,9 +36,11 @@ use crate::rng::Rng;
 
 pub mod candidates;
 pub mod design;
+pub mod extend;
 pub mod tour;
 
 pub use candidates::{Candidate, KeepOut, Rejection, Scene, Workspace};
+pub use extend::extend;
 
 /// The report's format tag.
 pub const PLAN_FORMAT: &str = "drawcal plan v1";
@@ -213,20 +215,11 @@ impl Plan {
     /// column is drawcal's addition: `drawcal simulate --targets` and the
     /// recording's poses.csv carry it over).
     pub fn targets_csv(&self) -> String {
-        let n = self.poses.first().map_or(0, |p| p.q_deg.len());
-        let mut out = String::from("target");
-        for j in 1..=n {
-            out.push_str(&format!(",q{j}_deg"));
-        }
-        out.push_str(",split\n");
-        for p in &self.poses {
-            out.push_str(&p.id);
-            for v in &p.q_deg {
-                out.push_str(&format!(",{v:.4}"));
-            }
-            out.push_str(&format!(",{}\n", p.split));
-        }
-        out
+        crate::model::targets::joint_targets_csv(
+            self.poses
+                .iter()
+                .map(|p| (p.id.as_str(), p.q_deg.as_slice(), p.split.as_str())),
+        )
     }
 }
 

@@ -200,6 +200,63 @@ impl FixedReason {
     }
 }
 
+/// Poses that would determine what a session left undetermined (the
+/// planner's advice after a calibration; `plan::extend`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ExtraPoses {
+    /// The parameters aimed at, with their predicted 1-sigma.
+    pub parameters: Vec<ExtraParam>,
+    /// The poses (`e01`...), in a tour from the last recorded pose; empty
+    /// when every parameter held is inseparable.
+    pub poses: Vec<ExtraPose>,
+    /// Parameters held for want of data that no pose of this rig would
+    /// separate from the identified ones (with those they move T like).
+    #[serde(default)]
+    pub inseparable: Vec<FixedParam>,
+    /// How they were chosen and what the user must still check.
+    pub criterion: String,
+}
+
+impl ExtraPoses {
+    /// The poses as targets.csv (split `train`): what to record next
+    /// (a header alone when there are none).
+    pub fn targets_csv(&self) -> String {
+        crate::model::targets::joint_targets_csv(
+            self.poses
+                .iter()
+                .map(|p| (p.id.as_str(), p.q_deg.as_slice(), "train")),
+        )
+    }
+}
+
+/// One extra pose: nominal joint targets.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ExtraPose {
+    /// Id (`e01`...).
+    pub id: String,
+    /// Nominal joint targets (deg).
+    pub q_deg: Vec<f64>,
+}
+
+/// A parameter the extra poses aim at.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ExtraParam {
+    /// Report name (`j3.d`).
+    pub name: String,
+    /// `mm` or `deg`.
+    pub unit: String,
+    /// Predicted 1-sigma from the recorded train poses alone (linear least
+    /// squares at the nominal model); `None` when they do not determine
+    /// it at all.
+    pub sigma_recorded: Option<f64>,
+    /// Predicted 1-sigma with the extra poses added; `None` when even
+    /// they do not determine it.
+    pub sigma_with_extra: Option<f64>,
+    /// The manufacturing tolerance the 1-sigma is judged against: a
+    /// parameter counts as determined at a third of it.
+    pub tolerance: f64,
+}
+
 /// Which identifiable parameters the geometric fit freed, and why: every
 /// one (the default, and always with enough poses), or a smaller nested
 /// set that cross-validation on the train poses chose (see
@@ -847,6 +904,15 @@ pub struct Report {
     /// the rig.json of the next session. Present with `rig_anchors`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibrated_rig: Option<Rig>,
+    /// Poses that would determine the parameters these poses left
+    /// undetermined (held at nominal, not structurally aliased), when there
+    /// are such parameters.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extra_poses: Option<ExtraPoses>,
+    /// "Is my result good?": green, amber or red and why (absent in reports
+    /// written before it existed: [`verdict::Verdict::read`] computes it then).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<verdict::Verdict>,
 }
 
 impl Report {

@@ -115,6 +115,11 @@ const CSS: &str = r#"
 .drawcal-report figure.evidence figcaption{font-size:12px;color:#444}
 .drawcal-report .report-warnings{color:#5c3c00;background:#fff4d6;border:2px solid #e0a100;border-left-width:8px;padding:8px 12px;margin:8px 0 12px}
 .drawcal-report .report-warnings ul{margin:.3em 0 0;padding-left:1.4em}
+.drawcal-report .verdict{padding:8px 12px;margin:8px 0 12px;border:2px solid;border-left-width:8px}
+.drawcal-report .verdict ul{margin:.3em 0 0;padding-left:1.4em}
+.drawcal-report .verdict-green{color:#124d1e;background:#e6f6e9;border-color:#2e9e46}
+.drawcal-report .verdict-amber{color:#5c3c00;background:#fff4d6;border-color:#e0a100}
+.drawcal-report .verdict-red{color:#6b0f0f;background:#fde8e8;border-color:#c62828}
 .drawcal-report p.physics-not-run{color:#5c3c00;background:#fff8e6;border:1px solid #e0b84d;padding:6px 10px}
 .drawcal-report td.physics-not-run{color:#5c3c00;background:#fff8e6}
 "#;
@@ -380,6 +385,8 @@ pub fn render_fragment(r: &Report, poses: Option<&PoseColumns>) -> String {
     // Warnings about the input, first: they say the rest may not be
     // trusted.
     sections::warnings(&mut o, r);
+    // The answer to "is my result good?" before the evidence for it.
+    sections::verdict(&mut o, r);
     // The physics analysis's note when it did not run (physics off, or a
     // geometric model too far off the data to fit effects on).
     let not_run = (!r.physics.ran())

@@ -10,6 +10,7 @@ use super::{
 };
 use crate::model::Split;
 use crate::report::Report;
+use crate::report::verdict::Verdict;
 
 /// The warnings about the input, if any, as an alert box.
 pub(super) fn warnings(o: &mut String, r: &Report) {
@@ -20,6 +21,51 @@ pub(super) fn warnings(o: &mut String, r: &Report) {
         }
         o.push_str("</ul></div>");
     }
+}
+
+/// "Verdict": green, amber or red with every reason, and the extra poses
+/// it suggests (their targets and what each parameter's 1-sigma becomes).
+pub(super) fn verdict(o: &mut String, r: &Report) {
+    let v = Verdict::read(r);
+    let _ = write!(
+        o,
+        r#"<div class="verdict verdict-{l}" id="verdict" data-level="{l}"><b>Verdict: {L}</b><ul>"#,
+        l = v.level,
+        L = v.level.to_string().to_uppercase()
+    );
+    for reason in &v.reasons {
+        let _ = write!(o, "<li>{}</li>", esc(reason));
+    }
+    o.push_str("</ul></div>");
+    let Some(x) = r.extra_poses.as_ref().filter(|x| !x.poses.is_empty()) else {
+        return;
+    };
+    o.push_str(r#"<h3 id="extra-poses">Extra poses to record</h3><table id="extra-parameters"><tr><th>parameter</th><th class="num">1-sigma now</th><th class="num">with the extra poses</th><th class="num">tolerance</th><th>unit</th></tr>"#);
+    for p in &x.parameters {
+        let _ = write!(
+            o,
+            "<tr><td>{}</td>{}{}{}<td>{}</td></tr>",
+            esc(&p.name),
+            opt_num(p.sigma_recorded),
+            opt_num(p.sigma_with_extra),
+            num(p.tolerance),
+            esc(&p.unit)
+        );
+    }
+    o.push_str(r#"</table><table id="extra-targets"><tr><th>target</th>"#);
+    let dof = x.poses.first().map_or(0, |p| p.q_deg.len());
+    for j in 1..=dof {
+        let _ = write!(o, r#"<th class="num">q{j} (deg)</th>"#);
+    }
+    o.push_str("</tr>");
+    for p in &x.poses {
+        let _ = write!(o, "<tr><td>{}</td>", esc(&p.id));
+        for q in &p.q_deg {
+            let _ = write!(o, r#"<td class="num">{q:.3}</td>"#);
+        }
+        o.push_str("</tr>");
+    }
+    let _ = write!(o, "</table><p>{}</p>", esc(&x.criterion));
 }
 
 /// "Summary": method, split, held-out RMS, noise floor, solver,

@@ -209,13 +209,24 @@ impl TestApp {
     /// Create model, robot, rig and session from a dataset; returns
     /// (model_id, robot_id, rig_id, session_id).
     pub async fn setup(&self, dataset: &str, serial: &str) -> (i64, i64, i64, i64) {
+        self.setup_from(
+            &read(dataset, "robot.json"),
+            &read(dataset, "rig.json"),
+            serial,
+        )
+        .await
+    }
+
+    /// [`TestApp::setup`] from the texts of robot.json and rig.json.
+    pub async fn setup_from(
+        &self,
+        robot_json: &str,
+        rig_json: &str,
+        serial: &str,
+    ) -> (i64, i64, i64, i64) {
         let model = ok_json(
-            self.post_raw(
-                "/models",
-                Some("application/json"),
-                read(dataset, "robot.json"),
-            )
-            .await,
+            self.post_raw("/models", Some("application/json"), robot_json.to_string())
+                .await,
             201,
         )
         .await;
@@ -229,7 +240,7 @@ impl TestApp {
         )
         .await;
         let rig = ok_json(
-            self.post_raw("/rigs", Some("application/json"), read(dataset, "rig.json"))
+            self.post_raw("/rigs", Some("application/json"), rig_json.to_string())
                 .await,
             201,
         )

@@ -18,6 +18,7 @@ mod compensate_payload;
 mod compensate_thermal;
 mod deploy;
 mod e2e;
+mod export;
 mod helpers;
 mod http_errors;
 mod jobs;

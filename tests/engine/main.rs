@@ -36,3 +36,4 @@ mod plan;
 mod report_html;
 mod simulate_files;
 mod urdf;
+mod verdict;
