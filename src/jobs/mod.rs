@@ -31,6 +31,7 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::{Notify, watch};
 use utoipa::ToSchema;
 
+use crate::identify::freeset::FreeSet;
 use crate::identify::{IdentifyOptions, Method, Progress};
 use crate::model::{Dataset, Rig, Robot};
 use crate::pipeline;
@@ -75,6 +76,39 @@ pub struct JobOptions {
     /// default false): the report gets `rig_anchors` and `calibrated_rig`.
     #[serde(default)]
     pub rig_anchors: Option<bool>,
+    /// Which identifiable joint parameters to free (as `drawcal identify
+    /// --free`): `auto` (default: chosen by cross-validation when the
+    /// train poses are few), `all`, `lengths` (θ, a, d) or `offsets` (θ);
+    /// the base pose, the tool point and the sensor parameters are free
+    /// in every set. Not with the paper's method.
+    #[serde(default)]
+    pub free_set: Option<JobFreeSet>,
+}
+
+/// Which identifiable joint parameters a job frees.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, ToSchema, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum JobFreeSet {
+    /// Chosen by cross-validation when the train poses are few, every
+    /// identifiable parameter otherwise.
+    Auto,
+    /// Every identifiable parameter.
+    All,
+    /// The joint offsets θ, link lengths a and link offsets d.
+    Lengths,
+    /// The joint offsets θ alone.
+    Offsets,
+}
+
+impl From<JobFreeSet> for FreeSet {
+    fn from(f: JobFreeSet) -> Self {
+        match f {
+            JobFreeSet::Auto => FreeSet::Auto,
+            JobFreeSet::All => FreeSet::All,
+            JobFreeSet::Lengths => FreeSet::Lengths,
+            JobFreeSet::Offsets => FreeSet::Offsets,
+        }
+    }
 }
 
 /// Identification method.
@@ -105,6 +139,19 @@ impl JobOptions {
                     format!("must be in [0, 100] sigmas, got {z}"),
                 ));
             }
+        }
+        if self.method == Some(JobMethod::Paper)
+            && matches!(
+                self.free_set,
+                Some(JobFreeSet::Lengths | JobFreeSet::Offsets)
+            )
+        {
+            return Err((
+                "free_set".into(),
+                "the paper's method frees every identifiable parameter: use free_set all or \
+                 auto, or method lm"
+                    .into(),
+            ));
         }
         Ok(())
     }
@@ -144,6 +191,9 @@ impl JobOptions {
         }
         if let Some(r) = self.rig_anchors {
             o.rig_anchors = r;
+        }
+        if let Some(f) = self.free_set {
+            o.free_set = f.into();
         }
         o
     }

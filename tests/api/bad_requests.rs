@@ -728,6 +728,25 @@ async fn bad_requests_are_refused_and_change_nothing() {
         None,
     )
     .await;
+    // A smaller free set is not for the paper's one-step method; an
+    // unknown set is refused.
+    refused(
+        &app,
+        c.post(app.url(&format!("/sessions/{sid}/jobs")))
+            .json(&json!({"free_set": "offsets", "method": "paper"})),
+        422,
+        "invalid_input",
+        Some("free_set"),
+        None,
+    )
+    .await;
+    let r = c
+        .post(app.url(&format!("/sessions/{sid}/jobs")))
+        .json(&json!({"free_set": "twists"}))
+        .send()
+        .await
+        .unwrap();
+    assert!(r.status().is_client_error(), "{}", r.status());
     // Held parameters must name this robot's joints, checked at once.
     for hold in ["j9.a", "base.x"] {
         refused(

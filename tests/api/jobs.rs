@@ -429,6 +429,39 @@ async fn held_parameters_reach_the_calibration() {
     app.stop().await;
 }
 
+/// `free_set` reaches the calibration: the joint offsets alone, as asked.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_requested_free_set_reaches_the_calibration() {
+    let app = TestApp::spawn("free-set").await;
+    let (_, _, _, sid) = app.setup(DS, "FREE").await;
+    let options = json!({"free_set": "offsets", "physics": false});
+    let j = app
+        .identify_session_with(sid, read(DS, "poses.csv"), &options)
+        .await;
+    let cal = ok_json(
+        app.get(&format!("/calibrations/{}", j["calibration_id"]))
+            .await,
+        200,
+    )
+    .await;
+    let f = &cal["report"]["free_set"];
+    assert_eq!(
+        (&f["chosen"], &f["how"]),
+        (&json!("offsets"), &json!("requested")),
+        "{f}"
+    );
+    let fixed = cal["report"]["identifiability"]["fixed"]
+        .as_array()
+        .unwrap();
+    assert!(
+        fixed
+            .iter()
+            .any(|p| p["name"] == "j2.a" && p["reason"] == "free_set"),
+        "{fixed:?}"
+    );
+    app.stop().await;
+}
+
 /// A calibration with nothing held out (a `holdout_fraction` that rounds
 /// to no pose, on a file
 /// without a split column) has no held-out figures: null in the
