@@ -398,8 +398,39 @@ pub(super) fn parameters(o: &mut String, r: &Report) {
         );
     }
     o.push_str("</table>");
+    free_set(o, r);
     fixed(o, r);
     deviations(o, r);
+}
+
+/// Which identifiable parameters were freed and why, with each candidate
+/// set's cross-validated RMS when the choice was made that way.
+fn free_set(o: &mut String, r: &Report) {
+    let Some(f) = &r.free_set else { return };
+    let _ = write!(
+        o,
+        r#"<h3>Free set</h3><p id="free-set" data-chosen="{c}" data-how="{h}"><b>{c}</b> ({h}): {}</p>"#,
+        esc(&f.reason),
+        c = esc(&f.chosen),
+        h = esc(&f.how)
+    );
+    if !f.candidates.is_empty() {
+        let _ = write!(
+            o,
+            r#"<table id="free-set-table"><tr><th>set</th><th class="num">parameters freed</th><th class="num">RMS of the left-out train readings ({} folds, mm)</th></tr>"#,
+            f.folds
+        );
+        for c in &f.candidates {
+            let _ = write!(
+                o,
+                r#"<tr><td>{}</td><td class="num">{}</td>{}</tr>"#,
+                esc(&c.name),
+                c.n_free,
+                num(c.cv_rms_mm)
+            );
+        }
+        o.push_str("</table>");
+    }
 }
 
 /// The parameters held at nominal as unidentifiable, with what each is

@@ -166,6 +166,20 @@ fn cli_report_holds_the_numbers_and_draws_the_plots() {
         has_value(&html, p.value, &p.name);
         has_value(&html, p.sigma, &format!("{} sigma", p.name));
     }
+    // The verdict first, with every reason; the free set with its reason.
+    let v = drawcal::report::verdict::Verdict::read(&r);
+    let at = html.find(r#"id="verdict""#).expect("verdict section");
+    assert!(
+        at < html.find(r#"id="summary""#).unwrap(),
+        "verdict before the summary"
+    );
+    assert!(html.contains(&format!(r#"data-level="{}""#, v.level)));
+    for reason in &v.reasons {
+        assert!(html.contains(&esc(reason)), "{reason}");
+    }
+    let f = r.free_set.as_ref().expect("free set");
+    assert!(html.contains(&format!(r#"data-chosen="{}""#, f.chosen)));
+    assert!(html.contains(&esc(&f.reason)));
     assert!(!r.fixed.is_empty());
     for f in &r.fixed {
         assert!(html.contains(&format!("<td>{}</td>", esc(f))), "fixed {f}");
