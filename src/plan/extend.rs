@@ -69,44 +69,7 @@ pub fn extend(
         return Ok(None);
     }
     let noise = noise_mm.unwrap_or_else(|| default_noise(rig));
-    let l = scene.chain.layout;
-    // The robot's geometry only: the sensor's parameters (string offsets,
-    // anchors) are not what poses are chosen for.
-    let index = |names: &[String]| -> Vec<usize> {
-        names
-            .iter()
-            .filter_map(|n| l.index_of(n))
-            .filter(|&i| i < l.n_geometric())
-            .collect()
-    };
-    // In the identification's priority order, so that of an aliased pair
-    // the one it would keep is the one aimed at.
-    let order = free_candidates(l, &IdentifyOptions::default());
-    let rank = |i: &usize| order.iter().position(|c| c == i).unwrap_or(usize::MAX);
-    let (free, mut wanted) = (index(free), index(wanted));
-    wanted.sort_by_key(rank);
-    // The freed parameters first: a wanted one is kept only if it stands
-    // clear of them (and of the wanted ones before it) over the whole pool
-    // by more than the near-alias sine, below which the identification
-    // would hold it again however many poses it had.
-    let cand: Vec<usize> = free.iter().chain(&wanted).copied().collect();
-    let jtj = normal_matrix(&scene, &pool, &cand);
-    let sel = identifiability::select(&jtj, &cand, &l, identifiability::NEAR_ALIAS_SINE);
-    let inseparable: Vec<FixedParam> = sel
-        .fixed
-        .into_iter()
-        .filter(|f| wanted.iter().any(|&w| l.name(w) == f.name))
-        .collect();
-    let cols = Columns {
-        param_scale: sel.free.iter().map(|&i| prior_size(l, i)).collect(),
-        params: sel.free,
-        aliased: vec![],
-        effects: vec![],
-        effect_scale: vec![],
-    };
-    let targets: Vec<usize> = (0..cols.params.len())
-        .filter(|&k| wanted.contains(&cols.params[k]))
-        .collect();
+    let (cols, targets, inseparable) = aimed_columns(&scene, &pool, free, wanted);
     if targets.is_empty() {
         return Ok(Some(ExtraPoses {
             parameters: vec![],
@@ -117,6 +80,7 @@ pub fn extend(
                 .into(),
         }));
     }
+    let l = scene.chain.layout;
     let mut design = design_pool(&scene, &cols, &pool, &pool, noise);
     let recorded_rows = design_pool(&scene, &cols, &recorded, &pool, noise).rows;
     let p = design.p;
@@ -179,11 +143,62 @@ pub fn extend(
         poses,
         inseparable,
         criterion: format!(
-            "added one at a time to the {} recorded train poses, each the pose of {} drawn that most lowers the summed variance of these parameters (linear least squares, {noise:.3} mm per reading), until each is determined to a third of its tolerance or {MAX_EXTRA_POSES} poses are added; drawn inside the joint limits with the strings in range and kept no lower than the recorded poses went, but without your cell's fixtures: check each pose before running it",
+            "added one at a time to the {} recorded train poses, each the pose of {} drawn that most lowers the summed variance of these parameters (linear least squares, {noise:.3} mm per reading), until each is determined to a third of its tolerance or {MAX_EXTRA_POSES} poses are added; drawn inside the joint limits, measurable by this rig and kept no lower than the recorded poses went, but without your cell's fixtures: check each pose before running it",
             recorded_q_deg.len(),
             pool.len()
         ),
     }))
+}
+
+/// The columns of the design: the parameters the session freed, then the
+/// wanted ones (report names) that stand clear of them over the whole
+/// pool; which columns are aimed at (the wanted ones kept); and the wanted
+/// ones that do not stand clear, with what they move T like.
+fn aimed_columns(
+    scene: &Scene,
+    pool: &[Candidate],
+    free: &[String],
+    wanted: &[String],
+) -> (Columns, Vec<usize>, Vec<FixedParam>) {
+    let l = scene.chain.layout;
+    // The robot's geometry only: the sensor's parameters (string offsets,
+    // anchors) are not what poses are chosen for.
+    let index = |names: &[String]| -> Vec<usize> {
+        names
+            .iter()
+            .filter_map(|n| l.index_of(n))
+            .filter(|&i| i < l.n_geometric())
+            .collect()
+    };
+    // In the identification's priority order, so that of an aliased pair
+    // the one it would keep is the one aimed at.
+    let order = free_candidates(l, &IdentifyOptions::default());
+    let rank = |i: &usize| order.iter().position(|c| c == i).unwrap_or(usize::MAX);
+    let (free, mut wanted) = (index(free), index(wanted));
+    wanted.sort_by_key(rank);
+    // The freed parameters first: a wanted one is kept only if it stands
+    // clear of them (and of the wanted ones before it) by more than the
+    // near-alias sine, below which the identification would hold it again
+    // however many poses it had.
+    let cand: Vec<usize> = free.iter().chain(&wanted).copied().collect();
+    let jtj = normal_matrix(scene, pool, &cand);
+    let sel = identifiability::select(&jtj, &cand, &l, identifiability::NEAR_ALIAS_SINE);
+    let inseparable = sel
+        .fixed
+        .into_iter()
+        .filter(|f| wanted.iter().any(|&w| l.name(w) == f.name))
+        .collect();
+    let targets = (0..sel.free.len())
+        .filter(|&k| wanted.contains(&sel.free[k]))
+        .collect();
+    let cols = Columns {
+        param_scale: sel.free.iter().map(|&i| prior_size(l, i)).collect(),
+        params: sel.free,
+        aliased: vec![],
+        effects: vec![],
+        effect_scale: vec![],
+    };
+    (cols, targets, inseparable)
 }
 
 /// 1-sigma of columns `targets` (in the pool's scaled units) from an
