@@ -21,6 +21,8 @@ type Db = sqlx::Postgres;
 #[derive(Clone, Debug)]
 pub struct Backend {
     pub(super) pool: sqlx::Pool<Db>,
+    /// Exports in flight (see `Backend::new`).
+    exports: std::sync::Arc<tokio::sync::Semaphore>,
 }
 
 /// Claim the oldest runnable job; concurrent claimers skip rows another
@@ -61,7 +63,7 @@ impl Backend {
             .await
             .map_err(super::StoreError::Db)?;
         super::migrations::postgres().run(&pool).await?;
-        Ok(Backend { pool })
+        Ok(Backend::new(pool))
     }
 
     async fn begin_write(&self) -> sqlx::Result<sqlx::Transaction<'static, Db>> {

@@ -25,6 +25,8 @@ type Db = sqlx::Sqlite;
 #[derive(Clone, Debug)]
 pub struct Backend {
     pub(super) pool: sqlx::Pool<Db>,
+    /// Exports in flight (see `Backend::new`).
+    exports: std::sync::Arc<tokio::sync::Semaphore>,
 }
 
 /// Claim the oldest runnable job. SQLite has one writer at a time, so a
@@ -80,7 +82,7 @@ impl Backend {
             .await
             .map_err(super::StoreError::Db)?;
         super::migrations::sqlite().run(&pool).await?;
-        Ok(Backend { pool })
+        Ok(Backend::new(pool))
     }
 
     async fn begin_write(&self) -> sqlx::Result<sqlx::Transaction<'static, Db>> {
