@@ -43,6 +43,18 @@ const CLAIM_SQL: &str = concat!(
 /// numbering and activation per robot across replicas).
 const LOCK_ROBOT_SQL: &str = "SELECT model_id FROM robots WHERE id = $1 FOR UPDATE";
 
+/// A condition on `c.robot_id` that repeats the robot conditions `conds`
+/// (on `robots`), for an export's planner. Given only the join, the planner
+/// costs a site's 5,000 calibrations read through `calibrations_history`
+/// as random reads and scans the whole table instead (65-72 ms at 100,000,
+/// against 20-27 ms); the robots' ids as an array it cannot see into make
+/// it an index condition (a bitmap scan of the site's rows).
+fn robot_ids_condition(conds: &str) -> Option<String> {
+    Some(format!(
+        "c.robot_id = ANY(ARRAY(SELECT id FROM robots WHERE {conds}))"
+    ))
+}
+
 /// How a query's plan is asked for.
 const EXPLAIN: &str = "EXPLAIN";
 

@@ -62,9 +62,10 @@ enum FilterArg<'a> {
 /// comparison the planner can serve from an index (one text for every
 /// filter, `($1 IS NULL OR c.robot_id = $1) AND ...`, was one plan for all
 /// of them: a scan of every calibration), numbered `$1`... in the order of
-/// the values returned. `robots` says whether a condition is on the robot
-/// (site, line), i.e. whether a count must join `robots`.
-fn calibration_filter<'a>(f: &'a CalibrationFilter) -> (String, Vec<FilterArg<'a>>, bool) {
+/// the values returned. The conditions on the robot (site, line) come again
+/// on their own, on `robots` without an alias (empty: a count need not
+/// join `robots`).
+fn calibration_filter<'a>(f: &'a CalibrationFilter) -> (String, Vec<FilterArg<'a>>, Vec<String>) {
     let mut conds: Vec<String> = Vec::new();
     let mut args: Vec<FilterArg<'a>> = Vec::new();
     let mut cond = |sql: &str, arg: FilterArg<'a>| {
@@ -95,7 +96,11 @@ fn calibration_filter<'a>(f: &'a CalibrationFilter) -> (String, Vec<FilterArg<'a
     if let Some(v) = f.min_test_rms_mm {
         cond("c.test_rms_after_mm >= ?", FilterArg::Real(v));
     }
-    let robots = f.site.is_some() || f.line.is_some();
+    let robots: Vec<String> = conds
+        .iter()
+        .filter_map(|c| c.strip_prefix("r."))
+        .map(str::to_string)
+        .collect();
     let sql = if conds.is_empty() {
         String::new()
     } else {
@@ -125,7 +130,7 @@ fn calibration_list_sql(f: &CalibrationFilter) -> (String, String, Vec<FilterArg
     let n = args.len();
     // Every calibration has its robot (a foreign key), so a query without
     // a condition on the robot need not join it.
-    let from = if robots {
+    let from = if !robots.is_empty() {
         "FROM calibrations c JOIN robots r ON r.id = c.robot_id"
     } else {
         "FROM calibrations c"
@@ -152,7 +157,12 @@ fn calibration_list_sql(f: &CalibrationFilter) -> (String, String, Vec<FilterArg
 /// The SQL of a history export: every row the filter matches, oldest
 /// first, in one statement (no page to find, no count).
 fn calibration_export_sql(f: &CalibrationFilter) -> (String, Vec<FilterArg<'_>>) {
-    let (filter, args, _) = calibration_filter(f);
+    let (mut filter, args, robots) = calibration_filter(f);
+    if !robots.is_empty() {
+        if let Some(ids) = robot_ids_condition(&robots.join(" AND ")) {
+            filter = format!("{filter}AND {ids} ");
+        }
+    }
     // Sorted as numbers with a filter, for the page's reason above: the
     // planner then reads the matching rows from the filter's indexes and
     // sorts them, instead of walking the primary key through every

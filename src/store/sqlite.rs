@@ -46,6 +46,13 @@ const CLAIM_SQL: &str = concat!(
 /// holds the database's write lock).
 const LOCK_ROBOT_SQL: &str = "SELECT model_id FROM robots WHERE id = $1";
 
+/// A condition on `c.robot_id` that repeats the robot conditions `conds`
+/// (on `robots`), for an export's planner: none here, SQLite's plan starts
+/// from the robots' index already.
+fn robot_ids_condition(_conds: &str) -> Option<String> {
+    None
+}
+
 /// How a query's plan is asked for.
 const EXPLAIN: &str = "EXPLAIN QUERY PLAN";
 
@@ -75,7 +82,14 @@ impl Backend {
             .journal_mode(SqliteJournalMode::Wal)
             .synchronous(SqliteSynchronous::Normal)
             .foreign_keys(true)
-            .busy_timeout(Duration::from_secs(10));
+            .busy_timeout(Duration::from_secs(10))
+            // Rows a statement's thread may read ahead of the reader (sqlx's
+            // default is 50): every time the queue fills, the two threads
+            // take turns, which on a busy machine costs a scheduler slice
+            // each; a site's 5,000-row export had store times up to 560-600
+            // ms with 50, 110-130 ms with 1,000 (BENCHMARKS.md, "Fleet
+            // scale"). Rows are small (about 150 bytes of values).
+            .row_buffer_size(1000);
         let pool = SqlitePoolOptions::new()
             .max_connections(8)
             .connect_with(opts)
