@@ -1,9 +1,12 @@
 //! Calibrations, activation and fleet history.
 
+use axum::body::{Body, Bytes};
 use axum::extract::State;
 use axum::http::header::CONTENT_TYPE;
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
+use futures_util::stream::BoxStream;
+use futures_util::{StreamExt, TryStreamExt};
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
@@ -13,7 +16,7 @@ use super::extract::{ApiJson, ApiQuery, Id};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
 use crate::report::Report;
 use crate::store::time::normalize_bound;
-use crate::store::{ActivationRec, CalibrationFilter, CalibrationRec, Page};
+use crate::store::{ActivationRec, CalibrationFilter, CalibrationRec, StoreError};
 
 /// Output format of history lists.
 #[derive(Debug, Clone, Copy, Default, Deserialize, ToSchema, PartialEq, Eq)]
@@ -84,20 +87,44 @@ impl HistoryFilter {
     }
 }
 
-fn opt_num(x: Option<f64>) -> String {
-    x.map(|v| format!("{v:.4}")).unwrap_or_default()
-}
-
 /// A free-text cell as a spreadsheet reads it safely: text a user typed
 /// (serial number, site, line, cell) that begins like a formula (`=`, `+`,
 /// `-`, `@`, tab, carriage return) gets a leading `'`, so an MES export
 /// opened in a spreadsheet shows it instead of running it.
 pub(super) fn text_cell(s: &str) -> String {
+    let mut cell = String::new();
+    push_text_cell(&mut cell, s);
+    cell
+}
+
+/// [`text_cell`] appended to `cell` (no allocation per cell).
+fn push_text_cell(cell: &mut String, s: &str) {
     if s.starts_with(['=', '+', '-', '@', '\t', '\r']) {
-        format!("'{s}")
-    } else {
-        s.to_string()
+        cell.push('\'');
     }
+    cell.push_str(s);
+}
+
+/// The one CSV dialect of the service's answers: the csv crate's defaults
+/// (quotes only where needed), records ended by `\n`.
+fn csv_writer(buf: Vec<u8>) -> csv::Writer<Vec<u8>> {
+    csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(buf)
+}
+
+fn csv_error(e: impl std::fmt::Display) -> ApiError {
+    ApiError::Internal(format!("writing CSV: {e}"))
+}
+
+/// `header`, then one record per row, as CSV.
+fn csv_bytes(header: &[&str], rows: impl IntoIterator<Item = Vec<String>>) -> ApiResult<Vec<u8>> {
+    let mut w = csv_writer(Vec::new());
+    w.write_record(header).map_err(csv_error)?;
+    for row in rows {
+        w.write_record(&row).map_err(csv_error)?;
+    }
+    w.into_inner().map_err(csv_error)
 }
 
 /// A `text/csv` answer: `header`, then one record per row.
@@ -105,67 +132,174 @@ pub(super) fn csv_table(
     header: &[&str],
     rows: impl IntoIterator<Item = Vec<String>>,
 ) -> ApiResult<Response> {
-    let mut w = csv::WriterBuilder::new()
-        .terminator(csv::Terminator::Any(b'\n'))
-        .from_writer(Vec::new());
-    let err = |e: csv::Error| ApiError::Internal(e.to_string());
-    w.write_record(header).map_err(err)?;
-    for row in rows {
-        w.write_record(&row).map_err(err)?;
-    }
-    let bytes = w
-        .into_inner()
-        .map_err(|e| ApiError::Internal(e.to_string()))?;
+    let bytes = csv_bytes(header, rows)?;
     Ok(([(CONTENT_TYPE, "text/csv")], bytes).into_response())
 }
 
-fn csv_response(rows: &[CalibrationRec]) -> ApiResult<Response> {
-    csv_table(
-        &[
-            "calibration_id",
-            "robot_id",
-            "serial_number",
-            "model_id",
-            "site",
-            "line",
-            "cell",
-            "version",
-            "created_at",
-            "method",
-            "n_poses",
-            "n_test",
-            "test_rms_before_mm",
-            "test_rms_after_mm",
-            "train_rms_after_mm",
-            "effects",
-            "active",
-            "session_id",
-            "job_id",
-        ],
-        rows.iter().map(|c| {
-            vec![
-                c.id.to_string(),
-                c.robot_id.to_string(),
-                text_cell(&c.serial_number),
-                c.model_id.to_string(),
-                text_cell(c.site.as_deref().unwrap_or_default()),
-                text_cell(c.line.as_deref().unwrap_or_default()),
-                text_cell(c.cell.as_deref().unwrap_or_default()),
-                c.version.to_string(),
-                c.created_at.clone(),
-                c.method.clone(),
-                c.n_poses.to_string(),
-                c.n_test.to_string(),
-                opt_num(c.test_rms_before_mm),
-                opt_num(c.test_rms_after_mm),
-                opt_num(c.train_rms_after_mm),
-                c.effects.replace(',', ";"),
-                c.active.to_string(),
-                c.session_id.to_string(),
-                c.job_id.to_string(),
-            ]
-        }),
-    )
+/// The columns of a calibrations CSV, in order.
+const CALIBRATION_COLUMNS: [&str; 19] = [
+    "calibration_id",
+    "robot_id",
+    "serial_number",
+    "model_id",
+    "site",
+    "line",
+    "cell",
+    "version",
+    "created_at",
+    "method",
+    "n_poses",
+    "n_test",
+    "test_rms_before_mm",
+    "test_rms_after_mm",
+    "train_rms_after_mm",
+    "effects",
+    "active",
+    "session_id",
+    "job_id",
+];
+
+/// CSV bytes gathered before they go to the connection as one piece: big
+/// enough that a piece's framing and write cost little per row (about
+/// 250 rows), small enough that an export holds little memory whatever
+/// its size. An export that fits in one piece is answered whole, with its
+/// length.
+const CSV_CHUNK_BYTES: usize = 32 * 1024;
+
+/// Calibrations written as CSV records into a buffer that is taken a
+/// piece at a time: the same writer, settings and cells as [`csv_table`]
+/// (a test compares them byte for byte), without a `String` per cell.
+struct CalibrationCsv {
+    w: csv::Writer<Vec<u8>>,
+    /// The cell being formatted (reused).
+    cell: String,
+}
+
+impl CalibrationCsv {
+    /// A writer that has written the header.
+    fn new() -> ApiResult<Self> {
+        let mut w = csv_writer(Vec::with_capacity(CSV_CHUNK_BYTES + 1024));
+        w.write_record(CALIBRATION_COLUMNS).map_err(csv_error)?;
+        Ok(CalibrationCsv {
+            w,
+            cell: String::new(),
+        })
+    }
+
+    /// Write the cell formatted by `f`.
+    fn field(&mut self, f: impl FnOnce(&mut String)) -> csv::Result<()> {
+        self.cell.clear();
+        f(&mut self.cell);
+        self.w.write_field(&self.cell)
+    }
+
+    /// Write one calibration's record.
+    fn row(&mut self, c: &CalibrationRec) -> ApiResult<()> {
+        self.record(c).map_err(csv_error)
+    }
+
+    fn record(&mut self, c: &CalibrationRec) -> csv::Result<()> {
+        use std::fmt::Write;
+        // Writing to a `String` cannot fail.
+        let num = |x: Option<f64>| {
+            move |s: &mut String| {
+                if let Some(v) = x {
+                    let _ = write!(s, "{v:.4}");
+                }
+            }
+        };
+        let int = |v: i64| {
+            move |s: &mut String| {
+                let _ = write!(s, "{v}");
+            }
+        };
+        self.field(int(c.id))?;
+        self.field(int(c.robot_id))?;
+        self.field(|s| push_text_cell(s, &c.serial_number))?;
+        self.field(int(c.model_id))?;
+        for t in [&c.site, &c.line, &c.cell] {
+            self.field(|s| push_text_cell(s, t.as_deref().unwrap_or_default()))?;
+        }
+        self.field(int(c.version))?;
+        self.w.write_field(&c.created_at)?;
+        self.w.write_field(&c.method)?;
+        self.field(int(c.n_poses))?;
+        self.field(int(c.n_test))?;
+        self.field(num(c.test_rms_before_mm))?;
+        self.field(num(c.test_rms_after_mm))?;
+        self.field(num(c.train_rms_after_mm))?;
+        // A list inside a cell: `;` between the effects, as before.
+        self.field(|s| s.extend(c.effects.chars().map(|ch| if ch == ',' { ';' } else { ch })))?;
+        self.w
+            .write_field(if c.active { "true" } else { "false" })?;
+        self.field(int(c.session_id))?;
+        self.field(int(c.job_id))?;
+        self.w.write_record(None::<&[u8]>)
+    }
+
+    /// The bytes written so far, now in the buffer.
+    fn len(&mut self) -> ApiResult<usize> {
+        self.w.flush().map_err(csv_error)?;
+        Ok(self.w.get_ref().len())
+    }
+
+    /// Write rows from `rows` until a piece is ready; `true` when `rows`
+    /// has ended.
+    async fn fill(&mut self, rows: &mut CalibrationStream) -> ApiResult<bool> {
+        while self.len()? < CSV_CHUNK_BYTES {
+            match rows.next().await {
+                Some(row) => self.row(&row?)?,
+                None => return Ok(true),
+            }
+        }
+        Ok(false)
+    }
+
+    /// Take what is written.
+    fn take(&mut self) -> ApiResult<Bytes> {
+        // A new writer for the next piece: the csv writer lends its
+        // buffer only by value.
+        let next = csv_writer(Vec::with_capacity(CSV_CHUNK_BYTES + 1024));
+        let w = std::mem::replace(&mut self.w, next);
+        Ok(Bytes::from(w.into_inner().map_err(csv_error)?))
+    }
+}
+
+/// Calibrations as the store reads them.
+type CalibrationStream = BoxStream<'static, Result<CalibrationRec, StoreError>>;
+
+/// A `text/csv` answer of calibrations, written as the store reads them, a
+/// piece of [`CSV_CHUNK_BYTES`] at a time: memory stays bounded however
+/// many rows match, and the first bytes leave before the last row is
+/// read. The first piece is written before the answer starts, so a query
+/// that fails is an error answer (its status chosen where every error's
+/// is); a failure after that can only end the answer early: the
+/// connection is closed mid-body, which a client sees as an incomplete
+/// answer, never as a complete shorter CSV.
+async fn calibrations_csv(mut rows: CalibrationStream) -> ApiResult<Response> {
+    let mut csv = CalibrationCsv::new()?;
+    let ended = csv.fill(&mut rows).await?;
+    let first = csv.take()?;
+    if ended {
+        return Ok(([(CONTENT_TYPE, "text/csv")], first).into_response());
+    }
+    let rest = futures_util::stream::unfold(Some((rows, csv)), |state| async move {
+        let (mut rows, mut csv) = state?;
+        let piece = match csv.fill(&mut rows).await {
+            Ok(ended) => csv.take().map(|piece| (piece, ended)),
+            Err(e) => Err(e),
+        };
+        match piece {
+            Ok((piece, true)) if piece.is_empty() => None,
+            Ok((piece, ended)) => Some((Ok(piece), (!ended).then_some((rows, csv)))),
+            Err(e) => {
+                tracing::error!(error = %e, "CSV export cut short");
+                Some((Err(e), None))
+            }
+        }
+    });
+    let body = futures_util::stream::once(std::future::ready(Ok::<_, ApiError>(first))).chain(rest);
+    Ok(([(CONTENT_TYPE, "text/csv")], Body::from_stream(body)).into_response())
 }
 
 /// The fleet's calibrations, filtered by robot, model, site, line, date
@@ -186,17 +320,7 @@ pub async fn list_calibrations(
     let mut filter = f.to_store()?;
     filter.site = caller.site_filter(filter.site)?;
     if f.format == Some(Format::Csv) {
-        let (rows, _) = app
-            .store
-            .list_calibrations(
-                &filter,
-                Page {
-                    limit: i64::MAX / 2,
-                    offset: 0,
-                },
-            )
-            .await?;
-        return csv_response(&rows);
+        return calibrations_csv(app.store.stream_calibrations(&filter).await).await;
     }
     let page = p.page()?;
     let (items, total) = app.store.list_calibrations(&filter, page).await?;
@@ -294,19 +418,11 @@ pub async fn robot_accuracy(
         robot_id: Some(id),
         ..Default::default()
     };
-    let (rows, _) = app
-        .store
-        .list_calibrations(
-            &filter,
-            Page {
-                limit: i64::MAX / 2,
-                offset: 0,
-            },
-        )
-        .await?;
+    let rows = app.store.stream_calibrations(&filter).await;
     if q.format == Some(Format::Csv) {
-        return csv_response(&rows);
+        return calibrations_csv(rows).await;
     }
+    let rows: Vec<CalibrationRec> = rows.try_collect().await?;
     let history = rows
         .into_iter()
         .map(|c| AccuracyPoint {
@@ -487,7 +603,8 @@ pub async fn list_activations(
 
 #[cfg(test)]
 mod tests {
-    use super::text_cell;
+    use super::*;
+    use axum::body::HttpBody;
 
     #[test]
     fn formula_like_text_is_quoted_for_spreadsheets() {
@@ -496,5 +613,134 @@ mod tests {
         assert_eq!(text_cell("-2"), "'-2");
         assert_eq!(text_cell("plant-1"), "plant-1");
         assert_eq!(text_cell(""), "");
+    }
+
+    /// Calibrations whose text needs quoting or the formula guard, numbers
+    /// absent and present, effects none, one or several.
+    fn awkward(n: usize) -> Vec<CalibrationRec> {
+        let texts = [
+            "plant-1",
+            "=HYPERLINK(\"x\")",
+            "a,b",
+            "-2",
+            "+1",
+            "@SUM(A1)",
+            "\tx",
+            "\rx",
+            "two\nlines",
+            "say \"hi\"",
+            "Zürich",
+            "",
+            " lead",
+        ];
+        let effects = ["", "joint_compliance", "joint_compliance,backlash,thermal"];
+        (0..n)
+            .map(|i| {
+                let t = |k: usize| texts[(i + k) % texts.len()].to_string();
+                CalibrationRec {
+                    id: i as i64 + 1,
+                    robot_id: (i % 7) as i64 + 1,
+                    serial_number: t(0),
+                    model_id: 3,
+                    site: (i % 5 != 0).then(|| t(1)),
+                    line: (i % 4 != 0).then(|| t(2)),
+                    cell: (i % 3 != 0).then(|| t(3)),
+                    session_id: 10 * i as i64,
+                    job_id: i64::MAX - i as i64,
+                    version: i as i64 / 7 + 1,
+                    method: "lm".into(),
+                    n_poses: 50,
+                    n_test: 15,
+                    test_rms_before_mm: (i % 6 != 0).then_some(0.123456789 * i as f64),
+                    test_rms_after_mm: (i % 6 != 1).then_some(1e-5 / (i + 1) as f64),
+                    train_rms_after_mm: (i % 6 != 2).then_some(12345.678_95),
+                    effects: effects[i % 3].into(),
+                    active: i % 2 == 0,
+                    created_at: format!("2026-01-{:02}T00:00:00.000Z", i % 28 + 1),
+                }
+            })
+            .collect()
+    }
+
+    /// The CSV as it was made before the export streamed: a `String` per
+    /// cell, the whole table through [`csv_table`]'s writer.
+    fn table(rows: &[CalibrationRec]) -> Vec<u8> {
+        let num = |x: Option<f64>| x.map(|v| format!("{v:.4}")).unwrap_or_default();
+        csv_bytes(
+            &CALIBRATION_COLUMNS,
+            rows.iter().map(|c| {
+                vec![
+                    c.id.to_string(),
+                    c.robot_id.to_string(),
+                    text_cell(&c.serial_number),
+                    c.model_id.to_string(),
+                    text_cell(c.site.as_deref().unwrap_or_default()),
+                    text_cell(c.line.as_deref().unwrap_or_default()),
+                    text_cell(c.cell.as_deref().unwrap_or_default()),
+                    c.version.to_string(),
+                    c.created_at.clone(),
+                    c.method.clone(),
+                    c.n_poses.to_string(),
+                    c.n_test.to_string(),
+                    num(c.test_rms_before_mm),
+                    num(c.test_rms_after_mm),
+                    num(c.train_rms_after_mm),
+                    c.effects.replace(',', ";"),
+                    c.active.to_string(),
+                    c.session_id.to_string(),
+                    c.job_id.to_string(),
+                ]
+            }),
+        )
+        .unwrap()
+    }
+
+    async fn answer(rows: Vec<Result<CalibrationRec, StoreError>>) -> ApiResult<Response> {
+        calibrations_csv(futures_util::stream::iter(rows).boxed()).await
+    }
+
+    /// Small exports are answered whole (with a length), large ones in
+    /// pieces; either way the bytes are the table's, header included.
+    #[tokio::test]
+    async fn streamed_csv_is_the_whole_table_byte_for_byte() {
+        for n in [0, 1, 13, 100, 2_000] {
+            let rows = awkward(n);
+            let want = table(&rows);
+            let r = answer(rows.into_iter().map(Ok).collect()).await.unwrap();
+            assert_eq!(r.headers()[CONTENT_TYPE], "text/csv");
+            let sized = r.body().size_hint().exact().is_some();
+            assert_eq!(
+                sized,
+                want.len() < CSV_CHUNK_BYTES,
+                "{n} rows, {} bytes",
+                want.len()
+            );
+            let got = axum::body::to_bytes(r.into_body(), usize::MAX)
+                .await
+                .unwrap();
+            assert_eq!(
+                String::from_utf8_lossy(&got),
+                String::from_utf8_lossy(&want),
+                "{n} rows"
+            );
+        }
+    }
+
+    /// A store failure before the first piece is an error answer; after
+    /// it, the body fails (the connection is cut) instead of ending as if
+    /// the CSV were whole.
+    #[tokio::test]
+    async fn a_failure_is_an_error_answer_or_a_cut_body() {
+        let fail = || Err(StoreError::Conflict("gone".into()));
+        let r = answer(vec![fail()]).await;
+        assert!(matches!(r, Err(ApiError::Conflict(_))), "{r:?}");
+        let mut rows: Vec<_> = awkward(2_000).into_iter().map(Ok).collect();
+        rows.push(fail());
+        let r = answer(rows).await.unwrap();
+        assert!(
+            axum::body::to_bytes(r.into_body(), usize::MAX)
+                .await
+                .is_err()
+        );
     }
 }

@@ -454,12 +454,12 @@ impl Store {
 
     /// Wrap an existing SQLite pool (already migrated), e.g. from `#[sqlx::test]`.
     pub fn from_sqlite_pool(pool: sqlx::SqlitePool) -> Self {
-        Store::Sqlite(sqlite::Backend { pool })
+        Store::Sqlite(sqlite::Backend::new(pool))
     }
 
     /// Wrap an existing PostgreSQL pool (already migrated).
     pub fn from_pg_pool(pool: sqlx::PgPool) -> Self {
-        Store::Postgres(postgres::Backend { pool })
+        Store::Postgres(postgres::Backend::new(pool))
     }
 
     /// Backend name (`sqlite` or `postgres`).
@@ -678,6 +678,24 @@ impl Store {
         page: Page,
     ) -> Result<(Vec<CalibrationRec>, i64)> {
         dispatch!(self.list_calibrations(f, page))
+    }
+    /// Every calibration the filter matches, oldest first, read from the
+    /// database as the stream is polled: one query, no count, one row in
+    /// memory at a time, so that an export of any size holds little. The
+    /// stream holds a pool connection until it ends or is dropped, so at
+    /// most half the pool's connections serve such streams at once (the
+    /// others are for everything else, however slowly exports are read);
+    /// past that this waits for one to end.
+    pub async fn stream_calibrations(
+        &self,
+        f: &CalibrationFilter,
+    ) -> futures_util::stream::BoxStream<'static, Result<CalibrationRec>> {
+        dispatch!(self.stream_calibrations(f))
+    }
+    /// The database's plan of [`Store::stream_calibrations`]'s query for a
+    /// filter, one line a step (as [`Store::explain_calibrations`]).
+    pub async fn explain_calibration_export(&self, f: &CalibrationFilter) -> Result<Vec<String>> {
+        dispatch!(self.explain_calibration_export(f))
     }
     /// The database's plan of [`Store::list_calibrations`]'s two queries
     /// (the page and its count) for a filter, one line a step: `EXPLAIN

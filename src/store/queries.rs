@@ -62,9 +62,10 @@ enum FilterArg<'a> {
 /// comparison the planner can serve from an index (one text for every
 /// filter, `($1 IS NULL OR c.robot_id = $1) AND ...`, was one plan for all
 /// of them: a scan of every calibration), numbered `$1`... in the order of
-/// the values returned. `robots` says whether a condition is on the robot
-/// (site, line), i.e. whether a count must join `robots`.
-fn calibration_filter<'a>(f: &'a CalibrationFilter) -> (String, Vec<FilterArg<'a>>, bool) {
+/// the values returned. The conditions on the robot (site, line) come again
+/// on their own, on `robots` without an alias (empty: a count need not
+/// join `robots`).
+fn calibration_filter<'a>(f: &'a CalibrationFilter) -> (String, Vec<FilterArg<'a>>, Vec<String>) {
     let mut conds: Vec<String> = Vec::new();
     let mut args: Vec<FilterArg<'a>> = Vec::new();
     let mut cond = |sql: &str, arg: FilterArg<'a>| {
@@ -95,7 +96,11 @@ fn calibration_filter<'a>(f: &'a CalibrationFilter) -> (String, Vec<FilterArg<'a
     if let Some(v) = f.min_test_rms_mm {
         cond("c.test_rms_after_mm >= ?", FilterArg::Real(v));
     }
-    let robots = f.site.is_some() || f.line.is_some();
+    let robots: Vec<String> = conds
+        .iter()
+        .filter_map(|c| c.strip_prefix("r."))
+        .map(str::to_string)
+        .collect();
     let sql = if conds.is_empty() {
         String::new()
     } else {
@@ -125,7 +130,7 @@ fn calibration_list_sql(f: &CalibrationFilter) -> (String, String, Vec<FilterArg
     let n = args.len();
     // Every calibration has its robot (a foreign key), so a query without
     // a condition on the robot need not join it.
-    let from = if robots {
+    let from = if !robots.is_empty() {
         "FROM calibrations c JOIN robots r ON r.id = c.robot_id"
     } else {
         "FROM calibrations c"
@@ -149,7 +154,39 @@ fn calibration_list_sql(f: &CalibrationFilter) -> (String, String, Vec<FilterArg
     (page, count, args)
 }
 
+/// The SQL of a history export: every row the filter matches, oldest
+/// first, in one statement (no page to find, no count).
+fn calibration_export_sql(f: &CalibrationFilter) -> (String, Vec<FilterArg<'_>>) {
+    let (mut filter, args, robots) = calibration_filter(f);
+    if !robots.is_empty() {
+        if let Some(ids) = robot_ids_condition(&robots.join(" AND ")) {
+            filter = format!("{filter}AND {ids} ");
+        }
+    }
+    // Sorted as numbers with a filter, for the page's reason above: the
+    // planner then reads the matching rows from the filter's indexes and
+    // sorts them, instead of walking the primary key through every
+    // calibration. Without a filter every row is read anyway, in the
+    // primary key's order.
+    let order = if args.is_empty() { "c.id" } else { "c.id + 0" };
+    (
+        format!("{}{filter}ORDER BY {order}", calibration_select!()),
+        args,
+    )
+}
+
 impl Backend {
+    pub(super) fn new(pool: sqlx::Pool<Db>) -> Self {
+        // An export holds a connection as long as its client takes to read
+        // it (up to the write timeout, for one that stops): half the pool
+        // at most, so that slow readers cannot starve the other routes.
+        let exports = (pool.options().get_max_connections() as usize / 2).max(1);
+        Backend {
+            pool,
+            exports: std::sync::Arc::new(tokio::sync::Semaphore::new(exports)),
+        }
+    }
+
     /// Is the database answering?
     pub async fn ping(&self) -> Result<()> {
         sqlx::query_scalar::<_, i64>("SELECT CAST(1 AS BIGINT)")
@@ -750,6 +787,39 @@ impl Backend {
         .fetch_one(&self.pool)
         .await?;
         Ok((items, total))
+    }
+
+    pub async fn stream_calibrations(
+        &self,
+        f: &CalibrationFilter,
+    ) -> futures_util::stream::BoxStream<'static, Result<CalibrationRec>> {
+        use futures_util::StreamExt;
+        use sqlx::FromRow;
+        let (sql, args) = calibration_export_sql(f);
+        // The semaphore is never closed.
+        let permit = self.exports.clone().acquire_owned().await.ok();
+        // The pool's stream holds a clone of the pool and the query its
+        // own copy of the bound values, so the stream outlives `self` and
+        // `f`: it is polled by the answer's body, after the handler.
+        bind_filter!(sqlx::query::<Db>(sqlx::AssertSqlSafe(sql)), args)
+            .fetch(&self.pool)
+            .map(move |row| {
+                // Held as long as the stream.
+                let _held = &permit;
+                Ok(CalibrationRec::from_row(&row?)?)
+            })
+            .boxed()
+    }
+
+    pub async fn explain_calibration_export(&self, f: &CalibrationFilter) -> Result<Vec<String>> {
+        let (sql, args) = calibration_export_sql(f);
+        let mut out = vec![format!("-- export: {sql}")];
+        let q = bind_filter!(
+            sqlx::query(sqlx::AssertSqlSafe(format!("{EXPLAIN} {sql}"))),
+            args
+        );
+        out.extend(explain_lines(&q.fetch_all(&self.pool).await?)?);
+        Ok(out)
     }
 
     pub async fn explain_calibrations(&self, f: &CalibrationFilter, page: Page) -> Result<Vec<String>> {

@@ -25,6 +25,8 @@ type Db = sqlx::Sqlite;
 #[derive(Clone, Debug)]
 pub struct Backend {
     pub(super) pool: sqlx::Pool<Db>,
+    /// Exports in flight (see `Backend::new`).
+    exports: std::sync::Arc<tokio::sync::Semaphore>,
 }
 
 /// Claim the oldest runnable job. SQLite has one writer at a time, so a
@@ -43,6 +45,13 @@ const CLAIM_SQL: &str = concat!(
 /// Read the robot's model inside a write transaction (IMMEDIATE already
 /// holds the database's write lock).
 const LOCK_ROBOT_SQL: &str = "SELECT model_id FROM robots WHERE id = $1";
+
+/// A condition on `c.robot_id` that repeats the robot conditions `conds`
+/// (on `robots`), for an export's planner: none here, SQLite's plan starts
+/// from the robots' index already.
+fn robot_ids_condition(_conds: &str) -> Option<String> {
+    None
+}
 
 /// How a query's plan is asked for.
 const EXPLAIN: &str = "EXPLAIN QUERY PLAN";
@@ -73,14 +82,21 @@ impl Backend {
             .journal_mode(SqliteJournalMode::Wal)
             .synchronous(SqliteSynchronous::Normal)
             .foreign_keys(true)
-            .busy_timeout(Duration::from_secs(10));
+            .busy_timeout(Duration::from_secs(10))
+            // Rows a statement's thread may read ahead of the reader (sqlx's
+            // default is 50): every time the queue fills, the two threads
+            // take turns, which on a busy machine costs a scheduler slice
+            // each; a site's 5,000-row export had store times up to 560-600
+            // ms with 50, 110-130 ms with 1,000 (BENCHMARKS.md, "Fleet
+            // scale"). Rows are small (about 150 bytes of values).
+            .row_buffer_size(1000);
         let pool = SqlitePoolOptions::new()
             .max_connections(8)
             .connect_with(opts)
             .await
             .map_err(super::StoreError::Db)?;
         super::migrations::sqlite().run(&pool).await?;
-        Ok(Backend { pool })
+        Ok(Backend::new(pool))
     }
 
     async fn begin_write(&self) -> sqlx::Result<sqlx::Transaction<'static, Db>> {

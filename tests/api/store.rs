@@ -4,6 +4,8 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
+use futures_util::TryStreamExt;
+
 use drawcal::store::{
     CalibrationFilter, NewCalibration, NewKey, NewRobot, Page, Store, StoreError,
 };
@@ -399,10 +401,28 @@ async fn suite(store: Store) {
         None
     );
 
-    // Fleet filters.
+    // Fleet filters; the export (every row, streamed) has the page's rows.
     let f = |f: CalibrationFilter| {
         let store = store.clone();
-        async move { store.list_calibrations(&f, PAGE).await.unwrap().1 }
+        async move {
+            let (items, total) = store.list_calibrations(&f, PAGE).await.unwrap();
+            let streamed: Vec<_> = store
+                .stream_calibrations(&f)
+                .await
+                .try_collect()
+                .await
+                .unwrap();
+            let ids = |v: &[drawcal::store::CalibrationRec]| -> Vec<i64> {
+                v.iter().map(|c| c.id).collect()
+            };
+            assert_eq!(ids(&streamed), ids(&items), "{f:?}");
+            assert_eq!(
+                format!("{streamed:?}"),
+                format!("{items:?}"),
+                "every column alike"
+            );
+            total
+        }
     };
     assert_eq!(f(CalibrationFilter::default()).await, 2);
     assert_eq!(
@@ -595,8 +615,8 @@ async fn store_conformance_sqlite() {
 
 /// The fleet history's filters by robot, site, line and date range, alone
 /// or together (with the unindexed model and accuracy filters beside them
-/// or not), never scan the calibrations: the page and its count each use
-/// an index (BENCHMARKS.md, "Fleet scale", has the plans and the times at
+/// or not), never scan the calibrations: the page, its count and the CSV
+/// export each use an index (BENCHMARKS.md, "Fleet scale", has the plans and the times at
 /// 100,000 calibrations). SQLite's planner needs no statistics for this,
 /// so an empty database shows the plan a full one gets. (A date bound
 /// alone, `from` without `to`, may be a scan in id order that stops at the
@@ -620,7 +640,8 @@ async fn history_filters_use_indexes_sqlite() {
                 max_test_rms_mm: extra.then_some(0.5),
                 min_test_rms_mm: None,
             };
-            let plan = store.explain_calibrations(&f, PAGE).await.unwrap();
+            let mut plan = store.explain_calibrations(&f, PAGE).await.unwrap();
+            plan.extend(store.explain_calibration_export(&f).await.unwrap());
             let scans: Vec<&String> = plan
                 .iter()
                 .filter(|l| {
@@ -638,6 +659,12 @@ async fn history_filters_use_indexes_sqlite() {
     // Without a filter the page reads the first rows in id order and stops.
     let plan = store
         .explain_calibrations(&CalibrationFilter::default(), PAGE)
+        .await
+        .unwrap();
+    assert!(plan.iter().all(|l| !l.contains("TEMP B-TREE")), "{plan:?}");
+    // Nor is the whole history's export sorted: it is the table's order.
+    let plan = store
+        .explain_calibration_export(&CalibrationFilter::default())
         .await
         .unwrap();
     assert!(plan.iter().all(|l| !l.contains("TEMP B-TREE")), "{plan:?}");
