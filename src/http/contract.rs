@@ -130,6 +130,15 @@ pub(super) fn declare(doc: &mut OpenApi) {
             }
         }
     }
+    // rig.json's anchors are points (utoipa gives an array of arrays no
+    // bounds on the inner one).
+    if let Some(RefOr::T(Schema::Array(a))) = property_of(components, "RigJson", "anchors_mm")
+        && let ArrayItems::RefOrSchema(item) = &mut a.items
+        && let RefOr::T(Schema::Array(point)) = item.as_mut()
+    {
+        point.min_items = Some(3);
+        point.max_items = Some(3);
+    }
     if let Some(RefOr::T(Schema::Object(o))) = property_of(components, "CreateKey", "role") {
         o.enum_values = Some(
             super::auth::Role::ALL

@@ -174,7 +174,8 @@ pub fn without_bom(bytes: &[u8]) -> &[u8] {
 }
 
 /// Parse JSON bytes: syntax errors are 400 `malformed_json`, type and
-/// shape errors 422 `invalid_input` naming the field path.
+/// shape errors 422 `invalid_input` naming the field path (a struct given
+/// as an array among them, at any depth).
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let bytes = without_bom(bytes);
     // JSON writes a control character only as an escape (`\u0000`, `\n`;
@@ -191,8 +192,9 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         });
     }
     // The common case in one pass; only a failed parse pays for the
-    // classification below (it is on the /compensate hot path).
-    if let Ok(v) = serde_json::from_slice::<T>(bytes) {
+    // classification below (it is on the /compensate hot path). Structs
+    // are read from objects only ([`super::strict`]).
+    if let Ok(v) = super::strict::from_slice::<T>(bytes) {
         return Ok(v);
     }
     // Syntax first, so that a truncated document is always "malformed" even
@@ -201,7 +203,7 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         return Err(ApiError::MalformedJson(format!("malformed JSON: {e}")));
     }
     let de = &mut serde_json::Deserializer::from_slice(bytes);
-    match serde_path_to_error::deserialize::<_, T>(de) {
+    match serde_path_to_error::deserialize::<_, T>(super::strict::Strict(de)) {
         Ok(v) => Ok(v),
         Err(e) => {
             let path = e.path().to_string();

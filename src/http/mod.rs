@@ -29,6 +29,7 @@ pub mod ops;
 pub mod plans;
 pub mod resources;
 pub mod sessions;
+pub mod strict;
 pub mod ui;
 
 use std::net::SocketAddr;

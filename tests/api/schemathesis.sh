@@ -93,12 +93,14 @@ curl -sS -H "Authorization: Bearer $KEY" "$BASE/jobs/1" | grep -q '"state":"succ
     { echo "seed job did not succeed" >&2; exit 1; }
 post "$BASE/robots/1/activate" -d '{"calibration_id": 1, "reason": "seed"}'
 
+# Every check is on by default (the config file turns one off for two
+# routes; object_level_authorization needs two users and does not run).
 START=$(date +%s)
 set +e
 SCHEMATHESIS_HOOKS=tests/api/schemathesis_hooks.py \
 "$ST" --config-file tests/api/schemathesis.toml run openapi.yaml --url "$BASE" \
     -H "Authorization: Bearer $KEY" \
-    --checks all --mode all \
+    --mode all \
     --max-examples "$MAX_EXAMPLES" --seed "$SEED" \
     --report junit --report-dir "$WORK/report" \
     --no-color "$@"
