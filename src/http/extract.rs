@@ -248,7 +248,10 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
 /// its fields in order, `[]` as all defaults), which no route takes.
 pub fn parse_json_object<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let first = without_bom(bytes).iter().find(|b| !b.is_ascii_whitespace());
-    if first == Some(&b'[') {
+    // Malformed JSON stays malformed (400), whatever it begins with.
+    if first == Some(&b'[')
+        && serde_json::from_slice::<serde::de::IgnoredAny>(without_bom(bytes)).is_ok()
+    {
         return Err(ApiError::Invalid {
             message: "the body is a JSON object ({ ... }), not an array".into(),
             field: None,
@@ -463,6 +466,11 @@ mod tests {
             }
         }
         assert!(parse_json_object::<T>(br#"{"serial_number": "SN", "model_id": 1}"#).is_ok());
+        // A truncated array is malformed JSON, as any truncated document.
+        assert!(matches!(
+            parse_json_object::<T>(b"[1,2"),
+            Err(ApiError::MalformedJson(_))
+        ));
     }
 
     #[test]
