@@ -1,8 +1,8 @@
 //! The handlers hold to what openapi.yaml declares (issue 21, item 6; the
 //! schema-driven run is tests/api/schemathesis.sh): lengths are counted in
 //! characters as JSON Schema counts them, control characters are refused in
-//! query strings as in bodies (C1 too), and a body documented as an object
-//! is refused as an array.
+//! query strings as in bodies (C1 too), an object is refused as an array
+//! at any depth, and an integer may be written `1.0`.
 
 use serde_json::{Value, json};
 
@@ -201,7 +201,49 @@ async fn object_bodies_given_as_arrays_are_refused() {
             "{path}: {v}"
         );
     }
+    // Nested: a rig's sensor, a compensation target, a plan's box.
+    let rig = json!({"anchors_mm": [[0, 0, 0], [1500, 0, 0], [0, 1500, 0]], "r_mm": 35, "sensor": [null, null]});
+    let v = err_json(app.post_json("/rigs", &rig).await, 422, "invalid_input").await;
+    assert_eq!(v["field"], "sensor", "{v}");
+    let target = json!({"robot_id": robot_id, "targets": [["t1", [0, 0, 0, 0, 0, 0]]]});
+    let v = err_json(
+        app.post_json("/compensate", &target).await,
+        422,
+        "invalid_input",
+    )
+    .await;
+    assert_eq!(v["field"], "targets[0]", "{v}");
     assert_eq!(app.snapshot().await, before);
     assert_eq!(ok_json(app.get("/keys").await, 200).await, keys_before);
+    app.stop().await;
+}
+
+/// JSON Schema's `integer` is any number without a fraction (`1.0`): an
+/// integer field takes it; `1.5` is still refused naming the field.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_integral_number_is_an_integer() {
+    let app = TestApp::spawn("integral").await;
+    let (_, robot_id, rig_id, _) = app.setup(DS, "INT-1").await;
+    let s = ok_json(
+        app.post_json(
+            "/sessions",
+            &json!({"robot_id": robot_id as f64, "rig_id": rig_id as f64}),
+        )
+        .await,
+        201,
+    )
+    .await;
+    assert_eq!(s["robot_id"], robot_id);
+    let v = err_json(
+        app.post_json(
+            "/sessions",
+            &json!({"robot_id": robot_id as f64 + 0.5, "rig_id": rig_id}),
+        )
+        .await,
+        422,
+        "invalid_input",
+    )
+    .await;
+    assert_eq!(v["field"], "robot_id", "{v}");
     app.stop().await;
 }
