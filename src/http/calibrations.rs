@@ -187,6 +187,9 @@ pub async fn list_calibrations(
 ) -> ApiResult<Response> {
     let mut filter = f.to_store()?;
     filter.site = caller.site_filter(filter.site)?;
+    // Checked whatever the format: CSV has every match, but a page out of
+    // range is a bad request either way.
+    let page = p.page()?;
     if f.format == Some(Format::Csv) {
         let (rows, _) = app
             .store
@@ -200,7 +203,6 @@ pub async fn list_calibrations(
             .await?;
         return csv_response(&rows);
     }
-    let page = p.page()?;
     let (items, total) = app.store.list_calibrations(&filter, page).await?;
     Ok(Json(Paged::new(items, total, page)).into_response())
 }

@@ -241,6 +241,12 @@ pub async fn list_audit(
     State(app): State<AppState>,
     ApiQuery(q): ApiQuery<AuditParams>,
 ) -> ApiResult<Response> {
+    // Checked whatever the format (CSV has every entry).
+    let page = PageParams {
+        limit: q.limit,
+        offset: q.offset,
+    }
+    .page()?;
     if q.format == Some(Format::Csv) {
         let (rows, _) = app
             .store
@@ -263,11 +269,6 @@ pub async fn list_audit(
             }),
         );
     }
-    let page = PageParams {
-        limit: q.limit,
-        offset: q.offset,
-    }
-    .page()?;
     let (items, total) = app.store.list_audit(page).await?;
     Ok(Json(Paged::new(items, total, page)).into_response())
 }

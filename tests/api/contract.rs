@@ -247,3 +247,27 @@ async fn an_integral_number_is_an_integer() {
     assert_eq!(v["field"], "robot_id", "{v}");
     app.stop().await;
 }
+
+/// `limit` and `offset` are checked with `format=csv` too (the CSV has
+/// every match, but the spec bounds them whatever the format).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn page_bounds_hold_for_csv_lists_too() {
+    let app = TestApp::spawn("csvpage").await;
+    for (path, field) in [
+        ("/calibrations?format=csv&offset=-1", "offset"),
+        ("/calibrations?format=csv&limit=0", "limit"),
+        ("/audit?format=csv&offset=-34359738368", "offset"),
+        ("/audit?format=csv&limit=1001", "limit"),
+    ] {
+        let v = err_json(app.get(path).await, 422, "invalid_input").await;
+        assert_eq!(v["field"], field, "{path}: {v}");
+    }
+    for path in [
+        "/calibrations?format=csv&limit=1000&offset=0",
+        "/audit?format=csv",
+    ] {
+        let r = app.get(path).await;
+        assert_eq!(r.status(), 200, "{path}");
+    }
+    app.stop().await;
+}
