@@ -45,9 +45,11 @@ pub struct HistoryFilter {
     pub from: Option<String>,
     /// Created on or before (`YYYY-MM-DD`, inclusive, or a UTC timestamp).
     pub to: Option<String>,
-    /// Held-out RMS after calibration at most this (mm).
+    /// Held-out RMS after calibration at most this (mm, 0 or more).
+    #[param(minimum = 0.0)]
     pub max_test_rms_mm: Option<f64>,
-    /// Held-out RMS after calibration at least this (mm).
+    /// Held-out RMS after calibration at least this (mm, 0 or more).
+    #[param(minimum = 0.0)]
     pub min_test_rms_mm: Option<f64>,
     /// `json` (default) or `csv`.
     pub format: Option<Format>,
@@ -319,10 +321,12 @@ pub async fn list_calibrations(
 ) -> ApiResult<Response> {
     let mut filter = f.to_store()?;
     filter.site = caller.site_filter(filter.site)?;
+    // Checked whatever the format: CSV has every match, but a page out of
+    // range is a bad request either way.
+    let page = p.page()?;
     if f.format == Some(Format::Csv) {
         return calibrations_csv(app.store.stream_calibrations(&filter).await).await;
     }
-    let page = p.page()?;
     let (items, total) = app.store.list_calibrations(&filter, page).await?;
     Ok(Json(Paged::new(items, total, page)).into_response())
 }
@@ -449,7 +453,8 @@ pub async fn robot_accuracy(
 pub struct Activate {
     /// Calibration of this robot.
     pub calibration_id: i64,
-    /// Why (recorded with the key's name, the actor).
+    /// Why (recorded with the key's name, the actor; trimmed, not blank).
+    #[schema(min_length = 1, max_length = 2000)]
     pub reason: String,
 }
 
@@ -457,7 +462,8 @@ pub struct Activate {
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Rollback {
-    /// Why (recorded with the key's name, the actor).
+    /// Why (recorded with the key's name, the actor; trimmed, not blank).
+    #[schema(min_length = 1, max_length = 2000)]
     pub reason: String,
 }
 
@@ -468,7 +474,7 @@ fn forget_active(app: &AppState, robot_id: i64) {
 }
 
 fn check_reason(reason: &str) -> ApiResult<()> {
-    if reason.trim().is_empty() || reason.len() > 2000 {
+    if reason.trim().is_empty() || reason.chars().count() > 2000 {
         return Err(ApiError::invalid(
             "reason",
             "say why (1 to 2000 characters)",

@@ -32,7 +32,7 @@ use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
-use super::extract::{ApiQuery, RawBody, is_json, parse_json};
+use super::extract::{ApiQuery, RawBody, is_json, parse_json_object};
 use super::{ApiError, ApiResult, AppState, ErrorBody, MAX_COMPENSATE_TARGETS};
 use crate::compensate::{
     Approach, Compensated, CompensationStatus, Compensator, ConditionNames, Conditions,
@@ -49,16 +49,19 @@ pub use super::cache::Cached;
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TargetIn {
-    /// Id, unique in the request.
+    /// Id, unique in the request (1 to 200 characters).
+    #[schema(min_length = 1, max_length = 200)]
     pub target: String,
     /// Nominal joint angles (deg), one per joint.
     #[serde(default)]
     pub q_deg: Option<Vec<f64>>,
     /// Wanted position of T in the robot base frame (mm).
     #[serde(default)]
+    #[schema(min_items = 3, max_items = 3)]
     pub xyz_mm: Option<[f64; 3]>,
     /// Wanted flange orientation, roll-pitch-yaw (deg), with `xyz_mm` only.
     #[serde(default)]
+    #[schema(min_items = 3, max_items = 3)]
     pub rpy_deg: Option<[f64; 3]>,
 }
 
@@ -110,18 +113,21 @@ pub struct CompensateRequest {
     pub target: Option<TargetIn>,
     /// A batch of up to 10,000 targets (answered in order).
     #[serde(default)]
+    #[schema(min_items = 1, max_items = 10000)] // MAX_COMPENSATE_TARGETS
     pub targets: Option<Vec<TargetIn>>,
     /// Temperature the robot runs at (°C, -50 to 150). Used when the
     /// calibration accepted thermal expansion driven by the temperature
     /// (default: its reference temperature, the geometry as calibrated);
     /// ignored otherwise (`temp_c_used` is then null).
     #[serde(default)]
+    #[schema(minimum = -50.0, maximum = 150.0)] // TEMP_C_RANGE
     pub temp_c: Option<f64>,
     /// Payload the robot carries at T (kg, 0 to 5000). Used when the
     /// calibration accepted a joint compliance (default: its session's
     /// median payload, 0 if it recorded none); ignored otherwise
     /// (`payload_kg_used` is then null).
     #[serde(default)]
+    #[schema(minimum = 0.0, maximum = 5000.0)] // MAX_PAYLOAD_KG
     pub payload_kg: Option<f64>,
     /// How the joints arrive at the targets. Used when the calibration
     /// accepted a backlash (default `positive`); ignored otherwise
@@ -232,7 +238,7 @@ fn check_target(i: usize, t: TargetIn, dof: usize, batch: bool) -> ApiResult<Tar
         field: Some(at(f)),
         row: Some(i + 1),
     };
-    if t.target.is_empty() || t.target.len() > 200 {
+    if t.target.is_empty() || t.target.chars().count() > 200 {
         return Err(bad("target", "an id of 1 to 200 characters".into()));
     }
     let kind = match (t.q_deg, t.xyz_mm) {
@@ -292,9 +298,11 @@ pub struct CompensateQuery {
     /// Temperature the robot runs at (°C, -50 to 150), for a calibration
     /// with thermal expansion driven by the temperature (default: its
     /// reference temperature).
+    #[param(minimum = -50.0, maximum = 150.0)]
     pub temp_c: Option<f64>,
     /// Payload the robot carries at T (kg, 0 to 5000), for a calibration
     /// with a joint compliance (default: its session's median payload).
+    #[param(minimum = 0.0, maximum = 5000.0)]
     pub payload_kg: Option<f64>,
     /// How the joints arrive at the targets, for a calibration with a
     /// backlash (default `positive`).
@@ -523,7 +531,7 @@ fn json_request(query: &CompensateQuery, bytes: &[u8]) -> ApiResult<Request> {
             ),
         ));
     }
-    let req: CompensateRequest = parse_json(bytes)?;
+    let req: CompensateRequest = parse_json_object(bytes)?;
     let (targets, batch) = match (req.target, req.targets) {
         (Some(t), None) => (vec![t], false),
         (None, Some(ts)) => (ts, true),

@@ -174,7 +174,8 @@ pub fn without_bom(bytes: &[u8]) -> &[u8] {
 }
 
 /// Parse JSON bytes: syntax errors are 400 `malformed_json`, type and
-/// shape errors 422 `invalid_input` naming the field path.
+/// shape errors 422 `invalid_input` naming the field path (a struct given
+/// as an array among them, at any depth).
 pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let bytes = without_bom(bytes);
     // JSON writes a control character only as an escape (`\u0000`, `\n`;
@@ -191,8 +192,9 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         });
     }
     // The common case in one pass; only a failed parse pays for the
-    // classification below (it is on the /compensate hot path).
-    if let Ok(v) = serde_json::from_slice::<T>(bytes) {
+    // classification below (it is on the /compensate hot path). Structs
+    // are read from objects only ([`super::strict`]).
+    if let Ok(v) = super::strict::from_slice::<T>(bytes) {
         return Ok(v);
     }
     // Syntax first, so that a truncated document is always "malformed" even
@@ -201,7 +203,7 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         return Err(ApiError::MalformedJson(format!("malformed JSON: {e}")));
     }
     let de = &mut serde_json::Deserializer::from_slice(bytes);
-    match serde_path_to_error::deserialize::<_, T>(de) {
+    match serde_path_to_error::deserialize::<_, T>(super::strict::Strict(de)) {
         Ok(v) => Ok(v),
         Err(e) => {
             let path = e.path().to_string();
@@ -239,6 +241,24 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
             }
         }
     }
+}
+
+/// Parse a JSON body that must be an object, as every struct body is
+/// documented: serde also reads a struct from an array (`["SN", 1]` as
+/// its fields in order, `[]` as all defaults), which no route takes.
+pub fn parse_json_object<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let first = without_bom(bytes).iter().find(|b| !b.is_ascii_whitespace());
+    // Malformed JSON stays malformed (400), whatever it begins with.
+    if first == Some(&b'[')
+        && serde_json::from_slice::<serde::de::IgnoredAny>(without_bom(bytes)).is_ok()
+    {
+        return Err(ApiError::Invalid {
+            message: "the body is a JSON object ({ ... }), not an array".into(),
+            field: None,
+            row: None,
+        });
+    }
+    parse_json(bytes)
 }
 
 /// Why a text with a control character is refused.
@@ -283,6 +303,58 @@ fn control_path(v: &serde_json::Value, at: String) -> Option<String> {
     }
 }
 
+/// The name (decoded) of the first query parameter whose name or value
+/// holds a control character once percent-decoded: C0 and DEL
+/// (`%00`-`%1F`, `%7F`) and C1 (`%C2%80`-`%C2%9F`), as in JSON bodies.
+/// Only a query with an escape that may write one is decoded.
+fn query_control(query: &str) -> Option<String> {
+    let b = query.as_bytes();
+    let may = b.windows(3).any(|w| {
+        w[0] == b'%'
+            && (matches!(w[1], b'0' | b'1')
+                || (w[1] == b'7' && matches!(w[2], b'f' | b'F'))
+                || (matches!(w[1], b'c' | b'C') && w[2] == b'2'))
+    });
+    if !may {
+        return None;
+    }
+    let decode = |s: &str| {
+        let s = s.replace('+', " ");
+        percent_decode(&s)
+    };
+    query.split('&').find_map(|pair| {
+        let (name, value) = pair.split_once('=').unwrap_or((pair, ""));
+        let (name, value) = (decode(name), decode(value));
+        (name.chars().any(char::is_control) || value.chars().any(char::is_control)).then_some(name)
+    })
+}
+
+/// `%XX` escapes decoded (invalid UTF-8 replaced, an incomplete escape
+/// kept as it is).
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        match (
+            b[i],
+            b.get(i + 1).copied().and_then(hex),
+            b.get(i + 2).copied().and_then(hex),
+        ) {
+            (b'%', Some(h), Some(l)) => {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+            }
+            (c, _, _) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
 /// A JSON body (`Content-Type: application/json` required).
 pub struct ApiJson<T>(pub T);
 
@@ -297,7 +369,7 @@ impl<S: Send + Sync, T: DeserializeOwned> FromRequest<S> for ApiJson<T> {
                 body.content_type.as_deref().unwrap_or("none")
             )));
         }
-        parse_json(&body.bytes).map(ApiJson)
+        parse_json_object(&body.bytes).map(ApiJson)
     }
 }
 
@@ -330,18 +402,10 @@ impl<S: Send + Sync, T: DeserializeOwned> FromRequestParts<S> for ApiQuery<T> {
 
     async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
         let query = parts.uri.query().unwrap_or("");
-        // Control characters arrive percent-encoded (%00-%1F, %7F).
-        let control = |p: &&str| {
-            p.as_bytes().windows(3).any(|w| {
-                w[0] == b'%'
-                    && ((matches!(w[1], b'0' | b'1') && w[2].is_ascii_hexdigit())
-                        || (w[1] == b'7' && matches!(w[2], b'f' | b'F')))
-            })
-        };
-        if let Some(pair) = query.split('&').find(control) {
+        if let Some(name) = query_control(query) {
             return Err(ApiError::Invalid {
                 message: CONTROL_MESSAGE.into(),
-                field: Some(pair.split('=').next().unwrap_or(pair).to_string()),
+                field: Some(name),
                 row: None,
             });
         }
@@ -375,6 +439,56 @@ mod tests {
             parse_json::<T>(br#"{"xyz_mm": [1, 2, 3"#),
             Err(ApiError::MalformedJson(_))
         ));
+    }
+
+    #[test]
+    fn a_struct_body_given_as_an_array_is_refused() {
+        #[derive(serde::Deserialize, Debug)]
+        struct T {
+            #[allow(dead_code)]
+            serial_number: String,
+            #[allow(dead_code)]
+            model_id: i64,
+        }
+        // serde alone reads the array as the struct.
+        assert!(serde_json::from_str::<T>(r#"["SN", 1]"#).is_ok());
+        for body in [
+            &br#"["SN", 1]"#[..],
+            &b" \n[]"[..],
+            &b"\xEF\xBB\xBF[\"SN\", 1]"[..],
+        ] {
+            match parse_json_object::<T>(body) {
+                Err(ApiError::Invalid { message, field, .. }) => {
+                    assert!(message.contains("not an array"), "{message}");
+                    assert_eq!(field, None);
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        assert!(parse_json_object::<T>(br#"{"serial_number": "SN", "model_id": 1}"#).is_ok());
+        // A truncated array is malformed JSON, as any truncated document.
+        assert!(matches!(
+            parse_json_object::<T>(b"[1,2"),
+            Err(ApiError::MalformedJson(_))
+        ));
+    }
+
+    #[test]
+    fn query_control_characters_are_found_decoded_c0_del_and_c1() {
+        assert_eq!(query_control("site=%C2%84"), Some("site".into()));
+        assert_eq!(query_control("a=1&line=x%00y"), Some("line".into()));
+        assert_eq!(query_control("a=1&b=%7f"), Some("b".into()));
+        assert_eq!(query_control("n%0Aame=1"), Some("n\name".into()));
+        // Text that is not a control character: é (%C3%A9), NBSP
+        // (%C2%A0), a literal %, and no escape at all.
+        for ok in [
+            "site=%C3%A9",
+            "site=%C2%A0",
+            "site=100%",
+            "site=plant-1&line=2",
+        ] {
+            assert_eq!(query_control(ok), None, "{ok}");
+        }
     }
 
     #[test]

@@ -21,7 +21,8 @@ use crate::store::{AuditRec, KeyRec, NewKey, Store};
 #[serde(deny_unknown_fields)]
 pub struct CreateKey {
     /// Who will hold it (1 to 100 characters, unique): what it does is
-    /// recorded under this name.
+    /// recorded under this name. Trimmed; not blank.
+    #[schema(min_length = 1, max_length = 100)]
     pub name: String,
     /// `reader`, `operator`, `engineer` or `admin`.
     pub role: String,
@@ -55,10 +56,10 @@ pub async fn create(
     expires_at: Option<String>,
     sites: &[String],
 ) -> ApiResult<CreatedKey> {
-    let name = name.trim();
-    if name.is_empty() || name.chars().count() > 100 {
+    if name.trim().is_empty() || name.chars().count() > 100 {
         return Err(ApiError::invalid("name", "1 to 100 characters"));
     }
+    let name = name.trim();
     let role: Role = role
         .parse()
         .map_err(|m: String| ApiError::invalid("role", m))?;
@@ -75,8 +76,13 @@ pub async fn create(
         None => None,
     };
     let mut limited: Vec<String> = Vec::new();
-    for s in sites.iter().map(|s| s.trim()) {
-        if s.is_empty() || s.len() > 100 || s.contains(',') || s.chars().any(char::is_control) {
+    for raw in sites {
+        let s = raw.trim();
+        if s.is_empty()
+            || raw.chars().count() > 100
+            || s.contains(',')
+            || s.chars().any(char::is_control)
+        {
             return Err(ApiError::invalid(
                 "sites",
                 format!(
@@ -213,8 +219,10 @@ pub async fn revoke_key(
 #[into_params(parameter_in = Query)]
 pub struct AuditParams {
     /// Items per page, 1..=1000 (default 50; JSON only).
+    #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<i64>,
     /// Items to skip (default 0; JSON only).
+    #[param(minimum = 0, maximum = 9223372036854775807_i64)]
     pub offset: Option<i64>,
     /// `json` (default) or `csv` (every entry).
     pub format: Option<Format>,
@@ -233,6 +241,12 @@ pub async fn list_audit(
     State(app): State<AppState>,
     ApiQuery(q): ApiQuery<AuditParams>,
 ) -> ApiResult<Response> {
+    // Checked whatever the format (CSV has every entry).
+    let page = PageParams {
+        limit: q.limit,
+        offset: q.offset,
+    }
+    .page()?;
     if q.format == Some(Format::Csv) {
         let (rows, _) = app
             .store
@@ -255,11 +269,6 @@ pub async fn list_audit(
             }),
         );
     }
-    let page = PageParams {
-        limit: q.limit,
-        offset: q.offset,
-    }
-    .page()?;
     let (items, total) = app.store.list_audit(page).await?;
     Ok(Json(Paged::new(items, total, page)).into_response())
 }

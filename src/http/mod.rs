@@ -18,6 +18,8 @@ pub mod calibrations;
 pub mod compensate;
 pub mod compute;
 pub mod conn;
+pub mod contract;
+pub mod documents;
 pub mod error;
 pub mod export;
 pub mod extract;
@@ -28,6 +30,7 @@ pub mod ops;
 pub mod plans;
 pub mod resources;
 pub mod sessions;
+pub mod strict;
 pub mod ui;
 
 use std::net::SocketAddr;
@@ -169,7 +172,7 @@ pub struct PageParams {
     #[param(minimum = 1, maximum = 1000)]
     pub limit: Option<i64>,
     /// Items to skip (default 0).
-    #[param(minimum = 0)]
+    #[param(minimum = 0, maximum = 9223372036854775807_i64)]
     pub offset: Option<i64>,
 }
 
@@ -219,9 +222,15 @@ impl<T: ToSchema> Paged<T> {
         description = "Robot kinematic calibration: pose plans, sessions, identification jobs, calibrations, activation, compensation and fleet history. Lengths in mm, angles in degrees. Every error answers `{error, message, field?, row?}`.",
         license(name = "MIT OR Apache-2.0")
     ),
-    // Format is referenced only by query parameters, which utoipa does
-    // not collect schemas from.
-    components(schemas(ErrorBody, calibrations::Format, export::ExportFormatParam)),
+    // Format and ExportFormatParam are referenced only by query
+    // parameters, which utoipa does not collect schemas from; LengthMm's
+    // schema is written by hand, which utoipa does not collect either.
+    components(schemas(
+        ErrorBody,
+        calibrations::Format,
+        export::ExportFormatParam,
+        documents::LengthMm
+    )),
     modifiers(&BearerKeys),
     security(("api_key" = []))
 )]
@@ -286,6 +295,7 @@ fn api() -> OpenApiRouter<AppState> {
 pub fn openapi() -> utoipa::openapi::OpenApi {
     let mut doc = api().split_for_parts().1;
     declare_roles(&mut doc);
+    contract::declare(&mut doc);
     doc
 }
 

@@ -32,8 +32,10 @@ use crate::store::{NewPlan, PlanRec, StoreError};
 #[serde(deny_unknown_fields)]
 pub struct PlanKeepOut {
     /// Smallest x, y, z (mm).
+    #[schema(min_items = 3, max_items = 3)]
     pub min_mm: [f64; 3],
     /// Largest x, y, z (mm); not below `min_mm` on any axis.
+    #[schema(min_items = 3, max_items = 3)]
     pub max_mm: [f64; 3],
 }
 

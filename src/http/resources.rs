@@ -9,7 +9,7 @@ use utoipa::{IntoParams, ToSchema};
 
 use super::auth::Caller;
 use super::error::{BODY_TIMEOUT_408, BODY_TOO_LARGE_413};
-use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json};
+use super::extract::{ApiJson, ApiQuery, Id, RawBody, is_json, parse_json_object};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
 use crate::model::{Rig, Robot};
 use crate::store::{ModelRec, NewRobot, RigRec, RobotRec};
@@ -18,7 +18,9 @@ use crate::store::{ModelRec, NewRobot, RigRec, RobotRec};
 #[derive(Debug, Deserialize, IntoParams)]
 #[into_params(parameter_in = Query)]
 pub struct NameParam {
-    /// Name to store (default: the document's own `name`, or `rig N`).
+    /// Name to store, at most 200 characters (default: the document's own
+    /// `name`, or `rig N`).
+    #[param(max_length = 200)]
     pub name: Option<String>,
 }
 
@@ -56,7 +58,7 @@ fn json_body(body: &RawBody) -> ApiResult<()> {
 }
 
 fn check_name(name: &str) -> ApiResult<()> {
-    if name.len() > 200 {
+    if name.chars().count() > 200 {
         return Err(ApiError::invalid("name", "at most 200 characters"));
     }
     Ok(())
@@ -76,7 +78,7 @@ fn rig_out(r: RigRec) -> ApiResult<RigOut> {
 
 /// Upload a nominal robot model: the body is robot.json itself.
 #[utoipa::path(post, path = "/models", tag = "models", params(NameParam),
-    request_body(content = Object, content_type = "application/json", description = "robot.json (DATA_FORMAT.md)"),
+    request_body(content = super::documents::RobotJson, content_type = "application/json", description = "robot.json (DATA_FORMAT.md)"),
     responses(
         (status = 201, description = "Stored", body = ModelOut),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
@@ -90,7 +92,7 @@ pub async fn create_model(
     body: RawBody,
 ) -> ApiResult<(StatusCode, Json<ModelOut>)> {
     json_body(&body)?;
-    let robot: Robot = parse_json(&body.bytes)?;
+    let robot: Robot = parse_json_object(&body.bytes)?;
     robot.validate()?;
     let name = q.name.unwrap_or_else(|| robot.name.clone());
     check_name(&name)?;
@@ -132,18 +134,22 @@ pub async fn get_model(State(app): State<AppState>, Id(id): Id) -> ApiResult<Jso
 #[derive(Debug, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CreateRobot {
-    /// Serial number, unique in the fleet.
+    /// Serial number, unique in the fleet (trimmed; not blank).
+    #[schema(min_length = 1, max_length = 100)]
     pub serial_number: String,
     /// Robot model id.
     pub model_id: i64,
     /// Site tag.
     #[serde(default)]
+    #[schema(max_length = 100)]
     pub site: Option<String>,
     /// Line tag.
     #[serde(default)]
+    #[schema(max_length = 100)]
     pub line: Option<String>,
     /// Cell tag.
     #[serde(default)]
+    #[schema(max_length = 100)]
     pub cell: Option<String>,
 }
 
@@ -163,12 +169,12 @@ pub async fn create_robot(
     ApiJson(r): ApiJson<CreateRobot>,
 ) -> ApiResult<(StatusCode, Json<RobotRec>)> {
     let serial = r.serial_number.trim().to_string();
-    if serial.is_empty() || serial.len() > 100 {
+    if serial.is_empty() || r.serial_number.chars().count() > 100 {
         return Err(ApiError::invalid("serial_number", "1 to 100 characters"));
     }
     caller.check_site(&format!("robot '{serial}'"), r.site.as_deref())?;
     for (f, v) in [("site", &r.site), ("line", &r.line), ("cell", &r.cell)] {
-        if v.as_ref().is_some_and(|s| s.len() > 100) {
+        if v.as_ref().is_some_and(|s| s.chars().count() > 100) {
             return Err(ApiError::invalid(f, "at most 100 characters"));
         }
     }
@@ -249,7 +255,7 @@ pub async fn get_robot(
 
 /// Upload a rig: the body is rig.json itself.
 #[utoipa::path(post, path = "/rigs", tag = "rigs", params(NameParam),
-    request_body(content = Object, content_type = "application/json", description = "rig.json (DATA_FORMAT.md)"),
+    request_body(content = super::documents::RigJson, content_type = "application/json", description = "rig.json (DATA_FORMAT.md)"),
     responses(
         (status = 201, description = "Stored", body = RigOut),
         (status = 400, description = "Malformed JSON", body = ErrorBody),
@@ -263,7 +269,7 @@ pub async fn create_rig(
     body: RawBody,
 ) -> ApiResult<(StatusCode, Json<RigOut>)> {
     json_body(&body)?;
-    let rig: Rig = parse_json(&body.bytes)?;
+    let rig: Rig = parse_json_object(&body.bytes)?;
     rig.validate()?;
     let name = q
         .name

@@ -34,8 +34,9 @@ pub struct CreateSession {
     pub robot_id: i64,
     /// Rig used.
     pub rig_id: i64,
-    /// Free-form name.
+    /// Free-form name, at most 200 characters.
     #[serde(default)]
+    #[schema(max_length = 200)]
     pub name: Option<String>,
 }
 
@@ -53,7 +54,7 @@ pub async fn create_session(
     Extension(caller): Extension<Caller>,
     ApiJson(s): ApiJson<CreateSession>,
 ) -> ApiResult<(StatusCode, Json<SessionRec>)> {
-    if s.name.as_ref().is_some_and(|n| n.len() > 200) {
+    if s.name.as_ref().is_some_and(|n| n.chars().count() > 200) {
         return Err(ApiError::invalid("name", "at most 200 characters"));
     }
     match app.store.get_robot(s.robot_id).await {
@@ -628,6 +629,7 @@ pub struct JobFilter {
     /// Only this session's jobs.
     pub session_id: Option<i64>,
     /// Only jobs in this state (`queued`, `running`, `succeeded`, `failed`, `cancelled`).
+    #[param(pattern = "^(queued|running|succeeded|failed|cancelled)$")]
     pub state: Option<String>,
 }
 

@@ -16,6 +16,7 @@ mod compensate_bound;
 mod compensate_csv;
 mod compensate_payload;
 mod compensate_thermal;
+mod contract;
 mod deploy;
 mod e2e;
 mod export;

@@ -368,3 +368,241 @@ async fn every_documented_route_exists_and_nothing_else() {
     }
     app.stop().await;
 }
+
+/// Every schema a request body or parameter uses, `$ref`s followed, with
+/// the path it was reached by.
+fn request_schemas(spec: &Value) -> Vec<(String, Value)> {
+    fn walk(
+        spec: &Value,
+        s: &Value,
+        at: String,
+        seen: &mut BTreeSet<String>,
+        out: &mut Vec<(String, Value)>,
+    ) {
+        if let Some(r) = s["$ref"].as_str() {
+            if seen.insert(r.to_string()) {
+                let name = r.trim_start_matches("#/components/schemas/");
+                walk(
+                    spec,
+                    &spec["components"]["schemas"][name],
+                    format!("{at}->{name}"),
+                    seen,
+                    out,
+                );
+            }
+            return;
+        }
+        out.push((at.clone(), s.clone()));
+        for (k, p) in s["properties"].as_object().into_iter().flatten() {
+            walk(spec, p, format!("{at}.{k}"), seen, out);
+        }
+        for key in ["items", "additionalProperties"] {
+            if s[key].is_object() {
+                walk(spec, &s[key], format!("{at}[{key}]"), seen, out);
+            }
+        }
+        for key in ["oneOf", "anyOf", "allOf"] {
+            for (i, x) in s[key].as_array().into_iter().flatten().enumerate() {
+                walk(spec, x, format!("{at}.{key}[{i}]"), seen, out);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for (path, item) in spec["paths"].as_object().unwrap() {
+        for (method, op) in item.as_object().unwrap() {
+            let mut seen = BTreeSet::new();
+            for p in op["parameters"].as_array().into_iter().flatten() {
+                walk(
+                    spec,
+                    &p["schema"],
+                    format!("{method} {path} ?{}", p["name"]),
+                    &mut seen,
+                    &mut out,
+                );
+            }
+            let json = &op["requestBody"]["content"]["application/json"]["schema"];
+            if json.is_object() {
+                walk(
+                    spec,
+                    json,
+                    format!("{method} {path} body"),
+                    &mut seen,
+                    &mut out,
+                );
+            }
+        }
+    }
+    out
+}
+
+fn has_type(s: &Value, t: &str) -> bool {
+    s["type"] == t
+        || s["type"]
+            .as_array()
+            .is_some_and(|ts| ts.iter().any(|x| x == t))
+}
+
+/// What every handler enforces on input is declared (src/http/contract.rs):
+/// every request text has a pattern (no control characters) or an enum,
+/// every object that takes other keys constrains their names, every
+/// integer has bounds within what serde reads (i64, u64), every path id
+/// starts at 1, and a route with a query string or a body documents the
+/// extractors' 400 and 422 (and 408, 413, 415 with a body).
+#[test]
+fn what_the_handlers_enforce_on_every_request_is_declared() {
+    let spec = spec();
+    let mut problems = Vec::new();
+    let schemas = request_schemas(&spec);
+    assert!(schemas.len() > 100, "{} request schemas", schemas.len());
+    for (at, s) in &schemas {
+        if has_type(s, "string") && !s["pattern"].is_string() && !s["enum"].is_array() {
+            problems.push(format!("{at}: text without a pattern"));
+        }
+        let extras = s["additionalProperties"] != false;
+        if has_type(s, "object") && extras && !s["propertyNames"]["pattern"].is_string() {
+            problems.push(format!("{at}: object taking any key name"));
+        }
+        if has_type(s, "integer") {
+            let min = s["minimum"].as_f64().or(s["exclusiveMinimum"].as_f64());
+            let max = s["maximum"].as_f64().or(s["exclusiveMaximum"].as_f64());
+            if !(min.is_some_and(|m| m >= i64::MIN as f64)
+                && max.is_some_and(|m| m <= u64::MAX as f64))
+            {
+                problems.push(format!("{at}: integer without bounds ({s})"));
+            }
+        }
+    }
+    for (path, item) in spec["paths"].as_object().unwrap() {
+        for (method, op) in item.as_object().unwrap() {
+            let at = format!("{method} {path}");
+            let params = op["parameters"].as_array().cloned().unwrap_or_default();
+            for p in params
+                .iter()
+                .filter(|p| p["in"] == "path" && p["name"] == "id")
+            {
+                if p["schema"]["minimum"] != 1 || p["schema"]["maximum"] != i64::MAX {
+                    problems.push(format!("{at}: path id {}", p["schema"]));
+                }
+            }
+            let query = params.iter().any(|p| p["in"] == "query");
+            let body = op["requestBody"].is_object();
+            let mut needed = Vec::new();
+            if query || body {
+                needed.extend(["400", "422"]);
+            }
+            if body {
+                needed.extend(["408", "413", "415"]);
+            }
+            for status in needed {
+                if !op["responses"][status].is_object() {
+                    problems.push(format!("{at}: {status} not documented"));
+                }
+            }
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+/// The declared patterns accept exactly what the handlers take: text
+/// without a control character (`char::is_control`), not blank once
+/// trimmed, a date or UTC time as `normalize_bound` reads it.
+#[test]
+fn the_declared_patterns_say_what_the_handlers_check() {
+    use drawcal::http::contract::{
+        DATE_OR_TIME_PATTERN, NON_BLANK_PATTERN, SITE_PATTERN, TEXT_PATTERN,
+    };
+    use drawcal::store::time::normalize_bound;
+    let text = regex::Regex::new(TEXT_PATTERN).unwrap();
+    let non_blank = regex::Regex::new(NON_BLANK_PATTERN).unwrap();
+    let site = regex::Regex::new(SITE_PATTERN).unwrap();
+    for c in (0u32..0x3100).filter_map(char::from_u32) {
+        for s in [format!("a{c}b"), c.to_string(), format!(" {c} ")] {
+            let control = s.chars().any(char::is_control);
+            let blank = s.trim().is_empty();
+            assert_eq!(text.is_match(&s), !control, "{s:?}");
+            assert_eq!(non_blank.is_match(&s), !control && !blank, "{s:?}");
+            assert_eq!(
+                site.is_match(&s),
+                !control && !blank && !s.contains(','),
+                "{s:?}"
+            );
+        }
+    }
+    assert!(text.is_match("") && !non_blank.is_match(""));
+    let date = regex::Regex::new(DATE_OR_TIME_PATTERN).unwrap();
+    let mut n = 0;
+    for y in [0, 4, 100, 400, 1900, 1999, 2000, 2023, 2024, 2100, 9999] {
+        for m in 0..=13 {
+            for d in 0..=32 {
+                let day = format!("{y:04}-{m:02}-{d:02}");
+                for s in [
+                    day.clone(),
+                    format!("{day}T00:00:00Z"),
+                    format!("{day}T23:59:59.999Z"),
+                    format!("{day}T12:30:00.5Z"),
+                    format!("{day}T24:00:00Z"),
+                    format!("{day}T12:60:00Z"),
+                    format!("{day}T12:00:00.Z"),
+                    format!("{day}T12:00:00"),
+                    format!("{day}T12:00Z"),
+                    format!("{day} "),
+                ] {
+                    let takes = normalize_bound(&s, false).is_some();
+                    assert_eq!(date.is_match(&s), takes, "{s}");
+                    n += takes as usize;
+                }
+            }
+        }
+    }
+    assert!(n > 10_000, "{n} accepted");
+    for s in [
+        "",
+        "2024-1-01",
+        "20240101",
+        "2024-01-01T12:00:00+01:00",
+        "x2024-01-01",
+    ] {
+        assert!(
+            !date.is_match(s) && normalize_bound(s, false).is_none(),
+            "{s}"
+        );
+    }
+}
+
+/// robot.json and rig.json as the data sets have them are what the spec's
+/// RobotJson and RigJson describe (keys, types, required keys), and the
+/// engine reads every one: the schemas mirror the engine's files.
+#[test]
+fn the_data_sets_match_the_robot_json_and_rig_json_schemas() {
+    let spec = spec();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let d = entry.unwrap().path();
+        for (file, schema) in [("robot.json", "RobotJson"), ("rig.json", "RigJson")] {
+            if d.join(file).is_file() {
+                files.push((d.join(file), schema));
+            }
+        }
+        for rig in std::fs::read_dir(&d).into_iter().flatten().flatten() {
+            let p = rig.path();
+            if d.ends_with("rigs") && p.extension().is_some_and(|e| e == "json") {
+                files.push((p, "RigJson"));
+            }
+        }
+    }
+    assert!(files.len() >= 18, "{files:?}");
+    for (path, schema) in files {
+        let text = std::fs::read_to_string(&path).unwrap();
+        let v: Value = serde_json::from_str(&text).unwrap();
+        let reference = serde_json::json!({"$ref": format!("#/components/schemas/{schema}")});
+        if let Err(e) = check(&spec, &reference, &v, "$") {
+            panic!("{}: {e}", path.display());
+        }
+        let read = match schema {
+            "RobotJson" => drawcal::model::Robot::from_json(&text).map(|_| ()),
+            _ => drawcal::model::Rig::from_json(&text).map(|_| ()),
+        };
+        assert!(read.is_ok(), "{}: {read:?}", path.display());
+    }
+}
