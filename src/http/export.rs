@@ -25,8 +25,8 @@ pub enum ExportFormatParam {
     RobotJson,
     /// One row per parameter: nominal, calibrated, deviation, sigma.
     Csv,
-    /// The extra poses the verdict suggests, as targets.csv (422 when the
-    /// report suggests none).
+    /// The extra poses the verdict suggests, as targets.csv (409 when the
+    /// calibration suggests none).
     ExtraTargets,
 }
 
@@ -57,10 +57,10 @@ impl From<ExportFormatParam> for ExportFormat {
     params(("id" = i64, Path, description = "Calibration id"), ExportQuery),
     responses(
         (status = 200, description = "The export", content(
-            (String = "application/xml"), (String = "application/json"), (String = "text/csv"))),
+            (String = "application/xml"), (serde_json::Value = "application/json"), (String = "text/csv"))),
         (status = 400, description = "Bad id or query", body = ErrorBody),
         (status = 404, description = "No such calibration", body = ErrorBody),
-        (status = 422, description = "extra-targets for a report that suggests no extra poses", body = ErrorBody)))]
+        (status = 409, description = "extra-targets of a calibration that suggests no extra poses", body = ErrorBody)))]
 pub async fn export_calibration(
     State(app): State<AppState>,
     Extension(caller): Extension<Caller>,
@@ -74,6 +74,18 @@ pub async fn export_calibration(
     let out = tokio::task::spawn_blocking(move || -> Result<String, ApiError> {
         let report = Report::from_json(&text)
             .map_err(|e| ApiError::Internal(format!("stored report {id}: {e}")))?;
+        // A fine request of a calibration that has none to give: the
+        // resource's state, not the query, is what refuses it.
+        let none = report
+            .extra_poses
+            .as_ref()
+            .is_none_or(|x| x.poses.is_empty());
+        if matches!(format, ExportFormat::ExtraTargets) && none {
+            return Err(ApiError::Conflict(format!(
+                "calibration {id} suggests no extra poses: its poses determine every parameter \
+                 any pose of this rig could"
+            )));
+        }
         Ok(export::export(&report, format)?)
     })
     .await

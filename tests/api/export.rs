@@ -121,7 +121,7 @@ async fn exports_are_the_cli_texts_and_extra_targets_need_extra_poses() {
         assert_eq!(text, export::export(&report, format).unwrap(), "{name}");
     }
     // A calibration whose poses determine everything they can: nothing to
-    // record next, said on `format`.
+    // record next (the calibration's state refuses it, not the query).
     let ds = "er3a_paper_like";
     let full = calibrate(
         &app,
@@ -134,11 +134,14 @@ async fn exports_are_the_cli_texts_and_extra_targets_need_extra_poses() {
     let e = err_json(
         app.get(&format!("/calibrations/{full}/export?format=extra-targets"))
             .await,
-        422,
-        "invalid_input",
+        409,
+        "conflict",
     )
     .await;
-    assert_eq!(e["field"], "format", "{e}");
+    assert!(
+        e["message"].as_str().unwrap().contains("no extra poses"),
+        "{e}"
+    );
     // An unknown format, or none, is refused before anything is read.
     for q in ["?format=step", "", "?format=urdf&x=1"] {
         let r = app.get(&format!("/calibrations/{cal}/export{q}")).await;
