@@ -56,11 +56,12 @@ impl Verdict {
     ///   estimate, the train RMS widened for the parameters fitted): green
     ///   within 1.3x, red beyond 2x, amber between;
     /// - warnings on the input, outliers, parameters these poses leave
-    ///   undetermined (with the extra poses that would determine them), or
-    ///   structure left that no effect of the catalogue explains: at least
-    ///   amber;
-    /// - what compensation does with the physics found, and how many
-    ///   deviations are within noise of nominal: said, green.
+    ///   undetermined (with the extra poses that would determine them), a
+    ///   free set that cross-validation made smaller, or structure left
+    ///   that no effect of the catalogue explains: at least amber;
+    /// - what no pose of this rig would separate, what compensation does
+    ///   with the physics found, and how many deviations are within noise
+    ///   of nominal: said, green.
     pub fn of(r: &Report) -> Verdict {
         let mut checks: Vec<(Level, String)> = Vec::new();
         let test = &r.stats.test;
