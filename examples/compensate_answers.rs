@@ -116,8 +116,15 @@ fn main() {
     if let Some(i) = args.iter().position(|a| a == "--loop") {
         // The benchmark's target (benches/engine.rs, without physics).
         let n: usize = args[i + 1].parse().unwrap();
-        let comp = calibrated("er3a_paper_like", false);
-        let t = joints(&[10.0, 20.0, 30.0, 40.0, 50.0, 60.0]);
+        // `--physics`: calibrated as `POST /sessions/{id}/jobs` does, with
+        // the physics analysis; `--q a,b,..`: another target (the load
+        // test's is 10,-20,30,0,40,0).
+        let comp = calibrated("er3a_paper_like", args.iter().any(|a| a == "--physics"));
+        let q: Vec<f64> = match args.iter().position(|a| a == "--q") {
+            Some(k) => args[k + 1].split(',').map(|v| v.parse().unwrap()).collect(),
+            None => vec![10.0, 20.0, 30.0, 40.0, 50.0, 60.0],
+        };
+        let t = joints(&q);
         let orientation = args.iter().any(|a| a == "--orientation");
         let mut iterations = 0;
         for _ in 0..n {
