@@ -179,6 +179,19 @@ impl Compensator {
         (t, f.r)
     }
 
+    /// [`Compensator::effective`] into `out` (one slot per joint), the
+    /// same sums without allocating when there are no joint effects.
+    fn effective_into(&self, q: &[f64], out: &mut [f64]) {
+        match &self.joint_effects {
+            Some(e) => {
+                for ((o, a), b) in out.iter_mut().zip(q).zip(e.offsets_rad(q, None)) {
+                    *o = a + b;
+                }
+            }
+            None => out.copy_from_slice(q),
+        }
+    }
+
     fn effective(&self, q: &[f64]) -> Vec<f64> {
         match &self.joint_effects {
             Some(e) => q

@@ -332,10 +332,8 @@ impl Compensator {
             &mut jac,
         );
         let zero = nalgebra::Vector3::zeros();
-        let (j, _) = self.task_system(&self.calibrated, &qe, &jac, oriented, &zero, &zero);
-        let sv = j.singular_values();
-        let (max, min) = (sv.max(), sv.min());
-        j.ncols() >= j.nrows() && !(min > 0.02 * max)
+        let (j, _) = self.task_system(&jac, oriented, &zero, &zero);
+        super::solve::singular_task_jacobian(&j)
     }
 
     /// What breaks [`Compensator::compensate_near`]'s precondition, if

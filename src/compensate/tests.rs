@@ -313,3 +313,40 @@ fn a_solve_that_cannot_converge_gives_up_early() {
     let sol = comp.solve(&t, Some(&r), &q, f64::INFINITY).ok().unwrap();
     assert!(sol.residual_mm < 1e-3);
 }
+
+/// The singular-pose test from the eigenvalues of `j jᵀ` says what the
+/// SVD of `j` said (smallest singular value under 2 % of the largest), on
+/// random task Jacobians of both sizes, on each side of the threshold and
+/// close to it, and on rank-deficient ones.
+#[test]
+fn the_singular_pose_test_agrees_with_the_svd() {
+    use nalgebra::DMatrix;
+    let mut rng = Rng::new(21);
+    let mut near = 0;
+    for m in [3, 6] {
+        for _ in 0..2000 {
+            let n = if rng.range(0.0, 1.0) < 0.8 { 6 } else { 7 };
+            // j = U diag(s) Vᵀ with chosen singular values: a random
+            // matrix's QR gives the orthonormal factors.
+            let u = DMatrix::from_fn(m, m, |_, _| rng.normal()).qr().q();
+            let v = DMatrix::from_fn(n, m, |_, _| rng.normal()).qr().q();
+            let scale = 10f64.powf(rng.range(-1.0, 4.0));
+            let mut s: Vec<f64> = (0..m).map(|_| scale * rng.range(0.05, 1.0)).collect();
+            s[0] = scale;
+            s[m - 1] = scale
+                * match rng.range(0.0, 1.0) {
+                    x if x < 0.4 => 0.02 * (1.0 + rng.range(-1e-6, 1e-6)),
+                    x if x < 0.5 => 0.0,
+                    _ => rng.range(0.0, 0.1),
+                };
+            let j = &u * DMatrix::from_diagonal(&nalgebra::DVector::from_vec(s)) * v.transpose();
+            let sv = j.clone().singular_values();
+            let by_svd = !(sv.min() > 0.02 * sv.max());
+            near += usize::from((sv.min() / sv.max() / 0.02 - 1.0).abs() < 1e-5);
+            assert_eq!(solve::singular_task_jacobian(&j), by_svd, "{j}");
+        }
+    }
+    assert!(near > 1000, "only {near} within 1e-5 of the threshold");
+    // Fewer joints than the task has rows: never singular for it.
+    assert!(!solve::singular_task_jacobian(&DMatrix::zeros(3, 2)));
+}

@@ -463,6 +463,35 @@ mod tests {
         check_fd(Convention::Mdh, OutputFrame::Rig);
     }
 
+    /// The compensation solver takes each joint's axis from the Jacobian's
+    /// flange rotation per radian of its θ instead of walking the chain again
+    /// (`Chain::joint_axes`): the two must be the same numbers, to the bit,
+    /// in either convention.
+    #[test]
+    fn theta_rotation_columns_are_the_joint_axes() {
+        for conv in [Convention::Dh, Convention::Mdh] {
+            let mut robot = er3a();
+            robot.convention = conv;
+            let p = perturbed(&robot, 7);
+            let chain = Chain::new(conv, 6, 4);
+            let mut rng = Rng::new(13);
+            let mut jac = chain.new_jacobian();
+            for _ in 0..20 {
+                let q: Vec<f64> = (0..6).map(|_| rng.range(-3.0, 3.0)).collect();
+                chain.point_jacobian(&p.values, &q, OutputFrame::Base, &mut jac);
+                let axes = chain.joint_axes(&p.values, &q, OutputFrame::Base);
+                for (c, (axis, _)) in axes.iter().enumerate() {
+                    assert_eq!(
+                        *axis,
+                        jac.d_orientation[5 * c + JointParam::Theta as usize],
+                        "{conv:?} joint {}",
+                        c + 1
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn dh_matches_matrix_product() {
         // The elementary-rotation implementation against plain 4x4 products.
