@@ -530,6 +530,11 @@ pub(super) fn singular_task_jacobian(j: &DMatrix<f64>) -> bool {
     if n < m {
         return false;
     }
+    // A non-finite Jacobian counts as singular, and is kept from the
+    // eigenvalue iterations, which have no iteration limit.
+    if j.iter().any(|v| !v.is_finite()) {
+        return true;
+    }
     let jjt = |r: usize, c: usize| (0..n).map(|k| j[(r, k)] * j[(c, k)]).sum::<f64>();
     let (min, max) = match m {
         3 => extremes(Matrix3::from_fn(jjt).symmetric_eigenvalues().as_slice()),

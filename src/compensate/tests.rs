@@ -349,4 +349,14 @@ fn the_singular_pose_test_agrees_with_the_svd() {
     assert!(near > 1000, "only {near} within 1e-5 of the threshold");
     // Fewer joints than the task has rows: never singular for it.
     assert!(!solve::singular_task_jacobian(&DMatrix::zeros(3, 2)));
+    // Non-finite: singular, and answered (not left to the eigenvalue
+    // iterations).
+    for bad in [f64::NAN, f64::INFINITY] {
+        let mut j = DMatrix::identity(6, 6);
+        j[(2, 3)] = bad;
+        assert!(solve::singular_task_jacobian(&j));
+        let mut j = DMatrix::identity(3, 6);
+        j[(0, 5)] = bad;
+        assert!(solve::singular_task_jacobian(&j));
+    }
 }
