@@ -143,8 +143,10 @@ fn extra_poses_determine_what_a_short_session_left_undetermined() {
             assert!(!still.contains(&p.name), "{} still held: {still:?}", p.name);
         }
     }
+    // Measured 2026-12-04: 1.82 -> 0.044 mm, red -> green, with 2 poses.
+    assert_eq!(longer.verdict.as_ref().map(|v| v.level), Some(Level::Green));
     assert!(
-        longer.stats.test.after.rms_mm <= short.stats.test.after.rms_mm,
+        longer.stats.test.after.rms_mm <= 0.1 * short.stats.test.after.rms_mm,
         "{} -> {}",
         short.stats.test.after.rms_mm,
         longer.stats.test.after.rms_mm
