@@ -11,7 +11,7 @@ use crate::kinematics::Params;
 use crate::kinematics::chain::Chain;
 use crate::kinematics::ik::ClosedFormIk;
 use crate::model::Robot;
-use crate::physics::JointEffects;
+use crate::physics::{JointEffects, WorkspaceField};
 use crate::report::Report;
 
 use super::Compensator;
@@ -41,6 +41,7 @@ impl Compensator {
                 .map(|j| (j.q_min_deg.to_radians(), j.q_max_deg.to_radians()))
                 .collect(),
             joint_effects: None,
+            workspace_field: None,
             thermal: None,
             temp_c: None,
             time_thermal: false,
@@ -76,6 +77,14 @@ impl Compensator {
         comp.time_thermal = has_time_thermal(report);
         comp.joint_effects =
             JointEffects::new(&report.findings, &report.nominal_robot).map(Arc::new);
+        let base = &report.base_in_rig;
+        let [roll, pitch, yaw] = base.rpy_deg.map(f64::to_radians);
+        comp.workspace_field = WorkspaceField::new(
+            &report.findings,
+            crate::kinematics::rpy_matrix(roll, pitch, yaw),
+            Vector3::from(base.xyz_mm),
+        )
+        .map(Arc::new);
         Ok(comp)
     }
 }

@@ -38,6 +38,12 @@
 //! recorded none); [`Compensator::with_payload_kg`] gives the compensator
 //! for the payload the robot carries now.
 //!
+//! A field over the workspace (a data-driven correction of T as a
+//! function of where T is, accepted where the analysis located structure
+//! no named effect explains): the calibrated model is aimed at the target
+//! minus the field's displacement there, with a warning for a target
+//! outside the region the calibration's poses covered.
+//!
 //! Backlash: where a joint stops depends on the side it arrives from. A
 //! compensator takes every joint as arriving in +q (most teach programs
 //! finish so); [`Compensator::with_approach`] sets the directions, and
@@ -69,7 +75,7 @@ use nalgebra::{Matrix3, Vector3};
 use crate::kinematics::Params;
 use crate::kinematics::chain::{Chain, OutputFrame};
 use crate::kinematics::ik::{self, ClosedFormIk};
-use crate::physics::JointEffects;
+use crate::physics::{JointEffects, WorkspaceField};
 
 pub use crate::model::MAX_PAYLOAD_KG;
 pub use crate::model::compensated::{Compensated, CompensationStatus, write_csv};
@@ -92,6 +98,9 @@ pub struct Compensator {
     /// Robot-side effects accepted by the analysis (the robot really sits
     /// at `q + offsets(q)`), at the payload this compensator runs with.
     joint_effects: Option<Arc<JointEffects>>,
+    /// A data-driven field over the workspace accepted by the analysis: T
+    /// lands displaced by it, so targets are aimed against it.
+    workspace_field: Option<Arc<WorkspaceField>>,
     /// Temperature-driven thermal expansion accepted by the analysis.
     thermal: Option<Arc<Thermal>>,
     /// The temperature `calibrated` holds at (°C), with `thermal`.

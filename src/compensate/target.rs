@@ -18,6 +18,17 @@ struct Start {
     pos: Vector3<f64>,
     rot: Option<Matrix3<f64>>,
     seeds: Vec<Vec<f64>>,
+    /// A warning on the target from the workspace field (outside the
+    /// region it was fitted on).
+    field_warning: Option<String>,
+}
+
+/// Two optional warnings as one message.
+fn join_warnings(a: Option<String>, b: Option<String>) -> Option<String> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(format!("{a}; {b}")),
+        (a, b) => a.or(b),
+    }
 }
 
 /// A row without joints.
@@ -92,9 +103,20 @@ impl Compensator {
             );
         }
         match self.start(target, orientation, reference_rad) {
-            Ok(start) => self.solve_from(target, start),
+            Ok(start) => self.solve_from(target, self.aimed(start)),
             Err(refused) => refused,
         }
+    }
+
+    /// `start` aimed against the workspace field, when the calibration
+    /// has one.
+    fn aimed(&self, mut start: Start) -> Start {
+        if let Some(field) = &self.workspace_field {
+            let (pos, warning) = field.aim(&start.pos);
+            start.pos = pos;
+            start.field_warning = warning;
+        }
+        start
     }
 
     /// Why the calibrated model gave no joints for a target.
@@ -128,6 +150,7 @@ impl Compensator {
                     pos: t,
                     rot: orientation.then_some(r),
                     seeds: vec![q],
+                    field_warning: None,
                 })
             }
             TargetKind::Cartesian { xyz_mm, rpy_deg } => {
@@ -144,6 +167,7 @@ impl Compensator {
                     pos: t,
                     rot: r,
                     seeds,
+                    field_warning: None,
                 })
             }
         }
@@ -181,7 +205,12 @@ impl Compensator {
     /// within the limits: the closed-form (or taught) seeds first, the
     /// numerical ones only when those fail, computed lazily.
     fn solve_from(&self, target: &Target, start: Start) -> Compensated {
-        let Start { pos, rot, seeds } = start;
+        let Start {
+            pos,
+            rot,
+            seeds,
+            field_warning,
+        } = start;
         let cartesian = matches!(target.kind, TargetKind::Cartesian { .. });
         // A joint target's one seed is its taught joints, which the answer
         // must stay with.
@@ -237,10 +266,12 @@ impl Compensator {
                         residual_mm: Some(sol.residual_mm),
                         iterations: last_iterations,
                         status: CompensationStatus::Ok,
-                        message: self
-                            .joint_effects
-                            .as_ref()
-                            .and_then(|e| e.outside_fitted_range(&sol.q)),
+                        message: join_warnings(
+                            self.joint_effects
+                                .as_ref()
+                                .and_then(|e| e.outside_fitted_range(&sol.q)),
+                            field_warning,
+                        ),
                     };
                 }
                 Err(failed) => {

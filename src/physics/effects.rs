@@ -23,7 +23,7 @@ use crate::kinematics::chain::{Chain, OutputFrame};
 use crate::kinematics::{JointParam, Params};
 use crate::model::Robot;
 pub use crate::report::effect::{
-    CorrectionDriver, CorrectionTarget, EffectModel, Kind, ThermalDriver,
+    CorrectionDriver, CorrectionTarget, EffectModel, Kind, ThermalDriver, WORKSPACE_COORDINATES,
 };
 
 impl Kind {
@@ -130,6 +130,32 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
         CorrectionDriver::Time => "the session's clock".into(),
         CorrectionDriver::Temperature => "the temperature".into(),
         CorrectionDriver::StringLength => format!("string {at}'s length"),
+        CorrectionDriver::Workspace => format!(
+            "T's {} in the rig's frame",
+            [
+                "x",
+                "y",
+                "z",
+                "azimuth",
+                "elevation",
+                "distance from the origin"
+            ]
+            .get(index.unwrap_or(0))
+            .unwrap_or(&"position")
+        ),
+    }
+}
+
+/// Coordinate `index` of a point `p` (rig frame, mm) as
+/// [`CorrectionDriver::Workspace`] numbers them: x, y, z (mm), azimuth
+/// about z and elevation above the xy-plane (rad), distance from the
+/// origin (mm).
+pub fn workspace_coordinate(p: &Vector3<f64>, index: usize) -> f64 {
+    match index {
+        0..=2 => p[index],
+        3 => p.y.atan2(p.x),
+        4 => p.z.atan2(p.xy().norm()),
+        _ => p.norm(),
     }
 }
 
@@ -589,6 +615,7 @@ impl Context {
             CorrectionDriver::JointAngle => pc.q_rad.get(i).copied().unwrap_or(0.0),
             CorrectionDriver::Time => pc.time_s,
             CorrectionDriver::Temperature => pc.temp_c.or(self.temp_ref_c).unwrap_or(0.0),
+            CorrectionDriver::Workspace => workspace_coordinate(&pc.point_rig, i),
             CorrectionDriver::StringLength => self
                 .anchors
                 .get(i)

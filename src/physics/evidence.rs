@@ -133,6 +133,10 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
                 }
                 CorrectionDriver::Temperature => d(words, "degrees C"),
                 CorrectionDriver::StringLength => d(words, "mm"),
+                CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {
+                    d(words, "deg")
+                }
+                CorrectionDriver::Workspace => d(words, "mm"),
             }
         }
         // A moved rig: the session's clock (the row order without one).
@@ -192,6 +196,9 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
             let v = ctx.driver_value(pc, *driver, *driver_index);
             match driver {
                 CorrectionDriver::JointAngle => v.to_degrees(),
+                CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {
+                    v.to_degrees()
+                }
                 CorrectionDriver::Time if !ctx.timed => v + 1.0,
                 _ => v,
             }

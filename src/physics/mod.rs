@@ -7,17 +7,19 @@
 //!
 //! Used by the pipeline ([`crate::pipeline`]): [`analyse()`] after
 //! `identify::geometric()`, [`errors_with_effects`] for `stats.test.after`;
-//! by compensation: [`JointEffects`].
+//! by compensation: [`JointEffects`] and [`WorkspaceField`].
 
 pub mod analyse;
 pub mod effects;
 pub mod evidence;
+mod field;
 pub mod problem;
 pub mod simulate;
 mod unexplained;
 
 pub use analyse::{Analysis, analyse, effect_context, errors_with_effects};
 pub use effects::{Context, EffectModel, Kind};
+pub use field::WorkspaceField;
 
 use crate::model::Robot;
 use crate::report::Finding;

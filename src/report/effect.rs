@@ -42,15 +42,30 @@ pub enum CorrectionDriver {
     Temperature,
     /// One string's length (knots in mm).
     StringLength,
+    /// Where T is in the rig's frame (for point data, the measuring
+    /// instrument's own frame): `driver_index` 0, 1, 2 = its x, y, z (mm);
+    /// 3 = its azimuth about the frame's z axis, 4 = its elevation above the
+    /// xy-plane (rad); 5 = its distance from the frame's origin (mm). A
+    /// field over the workspace (a distortion of the measuring device, a
+    /// compliance of the stand) is a function of these.
+    Workspace,
 }
+
+/// Number of workspace coordinates a [`CorrectionDriver::Workspace`]
+/// indexes (x, y, z, azimuth, elevation, distance).
+pub const WORKSPACE_COORDINATES: usize = 6;
 
 impl CorrectionDriver {
     /// True when the driver is known for a future target: a joint angle
     /// is (the target's own); the session's clock and temperature history
     /// describe this session, not the next, and a string's length exists
-    /// only with the rig mounted.
+    /// only with the rig mounted. Where T is in the workspace is known for
+    /// a target too (the target itself, in the rig's frame).
     pub fn usable_for_compensation(self) -> bool {
-        matches!(self, CorrectionDriver::JointAngle)
+        matches!(
+            self,
+            CorrectionDriver::JointAngle | CorrectionDriver::Workspace
+        )
     }
 }
 
@@ -349,8 +364,9 @@ impl EffectModel {
         if let Kind::DataDriven {
             target,
             target_index,
+            driver,
+            driver_index,
             knots,
-            ..
         } = &self.kind
         {
             if knots.len() < 2
@@ -360,6 +376,14 @@ impl EffectModel {
                 return Err(
                     "a data-driven correction needs two or more finite, increasing knots".into(),
                 );
+            }
+            if *driver == CorrectionDriver::Workspace
+                && driver_index.is_none_or(|d| d >= WORKSPACE_COORDINATES)
+            {
+                return Err(format!(
+                    "a correction over the workspace needs a driver_index from 0 to {}",
+                    WORKSPACE_COORDINATES - 1
+                ));
             }
             if *target != CorrectionTarget::Point && target_index.is_none() {
                 return Err(

@@ -1,8 +1,9 @@
 //! Modelling what has no name: where the analysis located structure that
 //! no catalogue effect explains, a data-driven correction in the located
 //! driver (a smooth function of a joint's angle acting on some joint's
-//! angle, of the clock or the temperature moving T, of a string's length
-//! or the clock changing that string's reading), piecewise linear between
+//! angle, of the clock, the temperature or T's place in the workspace
+//! moving T, of a string's length or the clock changing that string's
+//! reading), piecewise linear between
 //! knots at quantiles of the driver over the train poses. Its family and
 //! number of knots are chosen by 5-fold cross-validation on the train
 //! poses, it is fitted jointly with the geometry and the accepted effects
@@ -26,7 +27,9 @@ use super::magnitude::magnitude;
 use super::normals::{Normals, cv_sse, normals, solve_subset, unaliased};
 use super::refit::FitInfo;
 use super::{Inputs, State};
-use crate::physics::effects::{CorrectionDriver, CorrectionTarget, EffectModel, Kind};
+use crate::physics::effects::{
+    CorrectionDriver, CorrectionTarget, EffectModel, Kind, WORKSPACE_COORDINATES,
+};
 use crate::physics::evidence::evidence_plot;
 use crate::physics::problem::EffectProblem;
 use crate::report::{EffectParameters, Finding, FindingModel, Place};
@@ -146,6 +149,20 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
             None,
             &CLOCK_KNOTS,
         )),
+        // A field over the workspace: T's displacement as a function of
+        // one coordinate of where T is, Cartesian or, for an instrument at
+        // the rig's origin, its own angles and distance.
+        ("workspace", None, None) => {
+            for c in 0..WORKSPACE_COORDINATES {
+                out.push(family(
+                    CorrectionTarget::Point,
+                    None,
+                    CorrectionDriver::Workspace,
+                    Some(c),
+                    &JOINT_KNOTS,
+                ));
+            }
+        }
         ("string", _, Some(s)) if s <= m => out.push(family(
             CorrectionTarget::StringReading,
             Some(s - 1),
@@ -294,7 +311,29 @@ fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: 
     let Kind::DataDriven { driver, knots, .. } = &e.kind else {
         return false;
     };
-    let usable = if driver.usable_for_compensation() {
+    let usable = if *driver == CorrectionDriver::Workspace {
+        let (lo, hi, unit) = match e.kind {
+            Kind::DataDriven {
+                driver_index: Some(3 | 4),
+                ..
+            } => (
+                knots[0].to_degrees(),
+                knots[knots.len() - 1].to_degrees(),
+                "deg",
+            ),
+            _ => (knots[0], knots[knots.len() - 1], "mm"),
+        };
+        // Strings that agree place the displacement on the robot's side;
+        // one instrument's points cannot.
+        let caveat = if ctx.anchors.is_empty() {
+            "; with point data alone a distortion of the measuring instrument cannot be told from one of the robot: unless the targets were defined with this instrument, measure again from another instrument position before relying on it"
+        } else {
+            ""
+        };
+        format!(
+            "compensation applies it (a function of where T is), inside the region the poses covered ({lo:.1} to {hi:.1} {unit}; beyond it the correction is held at its end value and compensation warns){caveat}"
+        )
+    } else if driver.usable_for_compensation() {
         format!(
             "compensation applies it (a function of joint angles), inside the range the poses covered ({:.1} to {:.1} deg; beyond it the correction is held at its end value and compensation warns)",
             knots[0].to_degrees(),

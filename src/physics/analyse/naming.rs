@@ -14,10 +14,17 @@ use crate::physics::effects::EffectModel;
 use crate::physics::problem::EffectProblem;
 use crate::report::FindingModel;
 
+/// The paired z a named effect's own held-out gain must reach beside a
+/// kept data-driven correction: the gate a new proposal passes
+/// ([`HELD_OUT_Z`](super::HELD_OUT_Z)). It was admitted against a model
+/// that lacked the structure's true shape, which it may have been fitting
+/// in part, so its admission is re-examined as if it were proposed now.
+const KEEP_BESIDE_CORRECTION_Z: f64 = super::HELD_OUT_Z;
+
 /// Drop, weakest first, every named effect without which the model (refit
-/// by one linearised step) predicts the held-out readings as well: its
-/// paired z of gain below [`PAIR_MEMBER_Z`]. Each drop is said in the
-/// `unexplained` finding's `resembles` and in the notes.
+/// by one linearised step) predicts the held-out readings about as well:
+/// its paired z of gain below [`KEEP_BESIDE_CORRECTION_Z`]. Each drop is
+/// said in the `unexplained` finding's `resembles` and in the notes.
 pub(super) fn prune(inputs: &Inputs, state: &mut State) {
     prune_overlapping(inputs, state);
     loop {
@@ -30,7 +37,7 @@ pub(super) fn prune(inputs: &Inputs, state: &mut State) {
                 continue;
             };
             let z = held_out_gain_z(inputs, (&p, &eff), (&state.p, &state.accepted));
-            if z < PAIR_MEMBER_Z && weakest.as_ref().is_none_or(|w| z < w.1) {
+            if z < KEEP_BESIDE_CORRECTION_Z && weakest.as_ref().is_none_or(|w| z < w.1) {
                 weakest = Some((k, z, p, eff));
             }
         }
@@ -39,7 +46,7 @@ pub(super) fn prune(inputs: &Inputs, state: &mut State) {
         };
         let gone = state.accepted[k].kind.clone();
         let why = format!(
-            "{} was kept in an earlier round, but beside the data-driven correction it no longer improves the held-out readings on its own (paired z = {z:.1}, needs {PAIR_MEMBER_Z}): it was absorbing part of a structure of another shape, so it is dropped rather than named",
+            "{} was kept in an earlier round, but beside the data-driven correction it no longer improves the held-out readings on its own as a new effect must (paired z = {z:.1}, needs {KEEP_BESIDE_CORRECTION_Z}): it was absorbing part of a structure of another shape, so it is dropped rather than named",
             described(&gone)
         );
         drop_kinds(state, &[gone], &why);
