@@ -44,6 +44,11 @@
 //! minus the field's displacement there, with a warning for a target
 //! outside the region the calibration's poses covered.
 //!
+//! A base that tilts under the arm's gravity moment moves T by an amount
+//! that depends on the joints (and the payload): each solve aims the
+//! calibrated model at the target minus that shift at its starting joints,
+//! and once more at the solution's when they differ.
+//!
 //! Backlash: where a joint stops depends on the side it arrives from. A
 //! compensator takes every joint as arriving in +q (most teach programs
 //! finish so); [`Compensator::with_approach`] sets the directions, and
@@ -178,14 +183,19 @@ impl Compensator {
         (t, f.r)
     }
 
-    /// Where the calibrated robot (with its effects) puts T and the flange
-    /// when commanded `q_rad`.
+    /// Where the calibrated robot (with its effects, a tilting base's shift
+    /// of T included) puts T and the flange when commanded `q_rad`.
     pub fn calibrated_pose(&self, q_rad: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
         let q = self.effective(q_rad);
         let (f, t) = self
             .chain
             .point(&self.calibrated.values, &q, OutputFrame::Base);
-        (t, f.r)
+        let shift = self
+            .joint_effects
+            .as_ref()
+            .and_then(|e| e.base_shift_mm(q_rad))
+            .unwrap_or_default();
+        (t + shift, f.r)
     }
 
     /// [`Compensator::effective`] into `out` (one slot per joint), the

@@ -108,6 +108,16 @@ impl Compensator {
         }
     }
 
+    /// Where to aim the calibrated model so that T lands on `pos` when a
+    /// tilting base moves it by its shift at joints `q` (`pos` itself
+    /// without a base tilt).
+    fn tilt_aim(&self, pos: &Vector3<f64>, q: &[f64]) -> Vector3<f64> {
+        match self.joint_effects.as_ref().and_then(|e| e.base_shift_mm(q)) {
+            Some(shift) => pos - shift,
+            None => *pos,
+        }
+    }
+
     /// `start` aimed against the workspace field, when the calibration
     /// has one.
     fn aimed(&self, mut start: Start) -> Start {
@@ -233,11 +243,24 @@ impl Compensator {
                 continue;
             }
             // Taught joints are where the answer should stay.
-            let solved = if cartesian {
-                self.solve(&pos, rot.as_ref(), &seed, f64::INFINITY)
-            } else {
-                self.solve_taught(&pos, rot.as_ref(), &seed)
+            let run = |aim: &Vector3<f64>| {
+                if cartesian {
+                    self.solve(aim, rot.as_ref(), &seed, f64::INFINITY)
+                } else {
+                    self.solve_taught(aim, rot.as_ref(), &seed)
+                }
             };
+            // A tilting base moves T by an amount that depends on the
+            // joints: aimed from the seed's, then once more from the
+            // solution's when they differ (a far numerical seed).
+            let aim = self.tilt_aim(&pos, &seed);
+            let mut solved = run(&aim);
+            if let Ok(sol) = &solved {
+                let again = self.tilt_aim(&pos, &sol.q);
+                if (again - aim).norm() > 0.1 * self.tolerance_mm {
+                    solved = run(&again);
+                }
+            }
             tried.push(seed);
             match solved {
                 Ok(sol) => {

@@ -81,6 +81,9 @@ impl Kind {
                 "the zero of string {} creeps steadily during the session (the encoder or its electronics drifting as they warm up)",
                 sensor_index + 1
             ),
+            Kind::BaseTilt => {
+                "the robot's mount (pedestal, floor or stand) tilts under the gravity moment of the arm and its payload about the base, so T moves as if the whole robot leaned, more the further the arm reaches out".into()
+            }
             Kind::CableSag => {
                 "the strings hang under their own weight and read longer than the straight distance, more so the longer their horizontal span (catenary)".into()
             }
@@ -198,6 +201,12 @@ pub struct PoseContext {
     /// unit-mass regressors (m) of every link frame origin 0..n, the tool
     /// (n) and the payload (n + 1, the tool's times `payload_kg`).
     torque: Vec<Vec<f64>>,
+    /// Displacement of T in the rig frame (mm) per rad/(N·m) of a base
+    /// tilt: the gravity moment of the arm and payload about the base
+    /// origin (N·m), as a rotation, applied to T (zero without masses).
+    tilt: Vector3<f64>,
+    /// Size of that gravity moment (N·m; zero without masses).
+    pub base_moment_nm: f64,
 }
 
 /// The pose contexts of a whole session and the fixed quantities effects use.
@@ -390,6 +399,21 @@ impl Context {
                         }
                     })
                     .collect();
+                // Gravity is perpendicular to every moment it makes, so the
+                // moment is horizontal: the axis the mount tilts about.
+                let (tilt, base_moment_nm) = match masses {
+                    Some(ms) => {
+                        let force = |kg: f64| g_base * kg;
+                        let mut moment = Vector3::zeros();
+                        for (k, lm) in ms.iter().enumerate() {
+                            let c = Vector3::new(lm.com_mm[0], lm.com_mm[1], lm.com_mm[2]);
+                            moment += (frames[k].apply(&c) * 1e-3).cross(&force(lm.mass_kg));
+                        }
+                        moment += (tool * 1e-3).cross(&force(payload));
+                        (base_rotation * moment.cross(&tool), moment.norm())
+                    }
+                    None => (Vector3::zeros(), 0.0),
+                };
                 let thermal = match thermal_driver {
                     ThermalDriver::Temperature => p.temp_c.unwrap_or(temp_ref) - temp_ref,
                     ThermalDriver::Time => (p.time_s.unwrap_or(t_ref) - t_ref) / 3600.0,
@@ -408,6 +432,8 @@ impl Context {
                     temp_c: p.temp_c,
                     point_rig: p.point_rig,
                     torque,
+                    tilt,
+                    base_moment_nm,
                 }
             })
             .collect();
@@ -571,6 +597,11 @@ impl Context {
                 }
             }
             Kind::RigDrift => self.rigid_basis(pc, self.clock_h(pc), out),
+            Kind::BaseTilt => {
+                for (d, t) in out.dp.iter_mut().zip(pc.tilt.iter()) {
+                    *d = *t;
+                }
+            }
             Kind::DataDriven {
                 target,
                 target_index,

@@ -34,8 +34,9 @@ pub fn effects_of(findings: &[Finding]) -> Vec<EffectModel> {
 }
 
 /// The robot-side effects a calibration accepted (compliance, backlash,
-/// periodic and scale errors of the joints), ready to evaluate at commanded joints: the joint
-/// really sits at `q + offsets_rad(q)`. To put T where the calibrated model
+/// periodic and scale errors of the joints, and a base that tilts under the
+/// arm's moment), ready to evaluate at commanded joints: the joint
+/// really sits at `q + offsets_rad(q)`, and T moves by `base_shift_mm(q)`. To put T where the calibrated model
 /// puts it with angles `q_model`, command `q_model - offsets(q_model)` (one
 /// fixed-point step is enough: the offsets change by their own square).
 ///
@@ -62,7 +63,7 @@ impl JointEffects {
     pub fn new(findings: &[Finding], robot: &Robot) -> Option<Self> {
         let effects: Vec<EffectModel> = effects_of(findings)
             .into_iter()
-            .filter(|e| e.kind.joint().is_some())
+            .filter(|e| e.kind.joint().is_some() || e.kind == Kind::BaseTilt)
             .collect();
         if effects.is_empty() {
             return None;
@@ -154,13 +155,28 @@ impl JointEffects {
         (!out.is_empty()).then(|| out.join("; "))
     }
 
-    /// Joint-angle offsets (rad, per joint) at the commanded `q_rad`.
-    /// `direction` is the approach direction of every joint (+1 or -1);
-    /// without it the one set by [`JointEffects::with_approach`], else
-    /// backlash takes every joint as arriving in +q, as most teach
-    /// programs finish with a positive approach.
-    pub fn offsets_rad(&self, q_rad: &[f64], direction: Option<&[f64]>) -> Vec<f64> {
-        let mut ctx = Context::new(
+    /// How far a tilting base moves T (mm, robot base frame) at the
+    /// commanded `q_rad` with the current payload; `None` when the
+    /// calibration accepted no base tilt.
+    pub fn base_shift_mm(&self, q_rad: &[f64]) -> Option<nalgebra::Vector3<f64>> {
+        let tilt: Vec<EffectModel> = self
+            .effects
+            .iter()
+            .filter(|e| e.kind == Kind::BaseTilt)
+            .cloned()
+            .collect();
+        if tilt.is_empty() {
+            return None;
+        }
+        let ctx = self.context(q_rad);
+        let mut buf = effects::Basis::default();
+        Some(ctx.apply(&tilt, 0, &mut buf).dp)
+    }
+
+    /// One pose's effect context at `q_rad` in the robot base frame (no
+    /// rig), with the current payload.
+    fn context(&self, q_rad: &[f64]) -> Context {
+        Context::new(
             &self.robot,
             vec![],
             0.0,
@@ -172,7 +188,16 @@ impl JointEffects {
                 payload_kg: self.payload_kg(),
                 point_rig: nalgebra::Vector3::zeros(),
             }],
-        );
+        )
+    }
+
+    /// Joint-angle offsets (rad, per joint) at the commanded `q_rad`.
+    /// `direction` is the approach direction of every joint (+1 or -1);
+    /// without it the one set by [`JointEffects::with_approach`], else
+    /// backlash takes every joint as arriving in +q, as most teach
+    /// programs finish with a positive approach.
+    pub fn offsets_rad(&self, q_rad: &[f64], direction: Option<&[f64]>) -> Vec<f64> {
+        let mut ctx = self.context(q_rad);
         ctx.poses[0].direction = direction
             .or(self.approach.as_deref())
             .map_or_else(|| vec![1.0; q_rad.len()], <[f64]>::to_vec);

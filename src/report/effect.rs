@@ -146,6 +146,11 @@ pub enum Kind {
     /// Every string hangs under its own weight and reads longer than the
     /// chord by `c · h² · d` (h horizontal span, d length, in m; c in mm/m³).
     CableSag,
+    /// The robot's mount (pedestal, floor, stand) tilts about the base
+    /// origin by `c` (rad/(N·m)) times the gravity moment of the arm and
+    /// the payload about it, a vector in the horizontal plane: T moves by
+    /// that rotation about the base origin. Needs link masses.
+    BaseTilt,
     /// Anchor `sensor_index` moved by a vector (mm, rig frame) at `t0_s`.
     AnchorStep {
         /// 0-based sensor.
@@ -199,6 +204,7 @@ impl Kind {
             Kind::SensorOffset { .. } => "sensor_offset",
             Kind::SensorDrift { .. } => "sensor_drift",
             Kind::CableSag => "cable_sag",
+            Kind::BaseTilt => "base_tilt",
             Kind::AnchorStep { .. } => "anchor_step",
             Kind::RigStep { .. } => "rig_step",
             Kind::RigDrift => "rig_drift",
@@ -251,6 +257,7 @@ impl Kind {
                 | Kind::ThermalExpansion { .. }
                 | Kind::RigStep { .. }
                 | Kind::RigDrift
+                | Kind::BaseTilt
                 | Kind::DataDriven {
                     target: CorrectionTarget::JointAngle | CorrectionTarget::Point,
                     ..
@@ -316,7 +323,8 @@ impl EffectModel {
     /// True when a payload at T changes this effect's offsets on a robot of
     /// `n_joints` joints: a compliance with link masses (the payload adds
     /// its torque), or without masses one whose session varied the payload
-    /// (so that its lever was fitted).
+    /// (so that its lever was fitted); a base tilt (the payload adds its
+    /// moment).
     pub fn payload_matters(&self, n_joints: usize) -> bool {
         let payload_regressor = n_joints + 1;
         match &self.kind {
@@ -327,6 +335,8 @@ impl EffectModel {
                         .zip(&self.coef)
                         .any(|(&r, &c)| r == payload_regressor && c != 0.0)
             }
+            // The payload adds its moment about the base.
+            Kind::BaseTilt => true,
             _ => false,
         }
     }
@@ -344,6 +354,9 @@ impl EffectModel {
                     "joint_index {j} (0-based) but the robot has {n_joints} joints"
                 ));
             }
+        }
+        if self.kind == Kind::BaseTilt && !has_masses {
+            return Err("a base tilt is driven by the arm's gravity moment, which needs link masses, but the robot has none".into());
         }
         if let Kind::JointCompliance { regressors, .. } = &self.kind {
             if regressors.is_empty() != has_masses {

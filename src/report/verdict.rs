@@ -297,7 +297,9 @@ fn compensation(r: &Report) -> Option<(Level, String)> {
         let needs = match &model.kind {
             Kind::ThermalExpansion { .. } => Some("temp_c"),
             Kind::Backlash { .. } => Some("the approach direction"),
-            Kind::JointCompliance { .. } if model.payload_matters(r.nominal_robot.dof()) => {
+            Kind::JointCompliance { .. } | Kind::BaseTilt
+                if model.payload_matters(r.nominal_robot.dof()) =>
+            {
                 Some("payload_kg")
             }
             _ => None,

@@ -23,6 +23,7 @@ mod identify_warnings;
 mod lm_minpack;
 mod physics_analysis;
 mod physics_backlash;
+mod physics_base_tilt;
 mod physics_compensation;
 mod physics_derivatives;
 mod physics_eval;

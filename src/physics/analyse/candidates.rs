@@ -62,6 +62,14 @@ pub(super) fn candidates(
     for j in 0..ctx.n_joints {
         joint_candidates(&mut list, ctx, train, j);
     }
+    // The mount giving under the arm's moment: known only with masses.
+    if ctx.has_masses {
+        list.push(
+            Kind::BaseTilt,
+            1,
+            "the gravity moment of the arm about the base".into(),
+        );
+    }
     thermal_candidates(&mut list, ctx, train, accepted);
     // Change points at quantiles of the train times; each family scans
     // every change point of the session, so its look-elsewhere count is

@@ -35,6 +35,12 @@ pub(super) fn effect_model(
         ),
         "sensor_scale" | "sensor_offset" | "sensor_drift" => sensor_effect(es, mag, ctx)?,
         "cable_sag" => (Kind::CableSag, vec![mag]),
+        "base_tilt" => {
+            if !ctx.has_masses {
+                return Err("base_tilt needs link masses in robot.json".into());
+            }
+            (Kind::BaseTilt, vec![mag.to_radians()])
+        }
         "anchor_step" => anchor_step(es, mag, ctx, time, rng)?,
         "rig_step" | "rig_drift" => rig_motion(es, mag, time, rng)?,
         other => return Err(format!("unknown effect '{other}'")),
@@ -205,6 +211,7 @@ pub fn report_magnitude(e: &EffectModel, ctx: &Context) -> (f64, &'static str) {
         Kind::SensorOffset { .. } => (c[0], "mm"),
         Kind::SensorDrift { .. } => (c[0], "mm/h"),
         Kind::CableSag => (c[0], "mm/m^3"),
+        Kind::BaseTilt => (c[0] * deg, "deg/(N*m)"),
         Kind::AnchorStep { .. } => ((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt(), "mm"),
         Kind::RigStep { .. } => (
             ctx.rigid_rms_mm(&e.kind, c, &(0..ctx.poses.len()).collect::<Vec<_>>()),
