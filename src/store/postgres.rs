@@ -81,4 +81,27 @@ impl Backend {
     async fn begin_write(&self) -> sqlx::Result<sqlx::Transaction<'static, Db>> {
         self.pool.begin().await
     }
+    /// `Store::stream_calibrations`: the export query's rows as sqlx reads
+    /// them (on PostgreSQL a row costs little beyond the server's work).
+    pub async fn stream_calibrations(
+        &self,
+        f: &CalibrationFilter,
+    ) -> futures_util::stream::BoxStream<'static, Result<CalibrationRec>> {
+        use futures_util::StreamExt;
+        use sqlx::FromRow;
+        let (sql, args) = calibration_export_sql(f);
+        // The semaphore is never closed.
+        let permit = self.exports.clone().acquire_owned().await.ok();
+        // The pool's stream holds a clone of the pool and the query its
+        // own copy of the bound values, so the stream outlives `self` and
+        // `f`: it is polled by the answer's body, after the handler.
+        bind_filter!(sqlx::query::<Db>(sqlx::AssertSqlSafe(sql)), args)
+            .fetch(&self.pool)
+            .map(move |row| {
+                // Held as long as the stream.
+                let _held = &permit;
+                Ok(CalibrationRec::from_row(&row?)?)
+            })
+            .boxed()
+    }
 }
