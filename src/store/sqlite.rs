@@ -88,7 +88,9 @@ impl Backend {
             // take turns, which on a busy machine costs a scheduler slice
             // each; a site's 5,000-row export had store times up to 560-600
             // ms with 50, 110-130 ms with 1,000 (BENCHMARKS.md, "Fleet
-            // scale"). Rows are small (about 150 bytes of values).
+            // scale"; the export reads SQLite directly since, the other
+            // lists still go through this queue). Rows are small (about 150
+            // bytes of values).
             .row_buffer_size(1000);
         let pool = SqlitePoolOptions::new()
             .max_connections(8)

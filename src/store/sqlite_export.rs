@@ -5,8 +5,8 @@
 //! and freed, type-checked and looked up by name, and every row crosses a
 //! channel from the connection's thread to the runtime's, which on a busy
 //! machine means a thread wake-up per row. For a site's 5,000-row CSV that
-//! was about 80 % of the CPU time of the request; SQLite's own stepping
-//! and sorting were 14 % (BENCHMARKS.md, "Fleet scale"). Here the export's
+//! was most of the request's 29-33 ms of CPU; SQLite's own stepping and
+//! sorting were 14 % (BENCHMARKS.md, "Fleet scale"): 8 ms in all now. Here the export's
 //! statement runs on a blocking thread that holds the pooled connection's
 //! handle (`SqliteConnection::lock_handle`, sqlx's door for this), reads
 //! each row's columns in place and hands the rows over in batches.
