@@ -160,7 +160,11 @@ impl Statement {
         let bytes = unsafe {
             let p = ffi::sqlite3_column_text(self.stmt, col);
             let n = ffi::sqlite3_column_bytes(self.stmt, col);
-            if p.is_null() || n <= 0 {
+            if p.is_null() {
+                // Out of memory, or NULL in a column that may not hold it.
+                return Err(error("text column", format!("column {col} has no text")));
+            }
+            if n <= 0 {
                 &[][..]
             } else {
                 std::slice::from_raw_parts(p, n as usize)
