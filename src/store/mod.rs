@@ -21,6 +21,7 @@ mod plans;
 mod postgres;
 mod record;
 mod sqlite;
+mod sqlite_export;
 pub mod time;
 
 use serde::Serialize;

@@ -81,4 +81,56 @@ impl Backend {
     async fn begin_write(&self) -> sqlx::Result<sqlx::Transaction<'static, Db>> {
         self.pool.begin().await
     }
+    /// `Store::stream_calibrations`: the export query's rows as sqlx reads
+    /// them, each decoded by position (`export_row`).
+    pub async fn stream_calibrations(
+        &self,
+        f: &CalibrationFilter,
+    ) -> futures_util::stream::BoxStream<'static, Result<CalibrationRec>> {
+        use futures_util::StreamExt;
+        let (sql, args) = calibration_export_sql(f);
+        // The semaphore is never closed.
+        let permit = self.exports.clone().acquire_owned().await.ok();
+        // The pool's stream holds a clone of the pool and the query its
+        // own copy of the bound values, so the stream outlives `self` and
+        // `f`: it is polled by the answer's body, after the handler.
+        bind_filter!(sqlx::query::<Db>(sqlx::AssertSqlSafe(sql)), args)
+            .fetch(&self.pool)
+            .map(move |row| {
+                // Held as long as the stream.
+                let _held = &permit;
+                Ok(export_row(&row?)?)
+            })
+            .boxed()
+    }
+}
+
+/// A row of the export query (`calibration_select!`'s columns, in order),
+/// its columns taken by position: by name, each of the 19 was a hash
+/// lookup, about a tenth of the runtime thread's time in a 5,000-row CSV
+/// (BENCHMARKS.md, "Fleet scale"). The store suite compares every column
+/// with the paged list's rows, which are decoded by name.
+fn export_row(row: &sqlx::postgres::PgRow) -> sqlx::Result<CalibrationRec> {
+    use sqlx::Row;
+    Ok(CalibrationRec {
+        id: row.try_get(0)?,
+        robot_id: row.try_get(1)?,
+        serial_number: row.try_get(2)?,
+        model_id: row.try_get(3)?,
+        site: row.try_get(4)?,
+        line: row.try_get(5)?,
+        cell: row.try_get(6)?,
+        session_id: row.try_get(7)?,
+        job_id: row.try_get(8)?,
+        version: row.try_get(9)?,
+        method: row.try_get(10)?,
+        n_poses: row.try_get(11)?,
+        n_test: row.try_get(12)?,
+        test_rms_before_mm: row.try_get(13)?,
+        test_rms_after_mm: row.try_get(14)?,
+        train_rms_after_mm: row.try_get(15)?,
+        effects: row.try_get(16)?,
+        active: row.try_get(17)?,
+        created_at: row.try_get(18)?,
+    })
 }

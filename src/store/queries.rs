@@ -789,28 +789,6 @@ impl Backend {
         Ok((items, total))
     }
 
-    pub async fn stream_calibrations(
-        &self,
-        f: &CalibrationFilter,
-    ) -> futures_util::stream::BoxStream<'static, Result<CalibrationRec>> {
-        use futures_util::StreamExt;
-        use sqlx::FromRow;
-        let (sql, args) = calibration_export_sql(f);
-        // The semaphore is never closed.
-        let permit = self.exports.clone().acquire_owned().await.ok();
-        // The pool's stream holds a clone of the pool and the query its
-        // own copy of the bound values, so the stream outlives `self` and
-        // `f`: it is polled by the answer's body, after the handler.
-        bind_filter!(sqlx::query::<Db>(sqlx::AssertSqlSafe(sql)), args)
-            .fetch(&self.pool)
-            .map(move |row| {
-                // Held as long as the stream.
-                let _held = &permit;
-                Ok(CalibrationRec::from_row(&row?)?)
-            })
-            .boxed()
-    }
-
     pub async fn explain_calibration_export(&self, f: &CalibrationFilter) -> Result<Vec<String>> {
         let (sql, args) = calibration_export_sql(f);
         let mut out = vec![format!("-- export: {sql}")];

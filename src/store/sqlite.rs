@@ -88,7 +88,9 @@ impl Backend {
             // take turns, which on a busy machine costs a scheduler slice
             // each; a site's 5,000-row export had store times up to 560-600
             // ms with 50, 110-130 ms with 1,000 (BENCHMARKS.md, "Fleet
-            // scale"). Rows are small (about 150 bytes of values).
+            // scale"; the export reads SQLite directly since, the other
+            // lists still go through this queue). Rows are small (about 150
+            // bytes of values).
             .row_buffer_size(1000);
         let pool = SqlitePoolOptions::new()
             .max_connections(8)
@@ -101,5 +103,74 @@ impl Backend {
 
     async fn begin_write(&self) -> sqlx::Result<sqlx::Transaction<'static, Db>> {
         self.pool.begin_with("BEGIN IMMEDIATE").await
+    }
+
+    /// `Store::stream_calibrations`: the export query run on a blocking
+    /// thread straight on SQLite's handle, its rows sent in batches
+    /// (`super::sqlite_export` says why).
+    pub async fn stream_calibrations(
+        &self,
+        f: &CalibrationFilter,
+    ) -> futures_util::stream::BoxStream<'static, Result<CalibrationRec>> {
+        use super::sqlite_export::{Arg, read_calibrations};
+        use futures_util::StreamExt;
+        let (sql, args) = calibration_export_sql(f);
+        let args: Vec<Arg> = args
+            .iter()
+            .map(|a| match a {
+                FilterArg::Int(v) => Arg::Int(*v),
+                FilterArg::Text(v) => Arg::Text(v.to_string()),
+                FilterArg::Real(v) => Arg::Real(*v),
+            })
+            .collect();
+        // The semaphore is never closed.
+        let permit = self.exports.clone().acquire_owned().await.ok();
+        let pool = self.pool.clone();
+        // Two batches in flight: the reader thread stays a batch ahead of
+        // the answer, and waits (holding its connection) while the client
+        // is slow to read.
+        let (tx, rx) = tokio::sync::mpsc::channel(2);
+        tokio::spawn(async move {
+            // Held until the rows are all sent or the reader is gone.
+            let _permit = permit;
+            let mut conn = match pool.acquire().await {
+                Ok(c) => c,
+                Err(e) => {
+                    let _ = tx.send(Err(e.into())).await;
+                    return;
+                }
+            };
+            let runtime = tokio::runtime::Handle::current();
+            let failed = tx.clone();
+            let read = tokio::task::spawn_blocking(move || {
+                // The connection's own thread waits while this one holds
+                // its handle; the statement is finalized before the lock
+                // is given back.
+                match runtime.block_on(conn.lock_handle()) {
+                    Ok(mut locked) => read_calibrations(locked.as_raw_handle(), &sql, &args, &tx),
+                    Err(e) => {
+                        let _ = tx.blocking_send(Err(e.into()));
+                    }
+                }
+            })
+            .await;
+            if let Err(e) = read {
+                let _ = failed
+                    .send(Err(StoreError::Db(sqlx::Error::Protocol(format!(
+                        "sqlite export thread: {e}"
+                    )))))
+                    .await;
+            }
+        });
+        futures_util::stream::unfold(rx, |mut rx| async move {
+            rx.recv().await.map(|batch| (batch, rx))
+        })
+        .flat_map(|batch| {
+            futures_util::stream::iter(match batch {
+                Ok(rows) => rows.into_iter().map(Ok).collect::<Vec<_>>(),
+                Err(e) => vec![Err(e)],
+            })
+        })
+        .boxed()
     }
 }

@@ -21,6 +21,7 @@ mod deploy;
 mod e2e;
 mod export;
 mod helpers;
+mod history_csv;
 mod http_errors;
 mod jobs;
 mod limits;
