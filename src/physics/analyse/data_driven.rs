@@ -58,12 +58,19 @@ pub(super) const MAX_CORRECTIONS: usize = 3;
 pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
     let mut tried: Vec<Kind> = Vec::new();
     let mut kept = 0;
-    // Functions of the clock or the temperature last: over a long session
-    // they carry hundreds of coefficients, and every later candidate's fit
-    // would carry them too (its normal equations grow with the cube).
-    let clock = |p: &Place| matches!(p.driver.as_str(), "time" | "temperature");
-    let mut ordered: Vec<&Place> = places.iter().filter(|p| !clock(p)).collect();
-    ordered.extend(places.iter().filter(|p| clock(p)));
+    // A field over the workspace after the joints and strings: it is the
+    // most general shape (it can take up part of what one joint's angle
+    // drives), so the specific driver has the first say. Functions of the
+    // clock or the temperature last: over a long session they carry
+    // hundreds of coefficients, and every later candidate's fit would carry
+    // them too (its normal equations grow with the cube).
+    let rank = |p: &Place| match p.driver.as_str() {
+        "time" | "temperature" => 2,
+        "workspace" => 1,
+        _ => 0,
+    };
+    let mut ordered: Vec<&Place> = places.iter().collect();
+    ordered.sort_by_key(|p| rank(p));
     for place in ordered {
         if kept == MAX_CORRECTIONS {
             break;
