@@ -33,9 +33,22 @@ pub struct Pool {
     pub w: DMatrix<f64>,
 }
 
+/// What a selection minimises.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Criterion {
+    /// `trace(W M⁻¹)`: the expected squared error of T at random valid
+    /// poses (the module's comment).
+    #[default]
+    IOptimal,
+    /// `-log det M`: the volume of the parameters' confidence region,
+    /// every scaled parameter weighed alike.
+    DOptimal,
+}
+
 /// The running state of a selection.
 struct State<'a> {
     pool: &'a Pool,
+    criterion: Criterion,
     minv: DMatrix<f64>,
     g: Vec<Vec<f64>>,
     h: Vec<Vec<f64>>,
@@ -72,6 +85,7 @@ impl<'a> State<'a> {
         }
         State {
             pool,
+            criterion: Criterion::IOptimal,
             minv: DMatrix::identity(p, p),
             g,
             h,
@@ -115,13 +129,22 @@ impl<'a> State<'a> {
     /// Reduction of the objective if `i` were added:
     /// `trace((I + G_i)⁻¹ H_i)`.
     fn gain(&self, i: usize) -> f64 {
-        trace_solve(&self.g[i], &self.h[i], self.pool.m, 1.0).unwrap_or(f64::NEG_INFINITY)
+        match self.criterion {
+            Criterion::IOptimal => trace_solve(&self.g[i], &self.h[i], self.pool.m, 1.0),
+            Criterion::DOptimal => log_det(&self.g[i], self.pool.m, 1.0),
+        }
+        .unwrap_or(f64::NEG_INFINITY)
     }
 
     /// Increase of the objective if chosen `i` were removed:
     /// `trace((I - G_i)⁻¹ H_i)`.
     fn loss(&self, i: usize) -> f64 {
-        trace_solve(&self.g[i], &self.h[i], self.pool.m, -1.0).unwrap_or(f64::INFINITY)
+        match self.criterion {
+            Criterion::IOptimal => trace_solve(&self.g[i], &self.h[i], self.pool.m, -1.0),
+            // det(M - JᵀJ) = det M · det(I - G).
+            Criterion::DOptimal => log_det(&self.g[i], self.pool.m, -1.0).map(|v| -v),
+        }
+        .unwrap_or(f64::INFINITY)
     }
 
     /// Add (`sign` +1) or remove (-1) candidate `s`.
@@ -259,6 +282,16 @@ fn trace_solve(g: &[f64], h: &[f64], m: usize, sign: f64) -> Option<f64> {
     Some(total)
 }
 
+/// `log det(I + sign·G)` for `m × m` row-major `g`; `None` when not
+/// positive definite.
+fn log_det(g: &[f64], m: usize, sign: f64) -> Option<f64> {
+    let s = DMatrix::from_fn(m, m, |a, b| {
+        sign * g[a * m + b] + if a == b { 1.0 } else { 0.0 }
+    });
+    s.cholesky()
+        .map(|c| 2.0 * c.l().diagonal().iter().map(|v| v.ln()).sum::<f64>())
+}
+
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -321,9 +354,21 @@ pub fn extend(
 /// exchanges (each chosen pose swapped for the candidate that lowers the
 /// objective most) for at most `passes` passes.
 pub fn select(pool: &Pool, n: usize, n_greedy: usize, passes: usize) -> Selection {
+    select_by(pool, n, n_greedy, passes, Criterion::IOptimal)
+}
+
+/// [`select`] by `criterion`.
+pub fn select_by(
+    pool: &Pool,
+    n: usize,
+    n_greedy: usize,
+    passes: usize,
+    criterion: Criterion,
+) -> Selection {
     let n_greedy = n_greedy.max(n).min(pool.rows.len());
     let n = n.min(n_greedy);
     let mut st = State::new(pool);
+    st.criterion = criterion;
     let mut order = Vec::new();
     let mut objective = Vec::new();
     let mut at_n: Option<State> = None;
@@ -340,6 +385,7 @@ pub fn select(pool: &Pool, n: usize, n_greedy: usize, passes: usize) -> Selectio
         if order.len() == n {
             at_n = Some(State {
                 pool,
+                criterion,
                 minv: st.minv.clone(),
                 g: st.g.clone(),
                 h: st.h.clone(),

@@ -264,8 +264,33 @@ pub fn check(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<()> {
     Scene::new(robot, rig, &opts.workspace).map(|_| ())
 }
 
+/// How the selection is made, beyond what a user asks: the defaults are
+/// drawcal's; the others are there to be measured against them
+/// (tests/engine/plan.rs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tuning {
+    /// What the selection minimises.
+    pub criterion: design::Criterion,
+    /// Exchange passes after the greedy selection.
+    pub exchange_passes: usize,
+}
+
+impl Default for Tuning {
+    fn default() -> Self {
+        Tuning {
+            criterion: design::Criterion::IOptimal,
+            exchange_passes: EXCHANGE_PASSES,
+        }
+    }
+}
+
 /// Plan a session for `robot` on `rig`.
 pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
+    plan_tuned(robot, rig, opts, &Tuning::default())
+}
+
+/// [`plan`] with the selection made as `tuning` says.
+pub fn plan_tuned(robot: &Robot, rig: &Rig, opts: &PlanOptions, tuning: &Tuning) -> Result<Plan> {
     check_options(robot, opts)?;
     let scene = Scene::new(robot, rig, &opts.workspace)?;
     let noise = opts.noise_mm.unwrap_or_else(|| default_noise(rig));
@@ -285,7 +310,13 @@ pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
     let cols = columns(&scene, &pool, opts, noise)?;
     let design_pool = design_pool(&scene, &cols, &pool, &validation, noise);
     let n_greedy = (2 * opts.n_poses).min(pool.len() - n_check);
-    let sel = design::select(&design_pool, opts.n_poses, n_greedy, EXCHANGE_PASSES);
+    let sel = design::select_by(
+        &design_pool,
+        opts.n_poses,
+        n_greedy,
+        tuning.exchange_passes,
+        tuning.criterion,
+    );
 
     // Check poses: random valid poses not chosen.
     let mut rest: Vec<usize> = (0..pool.len())
