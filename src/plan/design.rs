@@ -282,6 +282,51 @@ fn trace_solve(g: &[f64], h: &[f64], m: usize, sign: f64) -> Option<f64> {
     Some(total)
 }
 
+/// The best design with weights over the pool (summing to one), without
+/// the prior: `min trace(W M(w)⁻¹)` with `M(w) = Σ w_i J_iᵀ J_i`, by the
+/// multiplicative algorithm (`w_i ← w_i √(d_i / φ)`, `d_i = trace(J_i M⁻¹ W
+/// M⁻¹ J_iᵀ)`, which converges for such linear criteria) for `iterations`
+/// steps. Returns `φ` of the weights reached and a lower bound on the
+/// optimum, `2φ - max_i d_i` (φ is convex and its derivative towards
+/// candidate `i` is `φ - d_i`). `n` poses chosen from the pool have
+/// `trace(W (Σ J_iᵀ J_i)⁻¹) >= bound / n`: `1/n` of their information
+/// is such a weighted design.
+pub fn continuous_bound(pool: &Pool, iterations: usize) -> (f64, f64) {
+    let (m, p, n) = (pool.m, pool.p, pool.rows.len());
+    let mut w = vec![1.0 / n as f64; n];
+    let mut d = vec![0.0; n];
+    let (mut phi, mut lower) = (f64::INFINITY, 0.0);
+    for _ in 0..iterations {
+        let mut mm = DMatrix::zeros(p, p);
+        for (r, wi) in pool.rows.iter().zip(&w) {
+            if *wi < 1e-12 {
+                continue;
+            }
+            let j = DMatrix::from_row_slice(m, p, r);
+            mm.gemm_tr(*wi, &j, &j, 1.0);
+        }
+        let Some(minv) = mm.try_inverse() else {
+            return (f64::INFINITY, 0.0);
+        };
+        let a = &minv * &pool.w * &minv;
+        phi = (&pool.w * &minv).trace();
+        let mut dmax = 0.0f64;
+        for (r, di) in pool.rows.iter().zip(d.iter_mut()) {
+            let j = DMatrix::from_row_slice(m, p, r);
+            *di = (&j * &a).component_mul(&j).sum();
+            dmax = dmax.max(*di);
+        }
+        lower = 2.0 * phi - dmax;
+        let mut total = 0.0;
+        for (wi, di) in w.iter_mut().zip(&d) {
+            *wi *= (di / phi).sqrt();
+            total += *wi;
+        }
+        w.iter_mut().for_each(|v| *v /= total);
+    }
+    (phi, lower)
+}
+
 /// `log det(I + sign·G)` for `m × m` row-major `g`; `None` when not
 /// positive definite.
 fn log_det(g: &[f64], m: usize, sign: f64) -> Option<f64> {
@@ -581,6 +626,40 @@ mod tests {
         assert!(((&pool.w * &minv).trace() - d).abs() < 1e-8 * d.max(1.0));
         let (none, _) = extend(&pool, &m0, 4, |_| true).unwrap();
         assert!(none.is_empty());
+    }
+
+    /// No set of n poses beats the weighted design's bound, the greedy
+    /// set comes near it, and the bound is near the weighted optimum.
+    #[test]
+    fn the_weighted_bound_bounds_every_set() {
+        let pool = random_pool(6, 300, 3, 8);
+        let (phi, lower) = continuous_bound(&pool, 400);
+        assert!(
+            lower > 0.0 && lower <= phi && lower > 0.95 * phi,
+            "{lower} {phi}"
+        );
+        // Without the prior: `direct` with the prior's I, taken out.
+        let plain = |set: &[usize]| {
+            let mut mm = DMatrix::zeros(pool.p, pool.p);
+            for &i in set {
+                let j = DMatrix::from_row_slice(pool.m, pool.p, &pool.rows[i]);
+                mm += j.transpose() * j;
+            }
+            (&pool.w * mm.try_inverse().unwrap()).trace()
+        };
+        let n = 20;
+        let sel = select(&pool, n, n, 5);
+        let chosen = plain(&sel.chosen) * n as f64;
+        assert!(
+            chosen >= lower && chosen < 1.3 * phi,
+            "{chosen} {lower} {phi}"
+        );
+        let mut rng = Rng::new(3);
+        for _ in 0..20 {
+            let mut idx: Vec<usize> = (0..300).collect();
+            rng.shuffle(&mut idx);
+            assert!(plain(&idx[..n]) * n as f64 >= lower);
+        }
     }
 
     #[test]

@@ -233,6 +233,8 @@ struct Comparison {
     /// The plan's predicted model RMS (mm) for its poses and for random ones.
     predicted_model_mm: f64,
     predicted_random_model_mm: f64,
+    /// The best any N of the plan's candidates could do (`PLAN_BOUND`).
+    bound: Option<plan::DesignBound>,
 }
 
 fn compare(name: &str, n: usize, session: u64, candidates: usize) -> Comparison {
@@ -251,7 +253,12 @@ fn compare_tuned(
     opts.seed = 1000 + session;
     opts.candidates = candidates;
     opts.n_check = Some(0);
-    let p = plan::plan_tuned(&robot, &rig, &opts, tuning).unwrap();
+    let (p, bound) = if std::env::var("PLAN_BOUND").is_ok() {
+        let (p, b) = plan::plan_with_bound(&robot, &rig, &opts, tuning).unwrap();
+        (p, Some(b))
+    } else {
+        (plan::plan_tuned(&robot, &rig, &opts, tuning).unwrap(), None)
+    };
     let design: Vec<Vec<f64>> = p.poses.iter().map(|p| p.q_deg.clone()).collect();
     let check = random_valid(&robot, &rig, 200, 5000 + session);
     let random = random_valid(&robot, &rig, (3 * n).div_ceil(2), 9000 + session);
@@ -262,6 +269,7 @@ fn compare_tuned(
         predicted_holdout_mm: p.report.predicted.holdout_rms_mm,
         predicted_model_mm: p.report.predicted.model_rms_mm,
         predicted_random_model_mm: p.report.random.model_rms_mm,
+        bound,
     }
 }
 
@@ -450,6 +458,9 @@ fn planned_against_random_anatomy() {
         let runs: Vec<Comparison> = (1..=sessions)
             .map(|s| compare_tuned(name, n, s, candidates, &tuning))
             .collect();
+        let rms = |f: &dyn Fn(&Comparison) -> f64| {
+            (runs.iter().map(|c| f(c).powi(2)).sum::<f64>() / runs.len() as f64).sqrt()
+        };
         let ratio = |f: &dyn Fn(&Comparison) -> f64, g: &dyn Fn(&Comparison) -> f64| {
             mean(&runs.iter().map(f).collect::<Vec<_>>())
                 / mean(&runs.iter().map(g).collect::<Vec<_>>())
@@ -460,9 +471,16 @@ fn planned_against_random_anatomy() {
             ratio(&|c| c.planned.worst_mm, &|c| c.random.worst_mm),
             ratio(&|c| c.planned.rms_mm, &|c| c.random_1_5.rms_mm),
         );
-        let rms = |f: &dyn Fn(&Comparison) -> f64| {
-            (runs.iter().map(|c| f(c).powi(2)).sum::<f64>() / runs.len() as f64).sqrt()
-        };
+        if runs[0].bound.is_some() {
+            let b = |f: &dyn Fn(&plan::DesignBound) -> f64| rms(&|c| f(&c.bound.unwrap()));
+            println!(
+                "| {name} | {n} | predicted model RMS: planned {:.4}, random {:.4}; best weighted design {:.4}, no N poses below {:.4} |",
+                rms(&|c| c.predicted_model_mm),
+                rms(&|c| c.predicted_random_model_mm),
+                b(&|d| d.weighted_model_rms_mm),
+                b(&|d| d.lower_model_rms_mm),
+            );
+        }
         let avg = |f: &dyn Fn(&Comparison) -> f64| mean(&runs.iter().map(f).collect::<Vec<_>>());
         for (label, pick) in [
             (
