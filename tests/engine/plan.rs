@@ -190,6 +190,14 @@ fn judge(preset: &str, seed: u64, design: &[Vec<f64>], check: &[Vec<f64>]) -> Ju
                 .sum();
             (sq / check.len() as f64).sqrt()
         };
+        if std::env::var("PLAN_VERBOSE").is_ok() {
+            let names: Vec<String> = sel
+                .fixed
+                .iter()
+                .map(|f| format!("{} ({:?})", f.name, f.reason))
+                .collect();
+            println!("{preset} seed {seed} N {}: held {names:?}", design.len());
+        }
         let fs = held(&|r| r == FixedReason::FreeSet);
         let und = held(&|r| r == FixedReason::Undetermined);
         Anatomy {
