@@ -662,6 +662,31 @@ mod tests {
         }
     }
 
+    /// D-optimal: the first pose is the one whose information has the
+    /// largest determinant with the prior, and the exchange never lowers
+    /// `det M`.
+    #[test]
+    fn d_optimal_selection_maximises_the_determinant() {
+        let pool = random_pool(7, 60, 3, 6);
+        let det = |set: &[usize]| {
+            let mut mm = DMatrix::identity(pool.p, pool.p);
+            for &i in set {
+                let j = DMatrix::from_row_slice(pool.m, pool.p, &pool.rows[i]);
+                mm += j.transpose() * j;
+            }
+            mm.determinant()
+        };
+        let first = select_by(&pool, 1, 1, 0, Criterion::DOptimal);
+        let best = (0..60)
+            .max_by(|&a, &b| det(&[a]).total_cmp(&det(&[b])))
+            .unwrap();
+        assert_eq!(first.chosen, vec![best]);
+        let sel = select_by(&pool, 8, 8, 5, Criterion::DOptimal);
+        assert!(det(&sel.chosen) >= det(&sel.greedy_order[..8]) * (1.0 - 1e-9));
+        let i_opt = select_by(&pool, 8, 8, 5, Criterion::IOptimal);
+        assert!(det(&sel.chosen) >= det(&i_opt.chosen) * (1.0 - 1e-9));
+    }
+
     #[test]
     fn greedy_gain_is_the_true_best_single_addition() {
         let pool = random_pool(2, 40, 3, 6);

@@ -379,6 +379,7 @@ fn planned_against_random_sweep() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(30);
+    let mut cells = Vec::new();
     for (name, n) in sweep_cells() {
         {
             let runs: Vec<Comparison> = (1..=sessions)
@@ -406,7 +407,13 @@ fn planned_against_random_sweep() {
                 pred_range.1,
                 runs.len()
             );
+            cells.push((name, n, runs));
         }
+    }
+    // Why (see `planned_against_random_anatomy`).
+    println!("\n{ANATOMY_HEADER}");
+    for (name, n, runs) in &cells {
+        print_anatomy(name, *n, runs);
     }
 }
 
@@ -458,17 +465,11 @@ fn planned_against_random_anatomy() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(10_000);
     println!("{tuning:?}, {candidates} candidates, {sessions} sessions");
-    println!(
-        "| robot | N | design | RMS | bias (noise-free) | floor | floor, free-set held freed | floor, undetermined freed | floor, all held freed | held by free set | held undetermined | free | predicted model RMS |"
-    );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("{ANATOMY_HEADER}");
     for (name, n) in sweep_cells() {
         let runs: Vec<Comparison> = (1..=sessions)
             .map(|s| compare_tuned(name, n, s, candidates, &tuning))
             .collect();
-        let rms = |f: &dyn Fn(&Comparison) -> f64| {
-            (runs.iter().map(|c| f(c).powi(2)).sum::<f64>() / runs.len() as f64).sqrt()
-        };
         let ratio = |f: &dyn Fn(&Comparison) -> f64, g: &dyn Fn(&Comparison) -> f64| {
             mean(&runs.iter().map(f).collect::<Vec<_>>())
                 / mean(&runs.iter().map(g).collect::<Vec<_>>())
@@ -479,42 +480,53 @@ fn planned_against_random_anatomy() {
             ratio(&|c| c.planned.worst_mm, &|c| c.random.worst_mm),
             ratio(&|c| c.planned.rms_mm, &|c| c.random_1_5.rms_mm),
         );
-        if runs[0].bound.is_some() {
-            let b = |f: &dyn Fn(&plan::DesignBound) -> f64| rms(&|c| f(&c.bound.unwrap()));
-            println!(
-                "| {name} | {n} | predicted model RMS: planned {:.4}, random {:.4}; best weighted design {:.4}, no N poses below {:.4} |",
-                rms(&|c| c.predicted_model_mm),
-                rms(&|c| c.predicted_random_model_mm),
-                b(&|d| d.weighted_model_rms_mm),
-                b(&|d| d.lower_model_rms_mm),
-            );
-        }
-        let avg = |f: &dyn Fn(&Comparison) -> f64| mean(&runs.iter().map(f).collect::<Vec<_>>());
-        for (label, pick) in [
-            (
-                "planned",
-                &(|c: &Comparison| c.planned) as &dyn Fn(&Comparison) -> Judged,
-            ),
-            ("random", &|c: &Comparison| c.random),
-            ("random 1.5N", &|c: &Comparison| c.random_1_5),
-        ] {
-            let predicted = match label {
-                "planned" => rms(&|c| c.predicted_model_mm),
-                "random" => rms(&|c| c.predicted_random_model_mm),
-                _ => f64::NAN,
-            };
-            println!(
-                "| {name} | {n} | {label} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.1} | {:.1} | {:.1} | {predicted:.4} |",
-                rms(&|c| pick(c).rms_mm),
-                rms(&|c| pick(c).anatomy.bias_mm),
-                rms(&|c| pick(c).anatomy.floor_mm),
-                rms(&|c| pick(c).anatomy.floor_freeset_freed_mm),
-                rms(&|c| pick(c).anatomy.floor_undetermined_freed_mm),
-                rms(&|c| pick(c).anatomy.floor_all_freed_mm),
-                avg(&|c| pick(c).anatomy.n_freeset as f64),
-                avg(&|c| pick(c).anatomy.n_undetermined as f64),
-                avg(&|c| pick(c).anatomy.n_free as f64),
-            );
-        }
+        print_anatomy(name, n, &runs);
+    }
+}
+
+const ANATOMY_HEADER: &str = "| robot | N | design | RMS | bias (noise-free) | floor | floor, free-set held freed | floor, undetermined freed | floor, all held freed | held by free set | held undetermined | free | predicted model RMS |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|";
+
+/// A cell's rows of the anatomy (root mean squares over the sessions, mm;
+/// counts are means), and the design bound when it was computed.
+fn print_anatomy(name: &str, n: usize, runs: &[Comparison]) {
+    let rms = |f: &dyn Fn(&Comparison) -> f64| {
+        (runs.iter().map(|c| f(c).powi(2)).sum::<f64>() / runs.len() as f64).sqrt()
+    };
+    if runs[0].bound.is_some() {
+        let b = |f: &dyn Fn(&plan::DesignBound) -> f64| rms(&|c| f(&c.bound.unwrap()));
+        println!(
+            "| {name} | {n} | predicted model RMS: planned {:.4}, random {:.4}; best weighted design {:.4}, no N poses below {:.4} |",
+            rms(&|c| c.predicted_model_mm),
+            rms(&|c| c.predicted_random_model_mm),
+            b(&|d| d.weighted_model_rms_mm),
+            b(&|d| d.lower_model_rms_mm),
+        );
+    }
+    let avg = |f: &dyn Fn(&Comparison) -> f64| mean(&runs.iter().map(f).collect::<Vec<_>>());
+    for (label, pick) in [
+        (
+            "planned",
+            &(|c: &Comparison| c.planned) as &dyn Fn(&Comparison) -> Judged,
+        ),
+        ("random", &|c: &Comparison| c.random),
+        ("random 1.5N", &|c: &Comparison| c.random_1_5),
+    ] {
+        let predicted = match label {
+            "planned" => rms(&|c| c.predicted_model_mm),
+            "random" => rms(&|c| c.predicted_random_model_mm),
+            _ => f64::NAN,
+        };
+        println!(
+            "| {name} | {n} | {label} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.1} | {:.1} | {:.1} | {predicted:.4} |",
+            rms(&|c| pick(c).rms_mm),
+            rms(&|c| pick(c).anatomy.bias_mm),
+            rms(&|c| pick(c).anatomy.floor_mm),
+            rms(&|c| pick(c).anatomy.floor_freeset_freed_mm),
+            rms(&|c| pick(c).anatomy.floor_undetermined_freed_mm),
+            rms(&|c| pick(c).anatomy.floor_all_freed_mm),
+            avg(&|c| pick(c).anatomy.n_freeset as f64),
+            avg(&|c| pick(c).anatomy.n_undetermined as f64),
+            avg(&|c| pick(c).anatomy.n_free as f64),
+        );
     }
 }
