@@ -285,6 +285,16 @@ fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
 }
 
+/// `mean(a) / mean(b)` over paired sessions and its standard error (delta
+/// method: the sessions' scatter of `a - r b`).
+fn ratio_of_means(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let n = a.len() as f64;
+    let r = mean(a) / mean(b);
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - r * y).collect();
+    let var = d.iter().map(|v| v * v).sum::<f64>() / (n - 1.0).max(1.0);
+    (r, (var / n).sqrt() / mean(b))
+}
+
 fn geo_mean(v: impl Iterator<Item = f64>) -> f64 {
     let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x.ln(), n + 1));
     (s / n as f64).exp()
@@ -375,6 +385,7 @@ fn planned_against_random_sweep() {
         "| robot | N | planned/random RMS | planned/random worst | planned/random(1.5N) RMS | predicted/realised held-out | sessions |"
     );
     println!("|---|---|---|---|---|---|---|");
+    // Each ratio is followed by its standard error over the sessions.
     let sessions: u64 = std::env::var("PLAN_SWEEP_SESSIONS")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -385,12 +396,13 @@ fn planned_against_random_sweep() {
             let runs: Vec<Comparison> = (1..=sessions)
                 .map(|s| compare(name, n, s, 10_000))
                 .collect();
-            let rms = mean(&runs.iter().map(|c| c.planned.rms_mm).collect::<Vec<_>>())
-                / mean(&runs.iter().map(|c| c.random.rms_mm).collect::<Vec<_>>());
-            let worst = mean(&runs.iter().map(|c| c.planned.worst_mm).collect::<Vec<_>>())
-                / mean(&runs.iter().map(|c| c.random.worst_mm).collect::<Vec<_>>());
-            let vs15 = mean(&runs.iter().map(|c| c.planned.rms_mm).collect::<Vec<_>>())
-                / mean(&runs.iter().map(|c| c.random_1_5.rms_mm).collect::<Vec<_>>());
+            let of = |f: &dyn Fn(&Comparison) -> f64| runs.iter().map(f).collect::<Vec<_>>();
+            let (rms, rms_se) =
+                ratio_of_means(&of(&|c| c.planned.rms_mm), &of(&|c| c.random.rms_mm));
+            let (worst, worst_se) =
+                ratio_of_means(&of(&|c| c.planned.worst_mm), &of(&|c| c.random.worst_mm));
+            let (vs15, vs15_se) =
+                ratio_of_means(&of(&|c| c.planned.rms_mm), &of(&|c| c.random_1_5.rms_mm));
             let pred = geo_mean(
                 runs.iter()
                     .map(|c| c.predicted_holdout_mm / c.planned.holdout_mm),
@@ -402,7 +414,7 @@ fn planned_against_random_sweep() {
                     (lo.min(r), hi.max(r))
                 });
             println!(
-                "| {name} | {n} | {rms:.3} | {worst:.3} | {vs15:.3} | {pred:.3} ({:.2}-{:.2}) | {} |",
+                "| {name} | {n} | {rms:.3} ± {rms_se:.3} | {worst:.3} ± {worst_se:.3} | {vs15:.3} ± {vs15_se:.3} | {pred:.3} ({:.2}-{:.2}) | {} |",
                 pred_range.0,
                 pred_range.1,
                 runs.len()
