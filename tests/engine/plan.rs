@@ -6,6 +6,12 @@
 //! sessions each) is `#[ignore]`d; EVAL.md quotes it:
 //!
 //!     cargo test --release --test engine plan::planned_against_random_sweep -- --ignored --nocapture
+//!
+//! It also prints what the error is made of (`print_anatomy`); the
+//! anatomy test repeats that for a part of the sweep (`PLAN_SWEEP_ROBOTS`,
+//! `PLAN_SWEEP_NS`), with the bound no N poses can beat (`PLAN_BOUND=1`)
+//! and other selections (`PLAN_CRITERION=d`, `PLAN_PASSES`,
+//! `PLAN_CANDIDATES`).
 
 use drawcal::identify::NoProgress;
 use drawcal::kinematics::chain::{Chain, OutputFrame};
@@ -379,7 +385,7 @@ fn a_planned_er3a_session_beats_random_poses_against_the_truth() {
 }
 
 #[test]
-#[ignore = "the issue's sweep: about ten minutes in release"]
+#[ignore = "the issue's sweep: five to thirteen minutes in release on the shared machine"]
 fn planned_against_random_sweep() {
     println!(
         "| robot | N | planned/random RMS | planned/random worst | planned/random(1.5N) RMS | predicted/realised held-out | sessions |"
