@@ -33,9 +33,22 @@ pub struct Pool {
     pub w: DMatrix<f64>,
 }
 
+/// What a selection minimises.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Criterion {
+    /// `trace(W M⁻¹)`: the expected squared error of T at random valid
+    /// poses (the module's comment).
+    #[default]
+    IOptimal,
+    /// `-log det M`: the volume of the parameters' confidence region,
+    /// every scaled parameter weighed alike.
+    DOptimal,
+}
+
 /// The running state of a selection.
 struct State<'a> {
     pool: &'a Pool,
+    criterion: Criterion,
     minv: DMatrix<f64>,
     g: Vec<Vec<f64>>,
     h: Vec<Vec<f64>>,
@@ -72,6 +85,7 @@ impl<'a> State<'a> {
         }
         State {
             pool,
+            criterion: Criterion::IOptimal,
             minv: DMatrix::identity(p, p),
             g,
             h,
@@ -115,13 +129,22 @@ impl<'a> State<'a> {
     /// Reduction of the objective if `i` were added:
     /// `trace((I + G_i)⁻¹ H_i)`.
     fn gain(&self, i: usize) -> f64 {
-        trace_solve(&self.g[i], &self.h[i], self.pool.m, 1.0).unwrap_or(f64::NEG_INFINITY)
+        match self.criterion {
+            Criterion::IOptimal => trace_solve(&self.g[i], &self.h[i], self.pool.m, 1.0),
+            Criterion::DOptimal => log_det(&self.g[i], self.pool.m, 1.0),
+        }
+        .unwrap_or(f64::NEG_INFINITY)
     }
 
     /// Increase of the objective if chosen `i` were removed:
     /// `trace((I - G_i)⁻¹ H_i)`.
     fn loss(&self, i: usize) -> f64 {
-        trace_solve(&self.g[i], &self.h[i], self.pool.m, -1.0).unwrap_or(f64::INFINITY)
+        match self.criterion {
+            Criterion::IOptimal => trace_solve(&self.g[i], &self.h[i], self.pool.m, -1.0),
+            // det(M - JᵀJ) = det M · det(I - G).
+            Criterion::DOptimal => log_det(&self.g[i], self.pool.m, -1.0).map(|v| -v),
+        }
+        .unwrap_or(f64::INFINITY)
     }
 
     /// Add (`sign` +1) or remove (-1) candidate `s`.
@@ -259,6 +282,61 @@ fn trace_solve(g: &[f64], h: &[f64], m: usize, sign: f64) -> Option<f64> {
     Some(total)
 }
 
+/// The best design with weights over the pool (summing to one), without
+/// the prior: `min trace(W M(w)⁻¹)` with `M(w) = Σ w_i J_iᵀ J_i`, by the
+/// multiplicative algorithm (`w_i ← w_i √(d_i / φ)`, `d_i = trace(J_i M⁻¹ W
+/// M⁻¹ J_iᵀ)`, which converges for such linear criteria) for `iterations`
+/// steps. Returns `φ` of the weights reached and a lower bound on the
+/// optimum, `2φ - max_i d_i` (φ is convex and its derivative towards
+/// candidate `i` is `φ - d_i`). `n` poses chosen from the pool have
+/// `trace(W (Σ J_iᵀ J_i)⁻¹) >= bound / n`: `1/n` of their information
+/// is such a weighted design.
+pub fn continuous_bound(pool: &Pool, iterations: usize) -> (f64, f64) {
+    let (m, p, n) = (pool.m, pool.p, pool.rows.len());
+    let mut w = vec![1.0 / n as f64; n];
+    let mut d = vec![0.0; n];
+    let (mut phi, mut lower) = (f64::INFINITY, 0.0);
+    for _ in 0..iterations {
+        let mut mm = DMatrix::zeros(p, p);
+        for (r, wi) in pool.rows.iter().zip(&w) {
+            if *wi < 1e-12 {
+                continue;
+            }
+            let j = DMatrix::from_row_slice(m, p, r);
+            mm.gemm_tr(*wi, &j, &j, 1.0);
+        }
+        let Some(minv) = mm.try_inverse() else {
+            return (f64::INFINITY, 0.0);
+        };
+        let a = &minv * &pool.w * &minv;
+        phi = (&pool.w * &minv).trace();
+        let mut dmax = 0.0f64;
+        for (r, di) in pool.rows.iter().zip(d.iter_mut()) {
+            let j = DMatrix::from_row_slice(m, p, r);
+            *di = (&j * &a).component_mul(&j).sum();
+            dmax = dmax.max(*di);
+        }
+        lower = 2.0 * phi - dmax;
+        let mut total = 0.0;
+        for (wi, di) in w.iter_mut().zip(&d) {
+            *wi *= (di / phi).sqrt();
+            total += *wi;
+        }
+        w.iter_mut().for_each(|v| *v /= total);
+    }
+    (phi, lower)
+}
+
+/// `log det(I + sign·G)` for `m × m` row-major `g`; `None` when not
+/// positive definite.
+fn log_det(g: &[f64], m: usize, sign: f64) -> Option<f64> {
+    let s = DMatrix::from_fn(m, m, |a, b| {
+        sign * g[a * m + b] + if a == b { 1.0 } else { 0.0 }
+    });
+    s.cholesky()
+        .map(|c| 2.0 * c.l().diagonal().iter().map(|v| v.ln()).sum::<f64>())
+}
+
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -321,9 +399,21 @@ pub fn extend(
 /// exchanges (each chosen pose swapped for the candidate that lowers the
 /// objective most) for at most `passes` passes.
 pub fn select(pool: &Pool, n: usize, n_greedy: usize, passes: usize) -> Selection {
+    select_by(pool, n, n_greedy, passes, Criterion::IOptimal)
+}
+
+/// [`select`] by `criterion`.
+pub fn select_by(
+    pool: &Pool,
+    n: usize,
+    n_greedy: usize,
+    passes: usize,
+    criterion: Criterion,
+) -> Selection {
     let n_greedy = n_greedy.max(n).min(pool.rows.len());
     let n = n.min(n_greedy);
     let mut st = State::new(pool);
+    st.criterion = criterion;
     let mut order = Vec::new();
     let mut objective = Vec::new();
     let mut at_n: Option<State> = None;
@@ -340,6 +430,7 @@ pub fn select(pool: &Pool, n: usize, n_greedy: usize, passes: usize) -> Selectio
         if order.len() == n {
             at_n = Some(State {
                 pool,
+                criterion,
                 minv: st.minv.clone(),
                 g: st.g.clone(),
                 h: st.h.clone(),
@@ -535,6 +626,65 @@ mod tests {
         assert!(((&pool.w * &minv).trace() - d).abs() < 1e-8 * d.max(1.0));
         let (none, _) = extend(&pool, &m0, 4, |_| true).unwrap();
         assert!(none.is_empty());
+    }
+
+    /// No set of n poses beats the weighted design's bound, the greedy
+    /// set comes near it, and the bound is near the weighted optimum.
+    #[test]
+    fn the_weighted_bound_bounds_every_set() {
+        let pool = random_pool(6, 300, 3, 8);
+        let (phi, lower) = continuous_bound(&pool, 400);
+        assert!(
+            lower > 0.0 && lower <= phi && lower > 0.95 * phi,
+            "{lower} {phi}"
+        );
+        // Without the prior: `direct` with the prior's I, taken out.
+        let plain = |set: &[usize]| {
+            let mut mm = DMatrix::zeros(pool.p, pool.p);
+            for &i in set {
+                let j = DMatrix::from_row_slice(pool.m, pool.p, &pool.rows[i]);
+                mm += j.transpose() * j;
+            }
+            (&pool.w * mm.try_inverse().unwrap()).trace()
+        };
+        let n = 20;
+        let sel = select(&pool, n, n, 5);
+        let chosen = plain(&sel.chosen) * n as f64;
+        assert!(
+            chosen >= lower && chosen < 1.3 * phi,
+            "{chosen} {lower} {phi}"
+        );
+        let mut rng = Rng::new(3);
+        for _ in 0..20 {
+            let mut idx: Vec<usize> = (0..300).collect();
+            rng.shuffle(&mut idx);
+            assert!(plain(&idx[..n]) * n as f64 >= lower);
+        }
+    }
+
+    /// D-optimal: the first pose is the one whose information has the
+    /// largest determinant with the prior, and the exchange never lowers
+    /// `det M`.
+    #[test]
+    fn d_optimal_selection_maximises_the_determinant() {
+        let pool = random_pool(7, 60, 3, 6);
+        let det = |set: &[usize]| {
+            let mut mm = DMatrix::identity(pool.p, pool.p);
+            for &i in set {
+                let j = DMatrix::from_row_slice(pool.m, pool.p, &pool.rows[i]);
+                mm += j.transpose() * j;
+            }
+            mm.determinant()
+        };
+        let first = select_by(&pool, 1, 1, 0, Criterion::DOptimal);
+        let best = (0..60)
+            .max_by(|&a, &b| det(&[a]).total_cmp(&det(&[b])))
+            .unwrap();
+        assert_eq!(first.chosen, vec![best]);
+        let sel = select_by(&pool, 8, 8, 5, Criterion::DOptimal);
+        assert!(det(&sel.chosen) >= det(&sel.greedy_order[..8]) * (1.0 - 1e-9));
+        let i_opt = select_by(&pool, 8, 8, 5, Criterion::IOptimal);
+        assert!(det(&sel.chosen) >= det(&i_opt.chosen) * (1.0 - 1e-9));
     }
 
     #[test]

@@ -264,8 +264,68 @@ pub fn check(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<()> {
     Scene::new(robot, rig, &opts.workspace).map(|_| ())
 }
 
+/// How the selection is made, beyond what a user asks: the defaults are
+/// drawcal's; the others are there to be measured against them
+/// (tests/engine/plan.rs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tuning {
+    /// What the selection minimises.
+    pub criterion: design::Criterion,
+    /// Exchange passes after the greedy selection.
+    pub exchange_passes: usize,
+}
+
+impl Default for Tuning {
+    fn default() -> Self {
+        Tuning {
+            criterion: design::Criterion::IOptimal,
+            exchange_passes: EXCHANGE_PASSES,
+        }
+    }
+}
+
 /// Plan a session for `robot` on `rig`.
 pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
+    plan_tuned(robot, rig, opts, &Tuning::default())
+}
+
+/// [`plan`] with the selection made as `tuning` says.
+pub fn plan_tuned(robot: &Robot, rig: &Rig, opts: &PlanOptions, tuning: &Tuning) -> Result<Plan> {
+    plan_inner(robot, rig, opts, tuning, false).map(|(p, _)| p)
+}
+
+/// How well any `n_poses` of a plan's candidates could do, in the plan's
+/// linear model: the best design with weights over the candidates (which
+/// no set of `n_poses` poses can beat), for comparison with the plan's own
+/// prediction ([`PlanReport::predicted`]).
+#[derive(Debug, Clone, Copy)]
+pub struct DesignBound {
+    /// Model RMS (mm) of the best weighted design found, at `n_poses`.
+    pub weighted_model_rms_mm: f64,
+    /// A lower bound on the model RMS (mm) of any `n_poses` of the
+    /// candidates (from the weighted design's optimality gap).
+    pub lower_model_rms_mm: f64,
+}
+
+/// [`plan_tuned`] and the [`DesignBound`] of its candidates (seconds to
+/// minutes more: a diagnosis, not part of planning).
+pub fn plan_with_bound(
+    robot: &Robot,
+    rig: &Rig,
+    opts: &PlanOptions,
+    tuning: &Tuning,
+) -> Result<(Plan, DesignBound)> {
+    let (p, b) = plan_inner(robot, rig, opts, tuning, true)?;
+    Ok((p, b.expect("asked for")))
+}
+
+fn plan_inner(
+    robot: &Robot,
+    rig: &Rig,
+    opts: &PlanOptions,
+    tuning: &Tuning,
+    with_bound: bool,
+) -> Result<(Plan, Option<DesignBound>)> {
     check_options(robot, opts)?;
     let scene = Scene::new(robot, rig, &opts.workspace)?;
     let noise = opts.noise_mm.unwrap_or_else(|| default_noise(rig));
@@ -285,7 +345,13 @@ pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
     let cols = columns(&scene, &pool, opts, noise)?;
     let design_pool = design_pool(&scene, &cols, &pool, &validation, noise);
     let n_greedy = (2 * opts.n_poses).min(pool.len() - n_check);
-    let sel = design::select(&design_pool, opts.n_poses, n_greedy, EXCHANGE_PASSES);
+    let sel = design::select_by(
+        &design_pool,
+        opts.n_poses,
+        n_greedy,
+        tuning.exchange_passes,
+        tuning.criterion,
+    );
 
     // Check poses: random valid poses not chosen.
     let mut rest: Vec<usize> = (0..pool.len())
@@ -306,6 +372,14 @@ pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
         &mut rng,
     );
     let parameters = predicted_sigmas(&design_pool, &cols, &sel.chosen, &scene);
+    let bound = with_bound.then(|| {
+        let (phi, lower) = design::continuous_bound(&design_pool, 300);
+        let n = opts.n_poses as f64;
+        DesignBound {
+            weighted_model_rms_mm: (phi / n).sqrt(),
+            lower_model_rms_mm: (lower.max(0.0) / n).sqrt(),
+        }
+    });
     let approach = if opts.effects.iter().any(|e| e == "backlash") {
         approach_balance(&toured, &home)
     } else {
@@ -338,7 +412,7 @@ pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
         exchanges: sel.swaps,
         notes,
     };
-    Ok(Plan { poses, report })
+    Ok((Plan { poses, report }, bound))
 }
 
 /// The chosen poses (`p01`...) and the check poses (`c01`..., split
