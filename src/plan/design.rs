@@ -147,8 +147,12 @@ impl<'a> State<'a> {
         .unwrap_or(f64::INFINITY)
     }
 
-    /// Add (`sign` +1) or remove (-1) candidate `s`.
-    fn update(&mut self, s: usize, sign: f64) {
+    /// Add (`sign` +1) or remove (-1) candidate `s`. False when the
+    /// update does not solve (numerically degenerate): nothing changed,
+    /// and a candidate that could not be added is dropped from the pool,
+    /// so that the greedy steps do not pick it again and again.
+    #[must_use]
+    fn update(&mut self, s: usize, sign: f64) -> bool {
         let (m, p) = (self.pool.m, self.pool.p);
         let js = DMatrix::from_row_slice(m, p, &self.pool.rows[s]);
         let u = &self.minv * js.transpose(); // p × m
@@ -156,7 +160,10 @@ impl<'a> State<'a> {
             self.g[s][a * m + b] + if a == b { sign } else { 0.0 }
         });
         let Some(sinv) = smat.try_inverse() else {
-            return;
+            if sign > 0.0 {
+                self.active.retain(|&i| i != s);
+            }
+            return false;
         };
         let wu = &self.pool.w * &u;
         let r = &self.minv * &wu; // p × m
@@ -216,6 +223,7 @@ impl<'a> State<'a> {
             }
         }
         self.chosen[s] = sign > 0.0;
+        true
     }
 
     /// The unchosen candidate with the largest gain.
@@ -384,7 +392,9 @@ pub fn extend(
     let mut order = Vec::new();
     while order.len() < max_n && !done(&st.minv) {
         let Some((i, _)) = st.best() else { break };
-        st.update(i, 1.0);
+        if !st.update(i, 1.0) {
+            continue;
+        }
         if st.objective < REFRESH_DROP * refreshed_at {
             st.refresh();
             refreshed_at = st.objective;
@@ -420,7 +430,9 @@ pub fn select_by(
     let mut refreshed_at = st.objective;
     while order.len() < n_greedy {
         let Some((i, _)) = st.best() else { break };
-        st.update(i, 1.0);
+        if !st.update(i, 1.0) {
+            continue;
+        }
         if st.objective < REFRESH_DROP * refreshed_at {
             st.refresh();
             refreshed_at = st.objective;
@@ -471,16 +483,19 @@ pub fn select_by(
             let out = chosen[slot];
             let loss = st.loss(out);
             let before = st.objective;
-            st.update(out, -1.0);
+            if !st.update(out, -1.0) {
+                continue;
+            }
             match st.best() {
-                Some((inn, gain)) if inn != out && gain > loss * (1.0 + 1e-6) => {
-                    st.update(inn, 1.0);
+                Some((inn, gain))
+                    if inn != out && gain > loss * (1.0 + 1e-6) && st.update(inn, 1.0) =>
+                {
                     chosen[slot] = inn;
                     swaps += 1;
                     improved = true;
                 }
                 _ => {
-                    st.update(out, 1.0);
+                    let _ = st.update(out, 1.0);
                     // Rounding only: keep the bookkeeping exact.
                     st.objective = before;
                 }
@@ -565,7 +580,7 @@ mod tests {
         let mut refreshed_at = st.objective;
         for step in 0..40 {
             let (i, _) = st.best().unwrap();
-            st.update(i, 1.0);
+            assert!(st.update(i, 1.0));
             if st.objective < REFRESH_DROP * refreshed_at {
                 st.refresh();
                 refreshed_at = st.objective;
