@@ -104,6 +104,7 @@ pub(super) fn unexplained(
     );
     let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
     let excess = robot_side_excess(obs, ctx, &res, rpp, n_params);
+    let motion = motion_test(obs, ctx, &res, rpp, nb.zcrit).filter(|m| m.z > m.threshold);
     let confined = if nb.best.is_none() {
         let train: Vec<f64> = res
             .chunks(rpp)
@@ -117,7 +118,7 @@ pub(super) fn unexplained(
     } else {
         None
     };
-    let (winner, located) = located(&nb, excess, confined.as_ref(), &pairings)?;
+    let (winner, located) = located(&nb, excess, confined.as_ref(), motion.as_ref(), &pairings)?;
     // A confined mismatch already says where it lives.
     let region = if confined.is_some() {
         String::new()
@@ -126,7 +127,14 @@ pub(super) fn unexplained(
     };
     let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
     let test = rms(&errors_with_effects(obs, ctx, p, effects, &obs.test));
-    let places = places(obs, ctx, &nb.places, confined.as_ref(), excess.as_ref());
+    let places = places(
+        obs,
+        ctx,
+        &nb.places,
+        confined.as_ref(),
+        excess.as_ref(),
+        motion.as_ref(),
+    );
     // The evidence plot knows the plain orderings up to the configuration.
     let plot_len = ctx.n_joints + 2 + usize::from(with_temp);
     let (ordering, z) = match winner {
@@ -175,17 +183,34 @@ pub(super) fn unexplained(
     })
 }
 
-/// Every place the structure was located: the neighbour tests' places, a
-/// confined stretch of a joint's range, and, when nothing else placed it,
-/// the robot-side excess.
+/// Every place the structure was located: the neighbour tests' places, the
+/// move that led to each pose, a confined stretch of a joint's range, and,
+/// when nothing else placed it, the robot-side excess.
 fn places(
     obs: &Observations,
     ctx: &Context,
     located: &[Place],
     confined: Option<&Concentrated>,
     excess: Option<&Excess>,
+    motion: Option<&Motion>,
 ) -> Vec<Place> {
     let mut places = located.to_vec();
+    if let Some(m) = motion {
+        places.push(Place {
+            driver: "motion".into(),
+            joint: None,
+            sensor: None,
+            side: if obs.anchors.is_empty() {
+                "point"
+            } else {
+                "robot"
+            }
+            .into(),
+            z: m.z,
+            threshold: m.threshold,
+            range: None,
+        });
+    }
     if let Some(c) = confined {
         places.push(Place {
             driver: "joint".into(),
@@ -247,6 +272,9 @@ fn resemblances(places: &[Place]) -> Vec<String> {
             ),
             ("temperature", _, _) => say(
                 "temperature: thermal_expansion (every length in proportion) was tried; the structure is not a uniform growth".into(),
+            ),
+            ("motion", _, _) => say(
+                "the move that led to each pose: no catalogue effect depends on it (backlash depends only on the side a joint arrived from); an arm not settled at the dwell (overshoot or lag), a servo's following error or a tool still swinging would".into(),
             ),
             ("workspace" | "configuration", _, _) => say(
                 "the workspace: no catalogue effect is a field over the workspace; a distortion of the measuring device or a compliance of the stand or base would be".into(),
@@ -535,8 +563,19 @@ fn located(
     nb: &Neighbours,
     excess: Option<Excess>,
     confined: Option<&Concentrated>,
+    motion: Option<&Motion>,
     pairings: &[(String, Vec<(usize, usize)>)],
 ) -> Option<(usize, String)> {
+    // The ordering that comes nearest, for the plot of a structure no
+    // ordering placed.
+    let nearest = || {
+        nb.zs
+            .iter()
+            .enumerate()
+            .filter(|(_, z)| z.is_finite())
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map_or((0, f64::NAN), |(w, z)| (w, *z))
+    };
     let zcrit = nb.zcrit;
     Some(match (&nb.best, excess, nb.winner_at) {
         (Some((z, name)), _, Some((pk, false))) if pk >= pairings.len() => (
@@ -576,15 +615,21 @@ fn located(
                 ),
             )
         }
+        (None, _, _) if motion.is_some() => {
+            let m = motion.expect("checked");
+            let (w, _) = nearest();
+            (
+                w,
+                format!(
+                    "the residual of each pose follows the move that led to it: T is off along that move by {:.2} % of its length (z = {:.1}, threshold {:.1}): the mismatch depends on the motion, not on where the pose is, in a form no catalogue effect has",
+                    100.0 * m.fraction,
+                    m.z,
+                    m.threshold
+                ),
+            )
+        }
         (None, Some(x), _) if x.f > x.threshold => {
-            // The ordering that comes nearest, for the plot.
-            let (w, z) = nb
-                .zs
-                .iter()
-                .enumerate()
-                .filter(|(_, z)| z.is_finite())
-                .max_by(|a, b| a.1.total_cmp(b.1))
-                .map_or((0, f64::NAN), |(w, z)| (w, *z));
+            let (w, z) = nearest();
             (
                 w,
                 format!(
@@ -794,6 +839,72 @@ struct Excess {
     threshold: f64,
     d1: usize,
     d2: usize,
+}
+
+/// The residual regressed on the move that led to each pose.
+#[derive(Debug, Clone)]
+struct Motion {
+    /// T's displacement along the move, as a fraction of the move.
+    fraction: f64,
+    /// Its significance (two-sided normal z) and what it had to pass.
+    z: f64,
+    threshold: f64,
+}
+
+/// Does each train pose's residual follow the move that led to it (from
+/// the pose recorded before it, train or test)? Each residual as a
+/// displacement of T in the rig frame (a point's error, or the string
+/// residuals' common displacement through the anchors) is regressed on the
+/// move `T_k - T_(k-1)` (located points): one coefficient, its z against
+/// the scatter left. An arm not settled at the dwell or a servo's following
+/// error puts T off along or against its last move; no effect of the
+/// catalogue depends on it. `zcrit` is the neighbour tests' threshold
+/// (the same family-wise rate; one more test is a negligible change).
+fn motion_test(
+    obs: &Observations,
+    ctx: &Context,
+    res: &[f64],
+    rpp: usize,
+    zcrit: f64,
+) -> Option<Motion> {
+    let points = obs.anchors.is_empty();
+    let (mut sdd, mut sdr) = (0.0, 0.0);
+    let mut pairs = Vec::with_capacity(obs.train.len());
+    for (pos, &i) in obs.train.iter().enumerate() {
+        if i == 0 {
+            continue;
+        }
+        let r = &res[pos * rpp..(pos + 1) * rpp];
+        let here = ctx.poses[i].point_rig;
+        let d = if points {
+            nalgebra::Vector3::new(r[0], r[1], r[2])
+        } else {
+            // A pose whose anchors do not fix a point tells nothing here.
+            let Some((d, _)) = common_displacement(&obs.anchors, &here, r) else {
+                continue;
+            };
+            d
+        };
+        let mv = here - ctx.poses[i - 1].point_rig;
+        sdd += mv.norm_squared();
+        sdr += mv.dot(&d);
+        pairs.push((d, mv));
+    }
+    if pairs.len() < 20 || sdd <= 0.0 {
+        return None;
+    }
+    let c = sdr / sdd;
+    let scatter: f64 = pairs
+        .iter()
+        .map(|(d, mv)| (d - c * mv).norm_squared())
+        .sum();
+    let s2 = scatter / (3 * pairs.len() - 1) as f64;
+    let z = c.abs() / (s2 / sdd).sqrt();
+    Some(Motion {
+        fraction: c,
+        z,
+        threshold: zcrit,
+    })
 }
 
 /// False-alarm rate of the robot-side excess test (strict: it names no

@@ -1,5 +1,8 @@
-//! A distortion over the workspace that no catalogue effect describes: T
-//! displaced vertically by a function of its height (a stand that gives
+//! Structure no catalogue effect describes, in tracker sessions: where T
+//! is (a field over the workspace) and how it got there (the move that led
+//! to each pose).
+//!
+//! A distortion over the workspace: T displaced vertically by a function of its height (a stand that gives
 //! under the arm as it reaches up; with point data alone the same
 //! recordings would come from a tracker refracting in stratified air, and
 //! the finding says so). The analysis must locate it in the
@@ -7,6 +10,12 @@
 //! T as a function of where T is), bring the held-out RMS near what the
 //! same session without the distortion reaches, and compensation must aim
 //! targets against it, warning outside the region it was fitted on.
+//!
+//! An arm not settled at the dwell: T off along the move that led to the
+//! pose. The analysis must locate it at the motion, and say nothing on the
+//! same session without it. (It still names backlash terms beside it,
+//! which fit the part of the move's direction a joint's approach side
+//! carries: an open fault, printed by the test, not asserted.)
 
 use nalgebra::Vector3;
 
@@ -25,11 +34,15 @@ fn field(p: &Vector3<f64>, z0: f64) -> Vector3<f64> {
     Vector3::new(0.0, 0.0, 0.2 * s * s)
 }
 
+/// How the true T of pose `k` is displaced, given every pose's true T and
+/// their mean height.
+type Shift = dyn Fn(usize, &[Vector3<f64>], f64) -> Vector3<f64>;
+
 /// A tracker session of the simulated ER3A: T measured as a point (the
-/// simulator's true T, displaced by the field when `distorted`, plus
-/// tracker noise). The robot, a point rig with the simulator's base guess,
-/// the dataset, the field's z0 and the simulator's truth.
-fn session(seed: u64, distorted: bool) -> (Robot, Rig, Dataset, f64, serde_json::Value) {
+/// simulator's true T, displaced by `shift`, plus tracker noise). The
+/// robot, a point rig with the simulator's base guess, the dataset, the
+/// poses' mean height and the simulator's truth.
+fn session(seed: u64, shift: &Shift) -> (Robot, Rig, Dataset, f64, serde_json::Value) {
     let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
         "robot": "er3a", "n_poses": 200, "seed": seed
     }))
@@ -40,14 +53,9 @@ fn session(seed: u64, distorted: bool) -> (Robot, Rig, Dataset, f64, serde_json:
     let n = sim.robot.dof();
     let mut csv: String = (1..=n).map(|j| format!(",q{j}_deg")).collect();
     csv = format!("pose{csv},x_mm,y_mm,z_mm,time_s,split\n");
-    for (pose, t) in sim.dataset.poses.iter().zip(&sim.true_point) {
+    for (k, (pose, t)) in sim.dataset.poses.iter().zip(&sim.true_point).enumerate() {
         let noise = Vector3::new(rng.normal(), rng.normal(), rng.normal()) * NOISE_MM;
-        let shift = if distorted {
-            field(t, z0)
-        } else {
-            Vector3::zeros()
-        };
-        let m = t + shift + noise;
+        let m = t + shift(k, &sim.true_point, z0) + noise;
         let q: String = pose
             .q_rad
             .iter()
@@ -91,7 +99,7 @@ fn calibrate(robot: &Robot, rig: &Rig, data: &Dataset) -> Report {
 
 #[test]
 fn a_field_over_the_workspace_is_located_modelled_and_compensated() {
-    let (robot, rig, data, z0, truth) = session(41, true);
+    let (robot, rig, data, z0, truth) = session(41, &|k, t, z0| field(&t[k], z0));
     let report = calibrate(&robot, &rig, &data);
     let effects: Vec<&str> = report.findings.iter().map(|f| f.effect.as_str()).collect();
     // Located in the workspace, not named.
@@ -123,7 +131,7 @@ fn a_field_over_the_workspace_is_located_modelled_and_compensated() {
     assert!(correction.evidence.contains("compensation applies it"));
 
     // Held-out RMS near what the same session without the field reaches.
-    let (_, _, clean, _, _) = session(41, false);
+    let (_, _, clean, _, _) = session(41, &|_, _, _| Vector3::zeros());
     let floor = calibrate(&robot, &rig, &clean).stats.test.after.rms_mm;
     let after = report.stats.test.after.rms_mm;
     assert!(
@@ -198,4 +206,36 @@ fn a_field_over_the_workspace_is_located_modelled_and_compensated() {
     );
     let (_, inside) = field_model.aim(&comp.calibrated_pose(&data.poses[0].q_rad).0);
     assert!(inside.is_none(), "{inside:?}");
+}
+
+#[test]
+fn an_error_driven_by_the_move_is_located_at_the_motion() {
+    // 0.04 % of the move: about 0.1 mm after a 300 mm move.
+    let (robot, rig, data, _, _) = session(43, &|k, t, _| {
+        if k == 0 {
+            Vector3::zeros()
+        } else {
+            (t[k] - t[k - 1]) * 4e-4
+        }
+    });
+    let report = calibrate(&robot, &rig, &data);
+    let named: Vec<&str> = report
+        .findings
+        .iter()
+        .map(|f| f.effect.as_str())
+        .filter(|e| !matches!(*e, "unexplained" | "data_driven"))
+        .collect();
+    eprintln!("named beside it (an open fault): {named:?}");
+    let motion = report
+        .findings
+        .iter()
+        .filter_map(|f| f.unexplained())
+        .flat_map(|u| u.places.iter())
+        .find(|p| p.driver == "motion");
+    let place = motion.unwrap_or_else(|| panic!("{:#?}", report.findings));
+    assert!(place.z > place.threshold);
+    // And not on the same session without it.
+    let (_, _, clean, _, _) = session(43, &|_, _, _| Vector3::zeros());
+    let quiet = calibrate(&robot, &rig, &clean);
+    assert!(quiet.findings.is_empty(), "{:#?}", quiet.findings);
 }
