@@ -617,8 +617,9 @@ pub struct UnexplainedLocation {
 pub struct Place {
     /// `joint` (a joint's angle), `time`, `temperature`, `configuration`
     /// (nearest poses in joint space), `workspace` (nearest poses by T's
-    /// position), `string` (one string's reading), `robot` (a robot-side
-    /// excess that follows no driver tested).
+    /// position), `motion` (the move that led to each pose), `string` (one
+    /// string's reading), `robot` (a robot-side excess that follows no
+    /// driver tested).
     pub driver: String,
     /// The joint (1-based) whose angle it follows.
     #[serde(default, skip_serializing_if = "Option::is_none")]
