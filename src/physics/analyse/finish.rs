@@ -66,6 +66,27 @@ pub(super) fn finish(
     } else {
         locate_and_correct(&inputs, &mut state);
     }
+    let dropped = naming::drop_backlash_beside_motion(&inputs, &mut state);
+    if !dropped.is_empty() {
+        locate_and_correct(&inputs, &mut state);
+        let why = format!(
+            "{} {} kept, but the remainder still followed the move that led to each pose, of which backlash sees only the side each joint arrived from: {} fitted part of a motion-driven error, not a dead band, so {} not reported as physics",
+            dropped.join(", "),
+            if dropped.len() > 1 { "were" } else { "was" },
+            if dropped.len() > 1 { "they" } else { "it" },
+            if dropped.len() > 1 {
+                "they are"
+            } else {
+                "it is"
+            },
+        );
+        for f in state.findings.iter_mut() {
+            if let Some(crate::report::FindingModel::Unexplained(u)) = &mut f.parameters {
+                u.resembles.push(why.clone());
+            }
+        }
+        state.notes.push(why);
+    }
     progress.update("physics analysis", 1.0);
     let Inputs { obs, ctx, .. } = inputs;
     let test_errors = errors_with_effects(obs, &ctx, &state.p, &state.accepted, &obs.test);

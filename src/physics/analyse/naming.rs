@@ -338,3 +338,34 @@ pub(super) fn say_why(state: &mut State, series: &[Series], z: f64) {
         state.notes.push(why);
     }
 }
+
+/// Backlash depends on the motion only through the side each joint
+/// arrived from. When the remainder still follows the move that led to
+/// each pose (an `unexplained` finding placed at `motion`), the backlash
+/// terms kept were fitting part of that motion-driven error, not a dead
+/// band: they are taken out (their findings too, and the `unexplained`
+/// finding, to be located again), the rest refit by one linearised step.
+/// The names dropped, for a sentence; empty when nothing was done.
+pub(super) fn drop_backlash_beside_motion(inputs: &Inputs, state: &mut State) -> Vec<String> {
+    use crate::physics::effects::Kind;
+    let motion = state.findings.iter().any(|f| {
+        f.unexplained()
+            .is_some_and(|u| u.places.iter().any(|p| p.driver == "motion"))
+    });
+    let ks: Vec<usize> = (0..state.accepted.len())
+        .filter(|&k| matches!(state.accepted[k].kind, Kind::Backlash { .. }))
+        .collect();
+    if !motion || ks.is_empty() {
+        return Vec::new();
+    }
+    let Some((p, eff)) = without_all(inputs, state, &ks) else {
+        return Vec::new();
+    };
+    let gone: Vec<_> = ks.iter().map(|&k| state.accepted[k].kind.clone()).collect();
+    state.findings.retain(|f| {
+        f.unexplained().is_none() && f.effect_model().is_none_or(|m| !gone.contains(&m.kind))
+    });
+    state.p = p;
+    state.accepted = eff;
+    gone.iter().map(described).collect()
+}
