@@ -318,6 +318,76 @@ pub fn warm_up(h: f64, tau: f64) -> f64 {
     tau * (1.0 - (-h / tau).exp())
 }
 
+/// Per joint of a pose (link frames `frames`, joint axes `axes`, T at
+/// `tool`, base frame): the gravity torque on it (N·m) from the link
+/// `masses` and the `payload_kg` at T, or without masses the unit-mass
+/// regressors (m) of every link frame origin, the tool and the payload
+/// (see `PoseContext::torque`).
+fn gravity_torques(
+    frames: &[crate::kinematics::chain::Frame],
+    axes: &[(Vector3<f64>, Vector3<f64>)],
+    tool: &Vector3<f64>,
+    masses: Option<&Vec<crate::model::LinkMass>>,
+    g_base: Vector3<f64>,
+    payload_kg: f64,
+) -> Vec<Vec<f64>> {
+    let n = axes.len();
+    let g_unit = g_base.normalize();
+    (0..n)
+        .map(|j| {
+            let (z, o) = axes[j];
+            let lever = |x: &Vector3<f64>| z.dot(&((x - o) * 1e-3).cross(&g_unit));
+            match masses {
+                Some(ms) => {
+                    let mut tau = 0.0;
+                    for (k, lm) in ms.iter().enumerate().skip(j) {
+                        let c = Vector3::new(lm.com_mm[0], lm.com_mm[1], lm.com_mm[2]);
+                        let x = frames[k].apply(&c);
+                        tau += lm.mass_kg * g_base.norm() * lever(&x);
+                    }
+                    tau += payload_kg * g_base.norm() * lever(tool);
+                    vec![tau]
+                }
+                None => (0..=n + 1)
+                    .map(|k| {
+                        if k < j {
+                            0.0
+                        } else if k == n + 1 {
+                            payload_kg * lever(tool)
+                        } else if k == n {
+                            lever(tool)
+                        } else {
+                            lever(&frames[k].o)
+                        }
+                    })
+                    .collect(),
+            }
+        })
+        .collect()
+}
+
+/// A base tilt at one pose (base frame): T's displacement (mm) per
+/// rad/(N·m), and the size of the gravity moment (N·m) of the links
+/// `masses` and the `payload_kg` at T about the base origin. Gravity is
+/// perpendicular to every moment it makes, so the moment is horizontal:
+/// the axis the mount tilts about.
+fn base_tilt(
+    frames: &[crate::kinematics::chain::Frame],
+    tool: &Vector3<f64>,
+    masses: &[crate::model::LinkMass],
+    g_base: Vector3<f64>,
+    payload_kg: f64,
+) -> (Vector3<f64>, f64) {
+    let force = |kg: f64| g_base * kg;
+    let mut moment = Vector3::zeros();
+    for (k, lm) in masses.iter().enumerate() {
+        let c = Vector3::new(lm.com_mm[0], lm.com_mm[1], lm.com_mm[2]);
+        moment += (frames[k].apply(&c) * 1e-3).cross(&force(lm.mass_kg));
+    }
+    moment += (tool * 1e-3).cross(&force(payload_kg));
+    (moment.cross(tool), moment.norm())
+}
+
 impl Context {
     /// Build the contexts. `base_rotation` is the rotation of the robot base
     /// in the rig frame (for the direction of gravity in the rig); the
@@ -368,49 +438,11 @@ impl Context {
                 let axes = chain.joint_axes(&nominal.values, p.q_rad, OutputFrame::Base);
                 let (_, tool) = chain.point(&nominal.values, p.q_rad, OutputFrame::Base);
                 let payload = p.payload_kg.unwrap_or(0.0);
-                let torque = (0..n)
-                    .map(|j| {
-                        let (z, o) = axes[j];
-                        let lever = |x: &Vector3<f64>| z.dot(&((x - o) * 1e-3).cross(&g_unit));
-                        match masses {
-                            Some(ms) => {
-                                let mut tau = 0.0;
-                                for (k, lm) in ms.iter().enumerate().skip(j) {
-                                    let c = Vector3::new(lm.com_mm[0], lm.com_mm[1], lm.com_mm[2]);
-                                    let x = frames[k].apply(&c);
-                                    tau += lm.mass_kg * g_base.norm() * lever(&x);
-                                }
-                                tau += payload * g_base.norm() * lever(&tool);
-                                vec![tau]
-                            }
-                            None => (0..=n + 1)
-                                .map(|k| {
-                                    if k < j {
-                                        0.0
-                                    } else if k == n + 1 {
-                                        payload * lever(&tool)
-                                    } else if k == n {
-                                        lever(&tool)
-                                    } else {
-                                        lever(&frames[k].o)
-                                    }
-                                })
-                                .collect(),
-                        }
-                    })
-                    .collect();
-                // Gravity is perpendicular to every moment it makes, so the
-                // moment is horizontal: the axis the mount tilts about.
+                let torque = gravity_torques(&frames, &axes, &tool, masses, g_base, payload);
                 let (tilt, base_moment_nm) = match masses {
                     Some(ms) => {
-                        let force = |kg: f64| g_base * kg;
-                        let mut moment = Vector3::zeros();
-                        for (k, lm) in ms.iter().enumerate() {
-                            let c = Vector3::new(lm.com_mm[0], lm.com_mm[1], lm.com_mm[2]);
-                            moment += (frames[k].apply(&c) * 1e-3).cross(&force(lm.mass_kg));
-                        }
-                        moment += (tool * 1e-3).cross(&force(payload));
-                        (base_rotation * moment.cross(&tool), moment.norm())
+                        let (tilt, moment) = base_tilt(&frames, &tool, ms, g_base, payload);
+                        (base_rotation * tilt, moment)
                     }
                     None => (Vector3::zeros(), 0.0),
                 };

@@ -226,6 +226,24 @@ impl<'a> State<'a> {
         true
     }
 
+    /// Add the best candidate left, refreshing the bookkeeping when the
+    /// objective has dropped far since `refreshed_at` (the objective at
+    /// the last refresh); `None` when no candidate is left.
+    fn add_best(&mut self, refreshed_at: &mut f64) -> Option<usize> {
+        loop {
+            let (i, _) = self.best()?;
+            // A candidate that does not solve left the pool: try the next.
+            if !self.update(i, 1.0) {
+                continue;
+            }
+            if self.objective < REFRESH_DROP * *refreshed_at {
+                self.refresh();
+                *refreshed_at = self.objective;
+            }
+            return Some(i);
+        }
+    }
+
     /// The unchosen candidate with the largest gain.
     fn best(&self) -> Option<(usize, f64)> {
         self.active
@@ -391,14 +409,9 @@ pub fn extend(
     let mut refreshed_at = st.objective;
     let mut order = Vec::new();
     while order.len() < max_n && !done(&st.minv) {
-        let Some((i, _)) = st.best() else { break };
-        if !st.update(i, 1.0) {
-            continue;
-        }
-        if st.objective < REFRESH_DROP * refreshed_at {
-            st.refresh();
-            refreshed_at = st.objective;
-        }
+        let Some(i) = st.add_best(&mut refreshed_at) else {
+            break;
+        };
         order.push(i);
     }
     Some((order, st.minv))
@@ -429,14 +442,9 @@ pub fn select_by(
     let mut at_n: Option<State> = None;
     let mut refreshed_at = st.objective;
     while order.len() < n_greedy {
-        let Some((i, _)) = st.best() else { break };
-        if !st.update(i, 1.0) {
-            continue;
-        }
-        if st.objective < REFRESH_DROP * refreshed_at {
-            st.refresh();
-            refreshed_at = st.objective;
-        }
+        let Some(i) = st.add_best(&mut refreshed_at) else {
+            break;
+        };
         order.push(i);
         objective.push(st.objective);
         if order.len() == n {
