@@ -105,11 +105,17 @@ impl Kind {
                 driver,
                 driver_index,
                 knots,
+                period,
             } => format!(
-                "not a named physics: a data-driven correction of {} as a smooth function of {} ({} knots, chosen by cross-validation), fitted where the analysis located structure the catalogue does not explain",
+                "not a named physics: a data-driven correction of {} as a {} function of {} ({} knots{}, chosen by cross-validation), fitted where the analysis located structure the catalogue does not explain",
                 correction_target_words(*target, *target_index),
+                if period.is_some() { "periodic" } else { "smooth" },
                 correction_driver_words(*driver, *driver_index),
-                knots.len()
+                knots.len(),
+                period.map_or(String::new(), |p| format!(
+                    " per period of {}",
+                    correction_driver_amount(*driver, *driver_index, p)
+                )),
             ),
         }
     }
@@ -122,6 +128,20 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
         CorrectionTarget::JointAngle => format!("joint {at}'s angle"),
         CorrectionTarget::Point => "the position of T relative to the rig".into(),
         CorrectionTarget::StringReading => format!("string {at}'s reading"),
+    }
+}
+
+/// An amount of a correction's driver (internal units: rad, s, degrees C,
+/// mm) in words with its unit.
+pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, v: f64) -> String {
+    match driver {
+        CorrectionDriver::JointAngle => format!("{:.1} deg", v.to_degrees()),
+        CorrectionDriver::Workspace if matches!(index, Some(3 | 4)) => {
+            format!("{:.1} deg", v.to_degrees())
+        }
+        CorrectionDriver::Time => format!("{v:.0} s"),
+        CorrectionDriver::Temperature => format!("{v:.2} degrees C"),
+        CorrectionDriver::StringLength | CorrectionDriver::Workspace => format!("{v:.1} mm"),
     }
 }
 
@@ -164,11 +184,33 @@ pub fn workspace_coordinate(p: &Vector3<f64>, index: usize) -> f64 {
 
 /// Piecewise-linear ("hat") weights of `x` between increasing `knots`:
 /// the two knots around `x` and their weights, `x` held at the end knots
-/// beyond them. One implementation for the fit and compensation.
-pub fn hat_weights(knots: &[f64], x: f64) -> [(usize, f64); 2] {
+/// beyond them; with a `period`, `x` is taken modulo it and the last knot
+/// is joined to the first one period on. One implementation for the fit
+/// and compensation.
+///
+/// ```
+/// use drawcal::physics::effects::hat_weights;
+/// assert_eq!(hat_weights(&[0.0, 10.0], None, 2.5), [(0, 0.75), (1, 0.25)]);
+/// assert_eq!(hat_weights(&[0.0, 10.0], None, 12.0), [(1, 1.0), (1, 0.0)]);
+/// // Periodic over 20: 15 lies halfway from the knot at 10 back to the one at 0.
+/// assert_eq!(hat_weights(&[0.0, 10.0], Some(20.0), 55.0), [(1, 0.5), (0, 0.5)]);
+/// ```
+pub fn hat_weights(knots: &[f64], period: Option<f64>, x: f64) -> [(usize, f64); 2] {
     let k = knots.len();
     if k == 0 {
         return [(0, 0.0), (0, 0.0)];
+    }
+    if let Some(p) = period.filter(|p| *p > 0.0 && k > 1) {
+        let x = x.rem_euclid(p);
+        let s = knots.partition_point(|&v| v <= x);
+        // Between knot s-1 and knot s, wrapping past either end.
+        let (lo, hi, a, b) = match s {
+            0 => (k - 1, 0, knots[k - 1] - p, knots[0]),
+            s if s == k => (k - 1, 0, knots[k - 1], knots[0] + p),
+            s => (s - 1, s, knots[s - 1], knots[s]),
+        };
+        let t = (x - a) / (b - a);
+        return [(lo, 1.0 - t), (hi, t)];
     }
     if k == 1 || x <= knots[0] {
         return [(0, 1.0), (0, 0.0)];
@@ -640,9 +682,10 @@ impl Context {
                 driver,
                 driver_index,
                 knots,
+                period,
             } => {
                 let x = self.driver_value(pc, *driver, *driver_index);
-                for (k, w) in hat_weights(knots, x) {
+                for (k, w) in hat_weights(knots, *period, x) {
                     if w == 0.0 {
                         continue;
                     }

@@ -64,13 +64,14 @@ impl WorkspaceField {
             let Kind::DataDriven {
                 driver_index: Some(c),
                 knots,
+                period,
                 ..
             } = &e.kind
             else {
                 continue;
             };
             let x = workspace_coordinate(&at_rig, *c);
-            for (k, w) in hat_weights(knots, x) {
+            for (k, w) in hat_weights(knots, *period, x) {
                 for (axis, s) in shift_rig.iter_mut().enumerate() {
                     *s += w * e.coef.get(3 * k + axis).copied().unwrap_or(0.0);
                 }

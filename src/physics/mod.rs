@@ -13,6 +13,7 @@ pub mod analyse;
 pub mod effects;
 pub mod evidence;
 mod field;
+pub mod periodogram;
 pub mod problem;
 pub mod simulate;
 mod unexplained;

@@ -11,6 +11,7 @@ use nalgebra::Vector3;
 
 use super::analyse::{errors_with_effects, reading_errors, rms};
 use super::effects::{Context, EffectModel};
+use super::periodogram;
 use super::problem::EffectProblem;
 use crate::identify::Observations;
 use crate::report::{Finding, FindingModel, Place, UnexplainedLocation};
@@ -118,7 +119,14 @@ pub(super) fn unexplained(
     } else {
         None
     };
-    let (winner, located) = located(&nb, excess, confined.as_ref(), motion.as_ref(), &pairings)?;
+    let (winner, located) = located(
+        &nb,
+        excess,
+        confined.as_ref(),
+        motion.as_ref(),
+        &pairings,
+        &extra,
+    )?;
     // A confined mismatch already says where it lives.
     let region = if confined.is_some() {
         String::new()
@@ -388,29 +396,54 @@ struct ScalarTest {
     name: String,
     sensor: usize,
     driver: &'static str,
-    pairs: Vec<(usize, usize)>,
+    /// The side the place is on: "sensor" (the string's own part) or
+    /// "strings" (three strings: either side).
+    side: &'static str,
+    test: ScalarTestKind,
     values: Vec<f64>,
 }
 
-/// With four or more strings, per string: the part of its residual no
-/// displacement of T explains (its sensor side), with the train poses
-/// ordered by the string's length and by time. A string that reads wrong
-/// by a function of its length (a drum's pitch, a worn spool) or of the
-/// clock shows here, not in the robot-side tests.
+/// How a [`ScalarTest`] looks for structure.
+enum ScalarTestKind {
+    /// Do the values of these neighbouring train poses agree?
+    Neighbours(Vec<(usize, usize)>),
+    /// Is there a sinusoid in the values as a function of the driver (see
+    /// [`periodogram::strongest_period`])? Its z, computed once.
+    Periodic(Option<f64>),
+}
+
+/// Per string, with the train poses ordered by the string's length and
+/// by time: with four or more strings, the part of its residual no
+/// displacement of T explains (its sensor side); with three, its whole
+/// residual (three strings fix the point and nothing is left to tell a
+/// string's error from T's displacement along it, so the place is the
+/// string's, its side undecided). A string that reads wrong by a function
+/// of its length (a drum's pitch, a worn spool) or of the clock shows here,
+/// not in the robot-side tests.
 fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> Vec<ScalarTest> {
     let m = obs.anchors.len();
-    if m <= 3 || rpp != m {
+    if m < 3 || rpp != m {
         return vec![];
     }
+    let redundant = m > 3;
     let mut own = vec![Vec::with_capacity(obs.train.len()); m];
     for (pos, &i) in obs.train.iter().enumerate() {
         let r = &res[pos * rpp..(pos + 1) * rpp];
         let t = &ctx.poses[i].point_rig;
-        let d = common_displacement(&obs.anchors, t, r).map_or(Vector3::zeros(), |(d, _)| d);
+        let d = if redundant {
+            common_displacement(&obs.anchors, t, r).map_or(Vector3::zeros(), |(d, _)| d)
+        } else {
+            Vector3::zeros()
+        };
         for (k, a) in obs.anchors.iter().enumerate() {
             own[k].push(r[k] - (t - a).normalize().dot(&d));
         }
     }
+    let (part, side) = if redundant {
+        ("its own part of the residual", "sensor")
+    } else {
+        ("its residual", "strings")
+    };
     let sorted_pairs = |key: &dyn Fn(usize) -> f64| -> Vec<(usize, usize)> {
         let mut order: Vec<usize> = (0..obs.train.len()).collect();
         order.sort_by(|a, b| key(*a).total_cmp(&key(*b)));
@@ -421,17 +454,35 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
     for (k, values) in own.into_iter().enumerate() {
         let length = |a: usize| (ctx.poses[obs.train[a]].point_rig - obs.anchors[k]).norm();
         out.push(ScalarTest {
-            name: format!("string {}'s length (its own part of the residual)", k + 1),
+            name: format!("string {}'s length ({part})", k + 1),
             sensor: k + 1,
             driver: "string",
-            pairs: sorted_pairs(&length),
+            side,
+            test: ScalarTestKind::Neighbours(sorted_pairs(&length)),
             values: values.clone(),
         });
+        // A periodic error of short cycles in the length, which neighbours
+        // in the length miss (see `periodogram`).
+        let lengths: Vec<f64> = (0..obs.train.len()).map(length).collect();
+        if let Some((period, p)) = periodogram::strongest_period(&lengths, &values) {
+            out.push(ScalarTest {
+                name: format!(
+                    "string {}'s length, periodically (period near {period:.1} mm; {part})",
+                    k + 1
+                ),
+                sensor: k + 1,
+                driver: "string",
+                side,
+                test: ScalarTestKind::Periodic(Some(-normal_quantile(p.clamp(1e-300, 0.5)))),
+                values: values.clone(),
+            });
+        }
         out.push(ScalarTest {
-            name: format!("time (string {}'s own part of the residual)", k + 1),
+            name: format!("time (string {}'s {})", k + 1, &part[4..]),
             sensor: k + 1,
             driver: "time",
-            pairs: by_time.clone(),
+            side,
+            test: ScalarTestKind::Neighbours(by_time.clone()),
             values,
         });
     }
@@ -534,11 +585,22 @@ fn neighbours(
     }
     for (k, t) in extra.iter().enumerate() {
         let v = &t.values;
-        let Some(z) = z_of(&t.pairs, &|i, j| v[i] * v[j]) else {
+        let z = match &t.test {
+            ScalarTestKind::Neighbours(pairs) => z_of(pairs, &|i, j| v[i] * v[j]),
+            ScalarTestKind::Periodic(z) => *z,
+        };
+        let Some(z) = z else {
             continue;
         };
         if z > zcrit {
-            places.push(place(t.driver, None, Some(t.sensor), "sensor", z));
+            // One place per string and driver: its strongest test.
+            match places
+                .iter_mut()
+                .find(|p| p.driver == t.driver && p.sensor == Some(t.sensor))
+            {
+                Some(p) => p.z = p.z.max(z),
+                None => places.push(place(t.driver, None, Some(t.sensor), t.side, z)),
+            }
             if best.as_ref().is_none_or(|b| z > b.0) {
                 best = Some((z, t.name.clone()));
                 winner_at = Some((n_plain + k, false));
@@ -565,6 +627,7 @@ fn located(
     confined: Option<&Concentrated>,
     motion: Option<&Motion>,
     pairings: &[(String, Vec<(usize, usize)>)],
+    extra: &[ScalarTest],
 ) -> Option<(usize, String)> {
     // The ordering that comes nearest, for the plot of a structure no
     // ordering placed.
@@ -578,12 +641,50 @@ fn located(
     };
     let zcrit = nb.zcrit;
     Some(match (&nb.best, excess, nb.winner_at) {
-        (Some((z, name)), _, Some((pk, false))) if pk >= pairings.len() => (
-            pk,
-            format!(
-                "the part of the string residuals no displacement of T explains agrees between neighbouring poses by {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): that string reads wrong by an amount that varies smoothly with it, in a form no catalogue effect has"
-            ),
-        ),
+        (Some((z, name)), _, Some((pk, false))) if pk >= pairings.len() => {
+            let t = &extra[pk - pairings.len()];
+            let three = t.side == "strings";
+            let (whose, reads) = if three {
+                (
+                    "one string's residuals",
+                    "that string reads wrong, or T is displaced along it,",
+                )
+            } else {
+                (
+                    "the part of the string residuals no displacement of T explains",
+                    "that string reads wrong",
+                )
+            };
+            let (agree, varies) = match (&t.test, three) {
+                (ScalarTestKind::Neighbours(_), true) => (
+                    "agree between neighbouring poses by",
+                    "varies smoothly with it",
+                ),
+                (ScalarTestKind::Neighbours(_), false) => (
+                    "agrees between neighbouring poses by",
+                    "varies smoothly with it",
+                ),
+                (ScalarTestKind::Periodic(_), true) => (
+                    "follow a sinusoid in",
+                    "is periodic in its length (a drum's winding pitch or a spool's eccentricity would look so)",
+                ),
+                (ScalarTestKind::Periodic(_), false) => (
+                    "follows a sinusoid in",
+                    "is periodic in its length (a drum's winding pitch or a spool's eccentricity would look so)",
+                ),
+            };
+            let apart = if three {
+                " (three strings cannot tell the two apart)"
+            } else {
+                ""
+            };
+            (
+                pk,
+                format!(
+                    "{whose} {agree} {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): {reads} by an amount that {varies}, in a form no catalogue effect has{apart}"
+                ),
+            )
+        }
         (Some((z, name)), _, Some((pk, false))) => (
             pk,
             format!(

@@ -172,9 +172,11 @@ pub enum Kind {
     /// Not a named physics: a data-driven correction of structure the
     /// catalogue left unexplained, a piecewise-linear function of its
     /// driver between `knots` (one coefficient per knot, three for a point
-    /// target), held constant beyond the end knots. Fitted only where the
-    /// analysis located unexplained structure, its number of knots chosen
-    /// by cross-validation on the train poses.
+    /// target), held constant beyond the end knots; or, with a `period`,
+    /// a periodic one (the driver taken modulo the period, `knots` within
+    /// one period and the last joined to the first). Fitted only where the
+    /// analysis located unexplained structure, its number of knots (and
+    /// period) chosen by cross-validation on the train poses.
     DataDriven {
         /// What it corrects.
         target: CorrectionTarget,
@@ -188,6 +190,10 @@ pub enum Kind {
         driver_index: Option<usize>,
         /// Knots in the driver's unit (rad, s, degrees C, mm), increasing.
         knots: Vec<f64>,
+        /// The period in the driver's unit, for a periodic correction
+        /// (then every knot lies in `[0, period)`).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        period: Option<f64>,
     },
 }
 
@@ -380,6 +386,7 @@ impl EffectModel {
             driver,
             driver_index,
             knots,
+            period,
         } = &self.kind
         {
             if knots.len() < 2
@@ -388,6 +395,14 @@ impl EffectModel {
             {
                 return Err(
                     "a data-driven correction needs two or more finite, increasing knots".into(),
+                );
+            }
+            if let Some(p) = period
+                && !(p.is_finite() && *p > 0.0 && knots[0] >= 0.0 && knots[knots.len() - 1] < *p)
+            {
+                return Err(
+                    "a periodic correction needs a finite, positive period and its knots within one period"
+                        .into(),
                 );
             }
             if *driver == CorrectionDriver::Workspace

@@ -33,6 +33,7 @@ mod physics_joint_angle;
 mod physics_payload;
 mod physics_rig;
 mod physics_sensor_drift;
+mod physics_string_period;
 mod physics_workspace;
 mod plan;
 mod report_html;

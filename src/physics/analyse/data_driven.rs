@@ -31,6 +31,7 @@ use crate::physics::effects::{
     CorrectionDriver, CorrectionTarget, EffectModel, Kind, WORKSPACE_COORDINATES,
 };
 use crate::physics::evidence::evidence_plot;
+use crate::physics::periodogram;
 use crate::physics::problem::EffectProblem;
 use crate::report::{EffectParameters, Finding, FindingModel, Place};
 
@@ -117,6 +118,7 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                 driver,
                 driver_index,
                 knots,
+                period: None,
             })
             .collect()
     };
@@ -170,16 +172,83 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                 ));
             }
         }
-        ("string", _, Some(s)) if s <= m => out.push(family(
-            CorrectionTarget::StringReading,
-            Some(s - 1),
-            CorrectionDriver::StringLength,
-            Some(s - 1),
-            &JOINT_KNOTS,
-        )),
+        ("string", _, Some(s)) if s <= m => {
+            out.push(family(
+                CorrectionTarget::StringReading,
+                Some(s - 1),
+                CorrectionDriver::StringLength,
+                Some(s - 1),
+                &JOINT_KNOTS,
+            ));
+            // Or periodic in the length (a drum's winding pitch, a spool's
+            // eccentricity): many cycles over the range would need more
+            // knots than the poses hold.
+            let (target, driver) = (
+                CorrectionTarget::StringReading,
+                CorrectionDriver::StringLength,
+            );
+            out.push(
+                periodogram::scanned_periods(&values(driver, Some(s - 1)))
+                    .into_iter()
+                    .map(|period| {
+                        periodic(target, Some(s - 1), driver, Some(s - 1), period, SCAN_KNOTS)
+                    })
+                    .collect(),
+            );
+        }
         _ => {}
     }
     out.retain(|f| !f.is_empty());
+    out
+}
+
+/// Knots per period of the periodic corrections scanned over their period;
+/// the best few periods are tried again at [`PERIODIC_KNOTS`].
+const SCAN_KNOTS: usize = 4;
+/// Knots per period tried at the best periods of the scan.
+const PERIODIC_KNOTS: [usize; 3] = [4, 6, 8];
+/// How many of the scan's best periods are tried at every knot count.
+const REFINED_PERIODS: usize = 3;
+
+/// A periodic correction of `period` with `k` knots evenly spaced over it.
+fn periodic(
+    target: CorrectionTarget,
+    target_index: Option<usize>,
+    driver: CorrectionDriver,
+    driver_index: Option<usize>,
+    period: f64,
+    k: usize,
+) -> Kind {
+    Kind::DataDriven {
+        target,
+        target_index,
+        driver,
+        driver_index,
+        knots: (0..k).map(|i| period * i as f64 / k as f64).collect(),
+        period: Some(period),
+    }
+}
+
+/// The scan's best periodic candidates again at every knot count of
+/// [`PERIODIC_KNOTS`] (a sinusoid needs few knots, a sharper shape more).
+fn refined(ranked: &[(Kind, f64)]) -> Vec<Kind> {
+    let mut out = Vec::new();
+    let scanned = ranked.iter().filter_map(|(k, _)| match k {
+        Kind::DataDriven {
+            target,
+            target_index,
+            driver,
+            driver_index,
+            period: Some(p),
+            ..
+        } => Some((*target, *target_index, *driver, *driver_index, *p)),
+        _ => None,
+    });
+    for (target, ti, driver, di, p) in scanned.take(REFINED_PERIODS) {
+        for k in PERIODIC_KNOTS.into_iter().filter(|&k| k != SCAN_KNOTS) {
+            out.push(periodic(target, ti, driver, di, p, k));
+        }
+    }
     out
 }
 
@@ -276,13 +345,17 @@ fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: 
     // equations of a long session's many-knot candidates are large), and
     // the best that also solves in full is linearised again.
     let fixed = FixedBase::new(inputs, state);
-    let mut ranked: Vec<(Kind, f64)> = families
-        .iter()
-        .flatten()
-        .filter_map(|k| linearise(inputs, &fixed, state, k).map(|l| (k.clone(), l.cv, l.cv0)))
-        .filter(|(_, cv, cv0)| cv.is_finite() && cv < cv0)
-        .map(|(k, cv, _)| (k, cv))
-        .collect();
+    let score = |kinds: &mut dyn Iterator<Item = &Kind>| -> Vec<(Kind, f64)> {
+        kinds
+            .filter_map(|k| linearise(inputs, &fixed, state, k).map(|l| (k.clone(), l.cv, l.cv0)))
+            .filter(|(_, cv, cv0)| cv.is_finite() && cv < cv0)
+            .map(|(k, cv, _)| (k, cv))
+            .collect()
+    };
+    let mut ranked = score(&mut families.iter().flatten());
+    ranked.sort_by(|x, y| x.1.total_cmp(&y.1));
+    let more = refined(&ranked);
+    ranked.extend(score(&mut more.iter()));
     ranked.sort_by(|x, y| x.1.total_cmp(&y.1));
     let Some((kind, lin, (p_new, eff_new, fit))) = ranked.into_iter().find_map(|(k, _)| {
         let l = linearise(inputs, &fixed, state, &k)?;
@@ -351,9 +424,21 @@ fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: 
     } else {
         "compensation does not need it: it corrects what a string read, not where the robot went; check that string (its drum, its exit, its mounting)".into()
     };
+    let shape = match e.kind {
+        Kind::DataDriven {
+            period: Some(p),
+            driver_index,
+            ..
+        } => format!(
+            "periodic, {} knots per period of {} (the period scanned from two to {} cycles over the range)",
+            knots.len(),
+            crate::physics::effects::correction_driver_amount(*driver, driver_index, p),
+            periodogram::MAX_CYCLES
+        ),
+        _ => format!("{} knots", knots.len()),
+    };
     let evidence = format!(
-        "{} knots chosen by 5-fold cross-validation on the train poses (cross-validated SSE {:.4} -> {:.4} mm^2 over {} readings); held-out RMS per reading {:.4} -> {:.4} mm (paired z = {:.1}), 3-D {:.4} -> {:.4} mm; {usable}",
-        knots.len(),
+        "{shape}, chosen by 5-fold cross-validation on the train poses (cross-validated SSE {:.4} -> {:.4} mm^2 over {} readings); held-out RMS per reading {:.4} -> {:.4} mm (paired z = {:.1}), 3-D {:.4} -> {:.4} mm; {usable}",
         lin.cv0,
         lin.cv,
         lin.nm.rows,

@@ -254,6 +254,7 @@ mod tests {
                 driver: CorrectionDriver::JointAngle,
                 driver_index: Some(1),
                 knots: vec![-1.0, -0.3, 0.2, 1.1],
+                period: None,
             },
             Kind::DataDriven {
                 target: CorrectionTarget::Point,
@@ -261,6 +262,7 @@ mod tests {
                 driver: CorrectionDriver::Time,
                 driver_index: None,
                 knots: vec![0.0, 50.0, 100.0, 500.0],
+                period: None,
             },
             Kind::JointPeriodic {
                 joint_index: 0,
@@ -274,6 +276,7 @@ mod tests {
                 driver: CorrectionDriver::StringLength,
                 driver_index: Some(m - 1),
                 knots: vec![100.0, 400.0, 700.0, 1000.0],
+                period: None,
             });
         }
         kinds
