@@ -106,6 +106,7 @@ impl Kind {
                 driver_index,
                 knots,
                 period,
+                ..
             } => format!(
                 "not a named physics: a data-driven correction of {} as a {} function of {} ({} knots{}, chosen by cross-validation), fitted where the analysis located structure the catalogue does not explain",
                 correction_target_words(*target, *target_index),
@@ -683,6 +684,7 @@ impl Context {
                 driver_index,
                 knots,
                 period,
+                ..
             } => {
                 let x = self.driver_value(pc, *driver, *driver_index);
                 for (k, w) in hat_weights(knots, *period, x) {

@@ -76,7 +76,9 @@ impl WorkspaceField {
                     *s += w * e.coef.get(3 * k + axis).copied().unwrap_or(0.0);
                 }
             }
-            let (lo, hi) = (knots[0], knots[knots.len() - 1]);
+            let Some((lo, hi)) = e.kind.fitted_range() else {
+                continue;
+            };
             if x < lo || x > hi {
                 let angle = matches!(c, 3 | 4);
                 let (x, lo, hi, unit) = if angle {
@@ -85,9 +87,10 @@ impl WorkspaceField {
                     (x, lo, hi, "mm")
                 };
                 outside.push(format!(
-                    "warning: the target's {} is {x:.1} {unit}, outside {lo:.1} to {hi:.1} {unit}, the range the data-driven correction over the workspace was fitted on; it is held at its end value there",
+                    "warning: the target's {} is {x:.1} {unit}, outside {lo:.1} to {hi:.1} {unit}, the range the data-driven correction over the workspace was fitted on; {}",
                     super::effects::correction_driver_words(CorrectionDriver::Workspace, Some(*c))
-                        .trim_start_matches("T's ")
+                        .trim_start_matches("T's "),
+                    e.kind.beyond_range()
                 ));
             }
         }

@@ -130,23 +130,23 @@ impl JointEffects {
             .effects
             .iter()
             .filter_map(|e| match &e.kind {
-                Kind::DataDriven {
+                kind @ Kind::DataDriven {
                     driver: effects::CorrectionDriver::JointAngle,
                     driver_index: Some(d),
-                    knots,
                     target_index,
                     ..
                 } => {
                     let q = *q_rad.get(*d)?;
-                    let (lo, hi) = (*knots.first()?, *knots.last()?);
+                    let (lo, hi) = kind.fitted_range()?;
                     (q < lo || q > hi).then(|| {
                         format!(
-                            "warning: joint {}'s angle {:.1} deg is outside {:.1} to {:.1} deg, the range the data-driven correction of joint {}'s angle was fitted on; it is held at its end value there",
+                            "warning: joint {}'s angle {:.1} deg is outside {:.1} to {:.1} deg, the range the data-driven correction of joint {}'s angle was fitted on; {}",
                             d + 1,
                             q.to_degrees(),
                             lo.to_degrees(),
                             hi.to_degrees(),
-                            target_index.map_or(0, |t| t + 1)
+                            target_index.map_or(0, |t| t + 1),
+                            kind.beyond_range()
                         )
                     })
                 }

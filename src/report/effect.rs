@@ -194,6 +194,10 @@ pub enum Kind {
         /// (then every knot lies in `[0, period)`).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         period: Option<f64>,
+        /// The range of the driver the train poses covered, for a periodic
+        /// correction (its knots span one period, not the range).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        range: Option<[f64; 2]>,
     },
 }
 
@@ -274,6 +278,30 @@ impl Kind {
     /// True for a data-driven correction (not a named physics).
     pub fn is_data_driven(&self) -> bool {
         matches!(self, Kind::DataDriven { .. })
+    }
+
+    /// The range of its driver a data-driven correction was fitted on:
+    /// beyond it no pose supports it.
+    pub fn fitted_range(&self) -> Option<(f64, f64)> {
+        match self {
+            Kind::DataDriven {
+                range: Some([lo, hi]),
+                ..
+            } => Some((*lo, *hi)),
+            Kind::DataDriven { knots, .. } => Some((*knots.first()?, *knots.last()?)),
+            _ => None,
+        }
+    }
+
+    /// What a data-driven correction does beyond [`Kind::fitted_range`],
+    /// in words.
+    pub fn beyond_range(&self) -> &'static str {
+        match self {
+            Kind::DataDriven {
+                period: Some(_), ..
+            } => "it is continued periodically there",
+            _ => "it is held at its end value there",
+        }
     }
 
     /// Time of a change point, for effects that have one.
@@ -387,8 +415,14 @@ impl EffectModel {
             driver_index,
             knots,
             period,
+            range,
         } = &self.kind
         {
+            if range.is_some_and(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && lo <= hi)) {
+                return Err(
+                    "a data-driven correction's range must be two finite, ordered values".into(),
+                );
+            }
             if knots.len() < 2
                 || knots.iter().any(|k| !k.is_finite())
                 || knots.windows(2).any(|w| w[1] <= w[0])

@@ -119,6 +119,28 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                 driver_index,
                 knots,
                 period: None,
+                range: None,
+            })
+            .collect()
+    };
+    // Periodic in the driver at every period scanned (see `periodogram`).
+    let periodic_family = |target, target_index, driver, driver_index| -> Vec<Kind> {
+        let v = values(driver, driver_index);
+        let range = v
+            .iter()
+            .fold([f64::INFINITY, f64::NEG_INFINITY], |[a, b], &x| {
+                [a.min(x), b.max(x)]
+            });
+        periodogram::scanned_periods(&v)
+            .into_iter()
+            .map(|period| {
+                periodic(
+                    (target, target_index),
+                    (driver, driver_index),
+                    period,
+                    range,
+                    SCAN_KNOTS,
+                )
             })
             .collect()
     };
@@ -136,6 +158,14 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                     &JOINT_KNOTS,
                 ));
             }
+            // Its own angle periodically (a gear stage turning a
+            // non-integer number of times per joint revolution).
+            out.push(periodic_family(
+                CorrectionTarget::JointAngle,
+                Some(j - 1),
+                CorrectionDriver::JointAngle,
+                Some(j - 1),
+            ));
         }
         ("time", None, None) => out.push(family(
             CorrectionTarget::Point,
@@ -183,18 +213,12 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
             // Or periodic in the length (a drum's winding pitch, a spool's
             // eccentricity): many cycles over the range would need more
             // knots than the poses hold.
-            let (target, driver) = (
+            out.push(periodic_family(
                 CorrectionTarget::StringReading,
+                Some(s - 1),
                 CorrectionDriver::StringLength,
-            );
-            out.push(
-                periodogram::scanned_periods(&values(driver, Some(s - 1)))
-                    .into_iter()
-                    .map(|period| {
-                        periodic(target, Some(s - 1), driver, Some(s - 1), period, SCAN_KNOTS)
-                    })
-                    .collect(),
-            );
+                Some(s - 1),
+            ));
         }
         _ => {}
     }
@@ -207,16 +231,18 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
 const SCAN_KNOTS: usize = 4;
 /// Knots per period tried at the best periods of the scan.
 const PERIODIC_KNOTS: [usize; 3] = [4, 6, 8];
-/// How many of the scan's best periods are tried at every knot count.
-const REFINED_PERIODS: usize = 3;
+/// How many of the scan's best periods (by [`FixedBase::drop_alone`]) are
+/// fitted and cross-validated at every knot count.
+const SCREENED_PERIODS: usize = 3;
 
-/// A periodic correction of `period` with `k` knots evenly spaced over it.
+/// A periodic correction of `(target, index)` by `(driver, index)` of
+/// `period` with `k` knots evenly spaced over it, fitted where the driver
+/// covered `range`.
 fn periodic(
-    target: CorrectionTarget,
-    target_index: Option<usize>,
-    driver: CorrectionDriver,
-    driver_index: Option<usize>,
+    (target, target_index): (CorrectionTarget, Option<usize>),
+    (driver, driver_index): (CorrectionDriver, Option<usize>),
     period: f64,
+    range: [f64; 2],
     k: usize,
 ) -> Kind {
     Kind::DataDriven {
@@ -226,27 +252,48 @@ fn periodic(
         driver_index,
         knots: (0..k).map(|i| period * i as f64 / k as f64).collect(),
         period: Some(period),
+        range: Some(range),
     }
 }
 
-/// The scan's best periodic candidates again at every knot count of
-/// [`PERIODIC_KNOTS`] (a sinusoid needs few knots, a sharper shape more).
-fn refined(ranked: &[(Kind, f64)]) -> Vec<Kind> {
+/// A family of periodic candidates of one scalar (a joint's angle, a
+/// string's reading) screened: the [`SCREENED_PERIODS`]
+/// periods whose correction alone would take most from the residual, at
+/// every knot count of [`PERIODIC_KNOTS`] (a sinusoid needs few knots, a
+/// sharper shape more). Fitting every period scanned beside the whole
+/// model would cost a long session seconds.
+fn screened(inputs: &Inputs, fixed: &FixedBase, family: &[Kind]) -> Vec<Kind> {
+    let Some(first) = family.first() else {
+        return vec![];
+    };
+    let patterns = fixed.pose_patterns(inputs, first);
+    let mut by_drop: Vec<(f64, &Kind)> = family
+        .iter()
+        .map(|k| (fixed.drop_alone(inputs, k, &patterns), k))
+        .collect();
+    by_drop.sort_by(|a, b| b.0.total_cmp(&a.0));
     let mut out = Vec::new();
-    let scanned = ranked.iter().filter_map(|(k, _)| match k {
-        Kind::DataDriven {
+    for (_, kind) in by_drop.into_iter().take(SCREENED_PERIODS) {
+        let Kind::DataDriven {
             target,
             target_index,
             driver,
             driver_index,
             period: Some(p),
+            range: Some(r),
             ..
-        } => Some((*target, *target_index, *driver, *driver_index, *p)),
-        _ => None,
-    });
-    for (target, ti, driver, di, p) in scanned.take(REFINED_PERIODS) {
-        for k in PERIODIC_KNOTS.into_iter().filter(|&k| k != SCAN_KNOTS) {
-            out.push(periodic(target, ti, driver, di, p, k));
+        } = kind
+        else {
+            continue;
+        };
+        for k in PERIODIC_KNOTS {
+            out.push(periodic(
+                (*target, *target_index),
+                (*driver, *driver_index),
+                *p,
+                *r,
+                k,
+            ));
         }
     }
     out
@@ -352,10 +399,25 @@ fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: 
             .map(|(k, cv, _)| (k, cv))
             .collect()
     };
-    let mut ranked = score(&mut families.iter().flatten());
-    ranked.sort_by(|x, y| x.1.total_cmp(&y.1));
-    let more = refined(&ranked);
-    ranked.extend(score(&mut more.iter()));
+    let is_scan = |f: &Vec<Kind>| {
+        matches!(
+            f.first(),
+            Some(Kind::DataDriven {
+                period: Some(_),
+                ..
+            })
+        )
+    };
+    let mut candidates: Vec<Kind> = families
+        .iter()
+        .filter(|f| !is_scan(f))
+        .flatten()
+        .cloned()
+        .collect();
+    for f in families.iter().filter(|f| is_scan(f)) {
+        candidates.extend(screened(inputs, &fixed, f));
+    }
+    let mut ranked = score(&mut candidates.iter());
     ranked.sort_by(|x, y| x.1.total_cmp(&y.1));
     let Some((kind, lin, (p_new, eff_new, fit))) = ranked.into_iter().find_map(|(k, _)| {
         let l = linearise(inputs, &fixed, state, &k)?;
@@ -391,17 +453,18 @@ fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: 
     let Kind::DataDriven { driver, knots, .. } = &e.kind else {
         return false;
     };
+    let (lo, hi) = e
+        .kind
+        .fitted_range()
+        .unwrap_or((knots[0], knots[knots.len() - 1]));
+    let beyond = e.kind.beyond_range();
     let usable = if *driver == CorrectionDriver::Workspace {
         let (lo, hi, unit) = match e.kind {
             Kind::DataDriven {
                 driver_index: Some(3 | 4),
                 ..
-            } => (
-                knots[0].to_degrees(),
-                knots[knots.len() - 1].to_degrees(),
-                "deg",
-            ),
-            _ => (knots[0], knots[knots.len() - 1], "mm"),
+            } => (lo.to_degrees(), hi.to_degrees(), "deg"),
+            _ => (lo, hi, "mm"),
         };
         // Strings that agree place the displacement on the robot's side;
         // one instrument's points cannot.
@@ -411,13 +474,13 @@ fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: 
             ""
         };
         format!(
-            "compensation applies it (a function of where T is), inside the region the poses covered ({lo:.1} to {hi:.1} {unit}; beyond it the correction is held at its end value and compensation warns){caveat}"
+            "compensation applies it (a function of where T is), inside the region the poses covered ({lo:.1} to {hi:.1} {unit}; beyond it {beyond}, and compensation warns){caveat}"
         )
     } else if driver.usable_for_compensation() {
         format!(
-            "compensation applies it (a function of joint angles), inside the range the poses covered ({:.1} to {:.1} deg; beyond it the correction is held at its end value and compensation warns)",
-            knots[0].to_degrees(),
-            knots[knots.len() - 1].to_degrees()
+            "compensation applies it (a function of joint angles), inside the range the poses covered ({:.1} to {:.1} deg; beyond it {beyond}, and compensation warns)",
+            lo.to_degrees(),
+            hi.to_degrees()
         )
     } else if e.kind.robot_side() {
         "compensation cannot use it: it is a function of this session's clock or temperature history, not of a future target; find what changed during the session (the stand, the tracker, the temperature of the cell), keep it constant, or re-calibrate when it has settled".into()

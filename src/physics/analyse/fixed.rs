@@ -19,7 +19,7 @@ use nalgebra::DMatrix;
 
 use super::normals::{FOLDS, Normals, cv_sse, normals};
 use super::{Inputs, State};
-use crate::physics::effects::{Basis, EffectModel, Kind};
+use crate::physics::effects::{Basis, EffectModel, Kind, hat_weights};
 use crate::physics::problem::{EffectProblem, PoseFrame, RowDir};
 
 /// The train rows of the model so far (geometry and accepted effects at
@@ -111,13 +111,132 @@ impl FixedBase {
     /// appended at zero: its columns after the base's. The same as
     /// [`normals`] of that augmented problem.
     pub(super) fn with(&self, inputs: &Inputs, kind: &Kind) -> Normals {
+        let nb = self.n_base;
+        let k = kind.n_coef();
+        let n = nb + k;
+        let (cross, own, g) = self.blocks(inputs, kind);
+        let a = (0..FOLDS)
+            .map(|f| {
+                let base = &self.nm.a[f];
+                DMatrix::from_fn(n, n, |i, j| {
+                    let (i, j) = if i <= j { (i, j) } else { (j, i) };
+                    if j < nb {
+                        base[(i, j)]
+                    } else if i < nb {
+                        cross[f][(j - nb) * nb + i]
+                    } else {
+                        own[f][(i - nb) * k + (j - nb)]
+                    }
+                })
+            })
+            .collect();
+        let b = (0..FOLDS)
+            .map(|f| {
+                let mut b = self.nm.b[f].clone();
+                b.extend_from_slice(&g[f]);
+                b
+            })
+            .collect();
+        Normals {
+            n,
+            a,
+            b,
+            rr: self.nm.rr.clone(),
+            rows: self.nm.rows,
+        }
+    }
+
+    /// Per train pose, what a correction of one scalar (a joint's angle,
+    /// a string's reading: `probe`'s target) moves: `Σ v r` and `Σ v²` over
+    /// the pose's rows, `v` each row's derivative by the scalar. Any
+    /// correction of that target is a weight per pose times this pattern,
+    /// so [`Self::drop_alone`] screens a scan of them without the rows.
+    pub(super) fn pose_patterns(&self, inputs: &Inputs, probe: &Kind) -> Vec<(f64, f64)> {
+        let Inputs { obs, ctx, .. } = inputs;
+        // Knots beyond every value: coefficient 0 weighs 1 at every pose.
+        let probe = match probe {
+            Kind::DataDriven {
+                target,
+                target_index,
+                driver,
+                driver_index,
+                ..
+            } => Kind::DataDriven {
+                target: *target,
+                target_index: *target_index,
+                driver: *driver,
+                driver_index: *driver_index,
+                knots: vec![f64::MAX, f64::MAX],
+                period: None,
+                range: None,
+            },
+            other => other.clone(),
+        };
+        let mut out = vec![(0.0, 0.0); obs.train.len()];
+        let mut buf = Basis::default();
+        let mut dt = nalgebra::Vector3::zeros();
+        let mut last = usize::MAX;
+        for (row, &pos) in self.row_pos.iter().enumerate() {
+            if pos != last {
+                last = pos;
+                ctx.basis(&probe, obs.train[pos], &mut buf);
+                dt = self.frames[pos].d_point(&buf, 0);
+            }
+            let v = PoseFrame::column(self.dirs[row], &dt, &buf, 0, self.m);
+            out[pos].0 += v * self.r[row];
+            out[pos].1 += v * v;
+        }
+        out
+    }
+
+    /// How much `kind` (a correction of the scalar `patterns` were made
+    /// for, see [`Self::pose_patterns`]) alone would take from the train
+    /// residual's sum of squares, the model so far held fixed (mm²): a
+    /// screen for a scan of many candidates, in one pass over the poses.
+    pub(super) fn drop_alone(&self, inputs: &Inputs, kind: &Kind, patterns: &[(f64, f64)]) -> f64 {
+        let Inputs { obs, ctx, .. } = inputs;
+        let Kind::DataDriven {
+            driver,
+            driver_index,
+            knots,
+            period,
+            ..
+        } = kind
+        else {
+            return 0.0;
+        };
+        let k = knots.len();
+        let mut a = DMatrix::<f64>::zeros(k, k);
+        let mut g = nalgebra::DVector::<f64>::zeros(k);
+        for (pos, &(vr, vv)) in patterns.iter().enumerate() {
+            let x = ctx.driver_value(&ctx.poses[obs.train[pos]], *driver, *driver_index);
+            let w = hat_weights(knots, *period, x);
+            for &(c, wc) in &w {
+                g[c] += wc * vr;
+                for &(c2, wc2) in &w {
+                    a[(c, c2)] += wc * wc2 * vv;
+                }
+            }
+        }
+        for i in 0..k {
+            a[(i, i)] += 1e-12 * a[(i, i)].max(1e-300);
+        }
+        a.cholesky().map_or(0.0, |c| g.dot(&c.solve(&g)))
+    }
+
+    /// Per fold, the candidate's cross block with the base (k × nb, one
+    /// base row per candidate column), its own block (k × k, upper) and
+    /// its `Jᵀr`.
+    #[allow(clippy::type_complexity)]
+    fn blocks(
+        &self,
+        inputs: &Inputs,
+        kind: &Kind,
+    ) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<Vec<f64>>) {
         let Inputs { obs, ctx, .. } = inputs;
         let fold_of = &self.fold_of;
         let nb = self.n_base;
         let k = kind.n_coef();
-        let n = nb + k;
-        // Cross block (k × nb, one base row per candidate column), own block (k × k, upper) and
-        // the candidate's `Jᵀr`, per fold.
         let mut cross = vec![vec![0.0; nb * k]; FOLDS];
         let mut own = vec![vec![0.0; k * k]; FOLDS];
         let mut g = vec![vec![0.0; k]; FOLDS];
@@ -166,35 +285,7 @@ impl FixedBase {
                 }
             }
         }
-        let a = (0..FOLDS)
-            .map(|f| {
-                let base = &self.nm.a[f];
-                DMatrix::from_fn(n, n, |i, j| {
-                    let (i, j) = if i <= j { (i, j) } else { (j, i) };
-                    if j < nb {
-                        base[(i, j)]
-                    } else if i < nb {
-                        cross[f][(j - nb) * nb + i]
-                    } else {
-                        own[f][(i - nb) * k + (j - nb)]
-                    }
-                })
-            })
-            .collect();
-        let b = (0..FOLDS)
-            .map(|f| {
-                let mut b = self.nm.b[f].clone();
-                b.extend_from_slice(&g[f]);
-                b
-            })
-            .collect();
-        Normals {
-            n,
-            a,
-            b,
-            rr: self.nm.rr.clone(),
-            rows: self.nm.rows,
-        }
+        (cross, own, g)
     }
 }
 
@@ -255,6 +346,7 @@ mod tests {
                 driver_index: Some(1),
                 knots: vec![-1.0, -0.3, 0.2, 1.1],
                 period: None,
+                range: None,
             },
             Kind::DataDriven {
                 target: CorrectionTarget::Point,
@@ -263,10 +355,22 @@ mod tests {
                 driver_index: None,
                 knots: vec![0.0, 50.0, 100.0, 500.0],
                 period: None,
+                range: None,
             },
             Kind::JointPeriodic {
                 joint_index: 0,
                 harmonic: 2,
+            },
+            // Periodic: the driver taken modulo the period, the last knot
+            // joined to the first.
+            Kind::DataDriven {
+                target: CorrectionTarget::JointAngle,
+                target_index: Some(1),
+                driver: CorrectionDriver::JointAngle,
+                driver_index: Some(1),
+                knots: vec![0.0, 0.3, 0.6, 0.9],
+                period: Some(1.2),
+                range: Some([-2.0, 2.0]),
             },
         ];
         if m > 0 {
@@ -277,6 +381,16 @@ mod tests {
                 driver_index: Some(m - 1),
                 knots: vec![100.0, 400.0, 700.0, 1000.0],
                 period: None,
+                range: None,
+            });
+            kinds.push(Kind::DataDriven {
+                target: CorrectionTarget::StringReading,
+                target_index: Some(0),
+                driver: CorrectionDriver::StringLength,
+                driver_index: Some(0),
+                knots: vec![0.0, 10.0, 20.0, 30.0, 40.0, 50.0],
+                period: Some(60.0),
+                range: Some([100.0, 1500.0]),
             });
         }
         kinds
@@ -343,6 +457,41 @@ mod tests {
                 }
                 let (a, _, _) = got.total();
                 assert!((fixed.n_base..got.n).any(|c| a[(c, c)] > 0.0), "{kind:?}");
+            }
+        });
+    }
+
+    /// The screen of a correction of one scalar equals the drop its own
+    /// block of the full normal equations gives (`gᵀ A⁻¹ g`).
+    #[test]
+    fn drop_alone_equals_the_candidates_own_block() {
+        each_session(|inputs, _, fixed| {
+            for kind in candidates(inputs.ctx.n_joints, inputs.ctx.anchors.len()) {
+                if !matches!(
+                    kind,
+                    Kind::DataDriven {
+                        target: CorrectionTarget::JointAngle | CorrectionTarget::StringReading,
+                        ..
+                    }
+                ) {
+                    continue;
+                }
+                let nb = fixed.n_base;
+                let k = kind.n_coef();
+                let (a, b, _) = fixed.with(inputs, &kind).total();
+                // The screen's jitter, for knots no pose reaches.
+                let own = DMatrix::from_fn(k, k, |i, j| {
+                    let v = a[(nb + i, nb + j)];
+                    if i == j { v + 1e-12 * v.max(1e-300) } else { v }
+                });
+                let g = nalgebra::DVector::from_fn(k, |i, _| b[nb + i]);
+                let want = g.dot(&own.clone().cholesky().unwrap().solve(&g));
+                let patterns = fixed.pose_patterns(inputs, &kind);
+                let got = fixed.drop_alone(inputs, &kind, &patterns);
+                assert!(
+                    (got - want).abs() <= 1e-6 * want.abs().max(1e-12),
+                    "{kind:?}: {got} against {want}"
+                );
             }
         });
     }

@@ -1,13 +1,16 @@
+//! Errors periodic in their driver with many cycles over its range, which
+//! no catalogue effect describes: neighbours in the driver agree only while
+//! the period is long against their spacing, and a piecewise-linear
+//! correction would need knots for every cycle.
+//!
 //! A string that reads wrong by a periodic function of its own length (a
-//! drum's winding pitch, a spool's eccentricity: many short cycles over
-//! the range the string travels), which no catalogue effect describes.
-//! Neighbours in the length agree only while the period is long against
-//! their spacing, and a piecewise-linear correction would need knots for
-//! every cycle; the analysis must locate it on that string (with four
-//! strings on the string's own part of the residual, with three on its
-//! whole residual), model it as a periodic function of the length without
-//! a name, bring the held-out RMS near what the same session without the
-//! error reaches, and find nothing on that session.
+//! drum's winding pitch, a spool's eccentricity): the analysis must locate
+//! it on that string (with four strings on the string's own part of the
+//! residual, with three on its whole residual), model it as a periodic
+//! function of the length without a name, bring the held-out RMS near what
+//! the same session without the error reaches, and find nothing on that
+//! session. A joint whose angle is off by a non-integer harmonic of itself:
+//! modelled periodically in its own angle, no catalogue harmonic named.
 
 use drawcal::model::{Dataset, Measurement, Rig};
 use drawcal::physics::Kind;
@@ -123,5 +126,60 @@ fn a_periodic_error_of_a_string_is_located_and_modelled_with_three_strings() {
         2,
         57.0,
         "strings",
+    );
+}
+
+/// A joint whose angle is off by a sinusoid of a non-integer multiple of
+/// itself (an intermediate gear stage turning 5.3 times per joint
+/// revolution): no catalogue harmonic (whole multiples) describes it. The
+/// analysis must model it as a periodic function of the joint's own angle
+/// at about its period, and not name harmonics for it.
+#[test]
+fn a_non_integer_harmonic_of_a_joint_is_modelled_periodically_in_its_angle() {
+    let h = 5.3;
+    let sim = simulated(8, None);
+    let twin = calibrate(&sim, &sim.dataset);
+    assert!(twin.findings.is_empty(), "{:?}", twin.findings);
+    // The joint sat at the recorded angle plus the error: recording the
+    // true angle minus the error is the same session (the error evaluated
+    // a few millidegrees away).
+    let mut data = sim.dataset.clone();
+    for p in &mut data.poses {
+        p.q_rad[1] -= 0.02_f64.to_radians() * (h * p.q_rad[1] + 0.4).sin();
+    }
+    let r = calibrate(&sim, &data);
+    let names: Vec<&str> = r.findings.iter().map(|f| f.effect.as_str()).collect();
+    assert!(
+        names
+            .iter()
+            .all(|n| *n == "unexplained" || *n == "data_driven"),
+        "a catalogue name was forced: {names:?}"
+    );
+    let c = r
+        .findings
+        .iter()
+        .find_map(|f| f.effect_model().filter(|m| m.kind.is_data_driven()))
+        .expect("a data-driven correction");
+    let Kind::DataDriven {
+        target,
+        target_index,
+        driver_index,
+        period,
+        ..
+    } = &c.kind
+    else {
+        unreachable!()
+    };
+    assert_eq!(
+        (*target, *target_index, *driver_index),
+        (CorrectionTarget::JointAngle, Some(1), Some(1))
+    );
+    let p = period.expect("a periodic correction");
+    let want = 2.0 * std::f64::consts::PI / h;
+    assert!((p / want - 1.0).abs() < 0.03, "period {p} rad, want {want}");
+    let (with, without) = (r.stats.test.after.rms_mm, twin.stats.test.after.rms_mm);
+    assert!(
+        with < 1.15 * without,
+        "held out {with} mm against {without} mm without the error"
     );
 }
