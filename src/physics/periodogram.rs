@@ -1,8 +1,8 @@
 //! Structure periodic in a driver (a string's length: a drum's winding
 //! pitch, a spool's eccentricity): the periods sought, and the test that
-//! finds one. The locator ([`super::unexplained`]) tests a string's
+//! finds one. The locator (`physics::unexplained`) tests a string's
 //! residual against them; the data-driven correction
-//! ([`super::analyse`]) scans the same periods, so what was located is
+//! (`physics::analyse`) scans the same periods, so what was located is
 //! what can be modelled.
 //!
 //! Neighbours in the driver agree only while the period is long against
@@ -19,7 +19,7 @@ pub const MAX_CYCLES: f64 = 64.0;
 const STEPS_PER_CYCLE: f64 = 4.0;
 
 /// The periods sought in a driver that took `values`: frequencies evenly
-/// spaced (see [`STEPS_PER_CYCLE`]) from [`MIN_CYCLES`] to [`MAX_CYCLES`]
+/// spaced (four steps per inverse range) from two to [`MAX_CYCLES`]
 /// cycles over their range. Empty when the values have no range.
 ///
 /// ```
