@@ -136,7 +136,9 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
 /// mm) in words with its unit.
 pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, v: f64) -> String {
     match driver {
-        CorrectionDriver::JointAngle => format!("{:.1} deg", v.to_degrees()),
+        CorrectionDriver::JointAngle | CorrectionDriver::StringDirection => {
+            format!("{:.1} deg", v.to_degrees())
+        }
         CorrectionDriver::Workspace if matches!(index, Some(3 | 4)) => {
             format!("{:.1} deg", v.to_degrees())
         }
@@ -154,6 +156,9 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
         CorrectionDriver::Time => "the session's clock".into(),
         CorrectionDriver::Temperature => "the temperature".into(),
         CorrectionDriver::StringLength => format!("string {at}'s length"),
+        CorrectionDriver::StringDirection => {
+            format!("string {at}'s angle from its mean direction")
+        }
         CorrectionDriver::Workspace => format!(
             "T's {} in the rig's frame",
             [
@@ -684,9 +689,10 @@ impl Context {
                 driver_index,
                 knots,
                 period,
+                axis,
                 ..
             } => {
-                let x = self.driver_value(pc, *driver, *driver_index);
+                let x = self.driver_value(pc, *driver, *driver_index, axis.as_ref());
                 for (k, w) in hat_weights(knots, *period, x) {
                     if w == 0.0 {
                         continue;
@@ -710,13 +716,14 @@ impl Context {
     }
 
     /// The value of a data-driven correction's driver at pose `pc` (rad,
-    /// s or rows, degrees C, mm). A pose without a temperature reads the
-    /// first pose's.
+    /// s or rows, degrees C, mm); a string's direction is measured from
+    /// `axis`. A pose without a temperature reads the first pose's.
     pub fn driver_value(
         &self,
         pc: &PoseContext,
         driver: CorrectionDriver,
         index: Option<usize>,
+        axis: Option<&[f64; 3]>,
     ) -> f64 {
         let i = index.unwrap_or(0);
         match driver {
@@ -728,6 +735,13 @@ impl Context {
                 .anchors
                 .get(i)
                 .map_or(0.0, |a| (pc.point_rig - a).norm() - self.r_mm),
+            CorrectionDriver::StringDirection => match (self.anchors.get(i), axis) {
+                (Some(a), Some(axis)) => {
+                    let u = (pc.point_rig - a).normalize();
+                    u.dot(&Vector3::from(*axis)).clamp(-1.0, 1.0).acos()
+                }
+                _ => 0.0,
+            },
         }
     }
 

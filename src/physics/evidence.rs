@@ -134,6 +134,7 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
                 }
                 CorrectionDriver::Temperature => d(words, "degrees C"),
                 CorrectionDriver::StringLength => d(words, "mm"),
+                CorrectionDriver::StringDirection => d(words, "deg"),
                 CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {
                     d(words, "deg")
                 }
@@ -193,11 +194,12 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
         Kind::DataDriven {
             driver,
             driver_index,
+            axis,
             ..
         } => {
-            let v = ctx.driver_value(pc, *driver, *driver_index);
+            let v = ctx.driver_value(pc, *driver, *driver_index, axis.as_ref());
             match driver {
-                CorrectionDriver::JointAngle => v.to_degrees(),
+                CorrectionDriver::JointAngle | CorrectionDriver::StringDirection => v.to_degrees(),
                 CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {
                     v.to_degrees()
                 }

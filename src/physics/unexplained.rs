@@ -284,6 +284,9 @@ fn resemblances(places: &[Place]) -> Vec<String> {
             ("motion", _, _) => say(
                 "the move that led to each pose: no catalogue effect depends on it (backlash depends only on the side a joint arrived from); an arm not settled at the dwell (overshoot or lag), a servo's following error or a tool still swinging would".into(),
             ),
+            ("workspace", _, Some(s)) => say(format!(
+                "string {s} by its direction: cable_sag (a function of the string's horizontal span) and sensor_scale were tried; no catalogue effect depends on the angle at which a string leaves its anchor, which friction or wrap at its exit, eyelet or pulley would"
+            )),
             ("workspace" | "configuration", _, _) => say(
                 "the workspace: no catalogue effect is a field over the workspace; a distortion of the measuring device or a compliance of the stand or base would be".into(),
             ),
@@ -477,6 +480,23 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
                 values: values.clone(),
             });
         }
+        // By the string's direction (where T is as seen from its anchor):
+        // a string whose exit, eyelet or pulley adds friction or wrap as
+        // the string swings.
+        let dir = |a: usize| (ctx.poses[obs.train[a]].point_rig - obs.anchors[k]).normalize();
+        out.push(ScalarTest {
+            name: format!("string {}'s direction ({part})", k + 1),
+            sensor: k + 1,
+            driver: "workspace",
+            side,
+            test: ScalarTestKind::Neighbours(nearest_pairs(
+                obs.train.len(),
+                3,
+                |a, c| dir(a)[c],
+                |a, b| (dir(a) - dir(b)).norm_squared(),
+            )),
+            values: values.clone(),
+        });
         out.push(ScalarTest {
             name: format!("time (string {}'s {})", k + 1, &part[4..]),
             sensor: k + 1,

@@ -42,6 +42,11 @@ pub enum CorrectionDriver {
     Temperature,
     /// One string's length (knots in mm).
     StringLength,
+    /// One string's direction from its anchor: the angle between the
+    /// string and its `axis` (knots in rad). Wrap over a rounded exit or
+    /// eyelet grows with it; a function linear in the direction is an
+    /// anchor displaced instead.
+    StringDirection,
     /// Where T is in the rig's frame (for point data, the measuring
     /// instrument's own frame): `driver_index` 0, 1, 2 = its x, y, z (mm);
     /// 3 = its azimuth about the frame's z axis, 4 = its elevation above the
@@ -198,6 +203,11 @@ pub enum Kind {
         /// correction (its knots span one period, not the range).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         range: Option<[f64; 2]>,
+        /// The unit vector (rig frame) a string's direction is measured
+        /// from, for [`CorrectionDriver::StringDirection`]: the string's
+        /// mean direction over the train poses.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        axis: Option<[f64; 3]>,
     },
 }
 
@@ -416,8 +426,20 @@ impl EffectModel {
             knots,
             period,
             range,
+            axis,
         } = &self.kind
         {
+            if (*driver == CorrectionDriver::StringDirection) != axis.is_some()
+                || axis.is_some_and(|a| {
+                    !(a.iter().all(|c| c.is_finite())
+                        && (a.iter().map(|c| c * c).sum::<f64>().sqrt() - 1.0).abs() < 1e-6)
+                })
+            {
+                return Err(
+                    "a correction by a string's direction needs its axis (a unit vector), and only it has one"
+                        .into(),
+                );
+            }
             if range.is_some_and(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && lo <= hi)) {
                 return Err(
                     "a data-driven correction's range must be two finite, ordered values".into(),

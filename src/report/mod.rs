@@ -624,7 +624,8 @@ pub struct Place {
     /// The joint (1-based) whose angle it follows.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint: Option<usize>,
-    /// The string (1-based) it lives in.
+    /// The string (1-based) it lives in; with driver `workspace`, that
+    /// string's own part by its direction from its anchor.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensor: Option<usize>,
     /// `robot` (T itself is off), `sensor` (one string reads wrong),

@@ -34,6 +34,7 @@ mod physics_payload;
 mod physics_periodic;
 mod physics_rig;
 mod physics_sensor_drift;
+mod physics_string_direction;
 mod physics_workspace;
 mod plan;
 mod report_html;

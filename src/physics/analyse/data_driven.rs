@@ -18,7 +18,7 @@
 //! session, not the next; a string's reading is the measurement's, not the
 //! robot's).
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, Vector3};
 
 use super::candidates::Candidate;
 use super::fixed::{FixedBase, with_candidate};
@@ -59,15 +59,15 @@ pub(super) const MAX_CORRECTIONS: usize = 3;
 pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
     let mut tried: Vec<Kind> = Vec::new();
     let mut kept = 0;
-    // A field over the workspace after the joints and strings: it is the
-    // most general shape (it can take up part of what one joint's angle
+    // A field over the workspace after the joints and strings (a string's
+    // direction included): it is the most general shape (it can take up part of what one joint's angle
     // drives), so the specific driver has the first say. Functions of the
     // clock or the temperature last: over a long session they carry
     // hundreds of coefficients, and every later candidate's fit would carry
     // them too (its normal equations grow with the cube).
-    let rank = |p: &Place| match p.driver.as_str() {
-        "time" | "temperature" => 2,
-        "workspace" => 1,
+    let rank = |p: &Place| match (p.driver.as_str(), p.sensor) {
+        ("time" | "temperature", _) => 2,
+        ("workspace", None) => 1,
         _ => 0,
     };
     let mut ordered: Vec<&Place> = places.iter().collect();
@@ -100,14 +100,20 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
     let n = ctx.n_joints;
     let m = ctx.anchors.len();
     let train = &obs.train;
-    let values = |driver: CorrectionDriver, index: Option<usize>| -> Vec<f64> {
+    let values = |driver: CorrectionDriver, index: Option<usize>, axis: Option<&[f64; 3]>| {
         train
             .iter()
-            .map(|&i| ctx.driver_value(&ctx.poses[i], driver, index))
-            .collect()
+            .map(|&i| ctx.driver_value(&ctx.poses[i], driver, index, axis))
+            .collect::<Vec<f64>>()
     };
-    let family = |target, target_index, driver, driver_index, counts: &[usize]| -> Vec<Kind> {
-        let v = values(driver, driver_index);
+    let family_about = |target,
+                        target_index,
+                        driver,
+                        driver_index,
+                        axis: Option<[f64; 3]>,
+                        counts: &[usize]|
+     -> Vec<Kind> {
+        let v = values(driver, driver_index, axis.as_ref());
         counts
             .iter()
             .filter(|&&k| k * POSES_PER_KNOT <= train.len())
@@ -120,12 +126,16 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                 knots,
                 period: None,
                 range: None,
+                axis,
             })
             .collect()
     };
+    let family = |target, target_index, driver, driver_index, counts: &[usize]| {
+        family_about(target, target_index, driver, driver_index, None, counts)
+    };
     // Periodic in the driver at every period scanned (see `periodogram`).
     let periodic_family = |target, target_index, driver, driver_index| -> Vec<Kind> {
-        let v = values(driver, driver_index);
+        let v = values(driver, driver_index, None);
         let range = v
             .iter()
             .fold([f64::INFINITY, f64::NEG_INFINITY], |[a, b], &x| {
@@ -202,6 +212,25 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                 ));
             }
         }
+        // A string's reading by its direction from its anchor (wrap or
+        // friction at its exit, eyelet or pulley): by the angle from its
+        // mean direction over the train poses.
+        ("workspace", _, Some(s)) if s <= m => {
+            let mean: Vector3<f64> = train
+                .iter()
+                .map(|&i| (ctx.poses[i].point_rig - ctx.anchors[s - 1]).normalize())
+                .sum();
+            if mean.norm() > 0.0 {
+                out.push(family_about(
+                    CorrectionTarget::StringReading,
+                    Some(s - 1),
+                    CorrectionDriver::StringDirection,
+                    Some(s - 1),
+                    Some(mean.normalize().into()),
+                    &JOINT_KNOTS,
+                ));
+            }
+        }
         ("string", _, Some(s)) if s <= m => {
             out.push(family(
                 CorrectionTarget::StringReading,
@@ -253,6 +282,7 @@ fn periodic(
         knots: (0..k).map(|i| period * i as f64 / k as f64).collect(),
         period: Some(period),
         range: Some(range),
+        axis: None,
     }
 }
 

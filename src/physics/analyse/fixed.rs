@@ -169,6 +169,7 @@ impl FixedBase {
                 knots: vec![f64::MAX, f64::MAX],
                 period: None,
                 range: None,
+                axis: None,
             },
             other => other.clone(),
         };
@@ -200,6 +201,7 @@ impl FixedBase {
             driver_index,
             knots,
             period,
+            axis,
             ..
         } = kind
         else {
@@ -209,7 +211,12 @@ impl FixedBase {
         let mut a = DMatrix::<f64>::zeros(k, k);
         let mut g = nalgebra::DVector::<f64>::zeros(k);
         for (pos, &(vr, vv)) in patterns.iter().enumerate() {
-            let x = ctx.driver_value(&ctx.poses[obs.train[pos]], *driver, *driver_index);
+            let x = ctx.driver_value(
+                &ctx.poses[obs.train[pos]],
+                *driver,
+                *driver_index,
+                axis.as_ref(),
+            );
             let w = hat_weights(knots, *period, x);
             for &(c, wc) in &w {
                 g[c] += wc * vr;
@@ -347,6 +354,7 @@ mod tests {
                 knots: vec![-1.0, -0.3, 0.2, 1.1],
                 period: None,
                 range: None,
+                axis: None,
             },
             Kind::DataDriven {
                 target: CorrectionTarget::Point,
@@ -356,6 +364,7 @@ mod tests {
                 knots: vec![0.0, 50.0, 100.0, 500.0],
                 period: None,
                 range: None,
+                axis: None,
             },
             Kind::JointPeriodic {
                 joint_index: 0,
@@ -371,6 +380,7 @@ mod tests {
                 knots: vec![0.0, 0.3, 0.6, 0.9],
                 period: Some(1.2),
                 range: Some([-2.0, 2.0]),
+                axis: None,
             },
         ];
         if m > 0 {
@@ -382,6 +392,7 @@ mod tests {
                 knots: vec![100.0, 400.0, 700.0, 1000.0],
                 period: None,
                 range: None,
+                axis: None,
             });
             kinds.push(Kind::DataDriven {
                 target: CorrectionTarget::StringReading,
@@ -391,6 +402,18 @@ mod tests {
                 knots: vec![0.0, 10.0, 20.0, 30.0, 40.0, 50.0],
                 period: Some(60.0),
                 range: Some([100.0, 1500.0]),
+                axis: None,
+            });
+            // By the string's direction: its angle from an axis.
+            kinds.push(Kind::DataDriven {
+                target: CorrectionTarget::StringReading,
+                target_index: Some(m - 1),
+                driver: CorrectionDriver::StringDirection,
+                driver_index: Some(m - 1),
+                knots: vec![0.0, 0.1, 0.2, 0.4],
+                period: None,
+                range: None,
+                axis: Some([0.0, 0.6, 0.8]),
             });
         }
         kinds

@@ -1,0 +1,129 @@
+//! A string that reads wrong by a function of the angle at which it leaves
+//! its anchor (wrap over a rounded eyelet, friction at a pulley): no
+//! catalogue effect depends on a string's direction. The analysis must
+//! locate it on that string by its direction, name nothing from the
+//! catalogue, model it as a function of the string's angle from its mean
+//! direction, bring the held-out RMS near what the same session without
+//! the error reaches, and find nothing on that session.
+//!
+//! The error grows with the angle from the eyelet's axis (which points at
+//! the workspace's centre), not linearly in the direction: a linear
+//! function of the direction is an anchor displaced, which the rig
+//! calibration explains.
+
+use drawcal::model::{Dataset, Measurement};
+use drawcal::physics::Kind;
+use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
+use drawcal::physics::simulate;
+use drawcal::report::Report;
+use nalgebra::Vector3;
+
+/// The reading error of string `s` (0-based): `rho_mm_per_rad` times its
+/// angle from the eyelet's axis, less the angle's mean over the session.
+fn with_eyelet_wrap(sim: &simulate::Simulated, s: usize, rho_mm_per_rad: f64) -> Dataset {
+    let anchor = Vector3::from(sim.rig.anchors_mm[s]);
+    let centre = sim.true_point.iter().sum::<Vector3<f64>>() / sim.true_point.len() as f64;
+    let axis = (centre - anchor).normalize();
+    let theta: Vec<f64> = sim
+        .true_point
+        .iter()
+        .map(|p| (p - anchor).normalize().dot(&axis).clamp(-1.0, 1.0).acos())
+        .collect();
+    let mean = theta.iter().sum::<f64>() / theta.len() as f64;
+    let mut out = sim.dataset.clone();
+    for (p, t) in out.poses.iter_mut().zip(&theta) {
+        if let Measurement::Strings(l) = &mut p.measurement {
+            l[s] += rho_mm_per_rad * (t - mean);
+        }
+    }
+    out
+}
+
+fn calibrate(sim: &simulate::Simulated, data: &Dataset) -> Report {
+    drawcal::pipeline::calibrate(
+        &sim.robot,
+        &sim.rig,
+        data,
+        &Default::default(),
+        &drawcal::identify::NoProgress,
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_string_reading_wrong_by_its_direction_is_located_on_it_and_not_named() {
+    let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
+        "robot": "er3a", "n_poses": 200, "seed": 12
+    }))
+    .unwrap();
+    let sim = simulate::generate_with(&spec, Default::default()).unwrap();
+    assert_eq!(sim.true_point.len(), sim.dataset.poses.len());
+    let twin = calibrate(&sim, &sim.dataset);
+    assert!(twin.findings.is_empty(), "{:?}", twin.findings);
+
+    let s = 2;
+    let r = calibrate(&sim, &with_eyelet_wrap(&sim, s, 1.5));
+    let names: Vec<&str> = r.findings.iter().map(|f| f.effect.as_str()).collect();
+    assert!(
+        names
+            .iter()
+            .all(|n| *n == "unexplained" || *n == "data_driven"),
+        "a catalogue name was forced: {names:?}"
+    );
+    let u = r
+        .findings
+        .iter()
+        .find_map(|f| f.unexplained())
+        .expect("an unexplained finding");
+    let place = u
+        .places
+        .iter()
+        .find(|p| p.driver == "workspace" && p.sensor == Some(s + 1))
+        .unwrap_or_else(|| {
+            panic!(
+                "not located on string {} by direction: {:?}",
+                s + 1,
+                u.places
+            )
+        });
+    assert_eq!(place.side, "sensor");
+    assert!(place.z > place.threshold, "{place:?}");
+    assert!(
+        u.resembles.iter().any(|t| t.contains("by its direction")),
+        "{:?}",
+        u.resembles
+    );
+
+    let c = r
+        .findings
+        .iter()
+        .find_map(|f| f.effect_model().filter(|m| m.kind.is_data_driven()))
+        .expect("a data-driven correction");
+    let Kind::DataDriven {
+        target,
+        target_index,
+        driver,
+        driver_index,
+        axis,
+        ..
+    } = &c.kind
+    else {
+        unreachable!()
+    };
+    assert_eq!(
+        (*target, *target_index, *driver, *driver_index),
+        (
+            CorrectionTarget::StringReading,
+            Some(s),
+            CorrectionDriver::StringDirection,
+            Some(s)
+        )
+    );
+    let norm = axis.expect("its axis").iter().map(|c| c * c).sum::<f64>();
+    assert!((norm - 1.0).abs() < 1e-9);
+    let (with, without) = (r.stats.test.after.rms_mm, twin.stats.test.after.rms_mm);
+    assert!(
+        with < 1.15 * without,
+        "held out {with} mm against {without} mm without the error"
+    );
+}
