@@ -128,6 +128,9 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
     match target {
         CorrectionTarget::JointAngle => format!("joint {at}'s angle"),
         CorrectionTarget::Point => "the position of T relative to the rig".into(),
+        CorrectionTarget::PointSpherical => {
+            "the position of T in the spherical frame about the rig's origin (azimuth, elevation, distance)".into()
+        }
         CorrectionTarget::StringReading => format!("string {at}'s reading"),
     }
 }
@@ -144,7 +147,9 @@ pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, 
         }
         CorrectionDriver::Time => format!("{v:.0} s"),
         CorrectionDriver::Temperature => format!("{v:.2} degrees C"),
-        CorrectionDriver::StringLength | CorrectionDriver::Workspace => format!("{v:.1} mm"),
+        CorrectionDriver::StringLength | CorrectionDriver::Workspace | CorrectionDriver::Motion => {
+            format!("{v:.1} mm")
+        }
     }
 }
 
@@ -159,6 +164,7 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
         CorrectionDriver::StringDirection => {
             format!("string {at}'s angle from its mean direction")
         }
+        CorrectionDriver::Motion => "the length of the move that led to the pose".into(),
         CorrectionDriver::Workspace => format!(
             "T's {} in the rig's frame",
             [
@@ -173,6 +179,35 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
             .unwrap_or(&"position")
         ),
     }
+}
+
+/// What one unit of each of a point correction's three coefficients per
+/// knot moves T at `p` (rig frame, mm): the frame's axes for
+/// [`CorrectionTarget::Point`]; for [`CorrectionTarget::PointSpherical`]
+/// T's motion per radian of azimuth and of elevation about the rig's
+/// origin and per millimetre of distance from it. One implementation for
+/// the fit and compensation.
+///
+/// ```
+/// use drawcal::physics::effects::{CorrectionTarget, point_frame};
+/// use nalgebra::Vector3;
+/// let f = point_frame(CorrectionTarget::PointSpherical, &Vector3::new(0.0, 2000.0, 0.0));
+/// // A radian of azimuth moves a point 2 m out along y by 2000 mm in -x.
+/// assert!((f[0] - Vector3::new(-2000.0, 0.0, 0.0)).norm() < 1e-9);
+/// assert!((f[1] - Vector3::new(0.0, 0.0, 2000.0)).norm() < 1e-9);
+/// assert!((f[2] - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-9);
+/// ```
+pub fn point_frame(target: CorrectionTarget, p: &Vector3<f64>) -> [Vector3<f64>; 3] {
+    if target != CorrectionTarget::PointSpherical {
+        return [Vector3::x(), Vector3::y(), Vector3::z()];
+    }
+    let (az, el) = (p.y.atan2(p.x), p.z.atan2(p.xy().norm()));
+    let (horizontal, r) = (p.xy().norm(), p.norm());
+    [
+        Vector3::new(-az.sin(), az.cos(), 0.0) * horizontal,
+        Vector3::new(-el.sin() * az.cos(), -el.sin() * az.sin(), el.cos()) * r,
+        Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()),
+    ]
 }
 
 /// Coordinate `index` of a point `p` (rig frame, mm) as
@@ -245,6 +280,9 @@ pub struct PoseContext {
     /// The point T in the rig frame used by sensor-side effects (true point
     /// in the simulator, located point in the analysis).
     pub point_rig: Vector3<f64>,
+    /// The move that led to the pose: `point_rig` less the previous pose's
+    /// (zero for the first pose, whose approach is not recorded).
+    pub move_rig: Vector3<f64>,
     /// Per joint: gravity torque (N·m, from masses and payload) or the
     /// unit-mass regressors (m) of every link frame origin 0..n, the tool
     /// (n) and the payload (n + 1, the tool's times `payload_kg`).
@@ -511,6 +549,10 @@ impl Context {
                     thermal,
                     temp_c: p.temp_c,
                     point_rig: p.point_rig,
+                    move_rig: match i {
+                        0 => Vector3::zeros(),
+                        _ => p.point_rig - poses[i - 1].point_rig,
+                    },
                     torque,
                     tilt,
                     base_moment_nm,
@@ -693,20 +735,30 @@ impl Context {
                 ..
             } => {
                 let x = self.driver_value(pc, *driver, *driver_index, axis.as_ref());
+                // Along the move that led to the pose (none for the first).
+                let along = pc.move_rig.try_normalize(0.0).unwrap_or_default();
                 for (k, w) in hat_weights(knots, *period, x) {
                     if w == 0.0 {
                         continue;
                     }
                     match target {
+                        CorrectionTarget::Point if *driver == CorrectionDriver::Motion => {
+                            for r in 0..3 {
+                                out.dp[k * 3 + r] += w * along[r];
+                            }
+                        }
                         CorrectionTarget::JointAngle => {
                             out.dq[k * n + target_index.unwrap_or(0)] += w;
                         }
                         CorrectionTarget::StringReading => {
                             out.dl[k * m + target_index.unwrap_or(0)] += w;
                         }
-                        CorrectionTarget::Point => {
-                            for c in 0..3 {
-                                out.dp[(3 * k + c) * 3 + c] += w;
+                        CorrectionTarget::Point | CorrectionTarget::PointSpherical => {
+                            let frame = point_frame(*target, &pc.point_rig);
+                            for (c, dir) in frame.iter().enumerate() {
+                                for r in 0..3 {
+                                    out.dp[(3 * k + c) * 3 + r] += w * dir[r];
+                                }
                             }
                         }
                     }
@@ -735,6 +787,7 @@ impl Context {
                 .anchors
                 .get(i)
                 .map_or(0.0, |a| (pc.point_rig - a).norm() - self.r_mm),
+            CorrectionDriver::Motion => pc.move_rig.norm(),
             CorrectionDriver::StringDirection => match (self.anchors.get(i), axis) {
                 (Some(a), Some(axis)) => {
                     let u = (pc.point_rig - a).normalize();

@@ -135,6 +135,7 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
                 CorrectionDriver::Temperature => d(words, "degrees C"),
                 CorrectionDriver::StringLength => d(words, "mm"),
                 CorrectionDriver::StringDirection => d(words, "deg"),
+                CorrectionDriver::Motion => d(words, "mm"),
                 CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {
                     d(words, "deg")
                 }

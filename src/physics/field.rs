@@ -9,7 +9,8 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::effects::{
-    CorrectionDriver, CorrectionTarget, EffectModel, Kind, hat_weights, workspace_coordinate,
+    CorrectionDriver, CorrectionTarget, EffectModel, Kind, hat_weights, point_frame,
+    workspace_coordinate,
 };
 use super::effects_of;
 use crate::report::Finding;
@@ -38,7 +39,7 @@ impl WorkspaceField {
                 matches!(
                     e.kind,
                     Kind::DataDriven {
-                        target: CorrectionTarget::Point,
+                        target: CorrectionTarget::Point | CorrectionTarget::PointSpherical,
                         driver: CorrectionDriver::Workspace,
                         ..
                     }
@@ -62,6 +63,7 @@ impl WorkspaceField {
         let mut outside = Vec::new();
         for e in &self.corrections {
             let Kind::DataDriven {
+                target,
                 driver_index: Some(c),
                 knots,
                 period,
@@ -71,9 +73,10 @@ impl WorkspaceField {
                 continue;
             };
             let x = workspace_coordinate(&at_rig, *c);
+            let frame = point_frame(*target, &at_rig);
             for (k, w) in hat_weights(knots, *period, x) {
-                for (axis, s) in shift_rig.iter_mut().enumerate() {
-                    *s += w * e.coef.get(3 * k + axis).copied().unwrap_or(0.0);
+                for (axis, dir) in frame.iter().enumerate() {
+                    shift_rig += w * e.coef.get(3 * k + axis).copied().unwrap_or(0.0) * dir;
                 }
             }
             let Some((lo, hi)) = e.kind.fitted_range() else {

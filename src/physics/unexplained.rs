@@ -1006,7 +1006,7 @@ fn motion_test(
             };
             d
         };
-        let mv = here - ctx.poses[i - 1].point_rig;
+        let mv = ctx.poses[i].move_rig;
         sdd += mv.norm_squared();
         sdr += mv.dot(&d);
         pairs.push((d, mv));

@@ -28,6 +28,14 @@ pub enum CorrectionTarget {
     Point,
     /// One string's reading (mm): the string reads this much more.
     StringReading,
+    /// T relative to the rig in the spherical frame about the rig's origin
+    /// (for point data, the measuring instrument's own: three coefficients
+    /// per knot, an azimuth error (rad: T moves by its horizontal distance
+    /// times it, along the azimuth), an elevation error (rad: by its
+    /// distance, along the elevation) and a distance error (mm, along the
+    /// line of sight). An instrument's angle encoders and range err in
+    /// these directions, which turn with where T is.
+    PointSpherical,
 }
 
 /// What drives a data-driven correction.
@@ -54,6 +62,11 @@ pub enum CorrectionDriver {
     /// field over the workspace (a distortion of the measuring device, a
     /// compliance of the stand) is a function of these.
     Workspace,
+    /// The move of T that led to the pose, from the pose recorded before
+    /// it (knots: the move's length, mm). Its correction moves T along
+    /// that move (one coefficient per knot, mm): an arm not settled at the
+    /// dwell overshoots or lags along its last move.
+    Motion,
 }
 
 /// Number of workspace coordinates a [`CorrectionDriver::Workspace`]
@@ -65,7 +78,8 @@ impl CorrectionDriver {
     /// is (the target's own); the session's clock and temperature history
     /// describe this session, not the next, and a string's length exists
     /// only with the rig mounted. Where T is in the workspace is known for
-    /// a target too (the target itself, in the rig's frame).
+    /// a target too (the target itself, in the rig's frame); the move that
+    /// leads to it depends on the program that visits it.
     pub fn usable_for_compensation(self) -> bool {
         matches!(
             self,
@@ -279,7 +293,9 @@ impl Kind {
                 | Kind::RigDrift
                 | Kind::BaseTilt
                 | Kind::DataDriven {
-                    target: CorrectionTarget::JointAngle | CorrectionTarget::Point,
+                    target: CorrectionTarget::JointAngle
+                        | CorrectionTarget::Point
+                        | CorrectionTarget::PointSpherical,
                     ..
                 }
         )
@@ -343,7 +359,12 @@ impl Kind {
             Kind::AnchorStep { .. } => 3,
             Kind::RigStep { .. } | Kind::RigDrift => 6,
             Kind::DataDriven {
-                target: CorrectionTarget::Point,
+                driver: CorrectionDriver::Motion,
+                knots,
+                ..
+            } => knots.len(),
+            Kind::DataDriven {
+                target: CorrectionTarget::Point | CorrectionTarget::PointSpherical,
                 knots,
                 ..
             } => 3 * knots.len(),
@@ -469,7 +490,21 @@ impl EffectModel {
                     WORKSPACE_COORDINATES - 1
                 ));
             }
-            if *target != CorrectionTarget::Point && target_index.is_none() {
+            if *driver == CorrectionDriver::Motion && *target != CorrectionTarget::Point {
+                return Err("a correction by the motion moves T: its target must be point".into());
+            }
+            if *target == CorrectionTarget::PointSpherical && *driver != CorrectionDriver::Workspace
+            {
+                return Err(
+                    "a correction in the spherical frame is a field over the workspace: its driver must be workspace"
+                        .into(),
+                );
+            }
+            if !matches!(
+                target,
+                CorrectionTarget::Point | CorrectionTarget::PointSpherical
+            ) && target_index.is_none()
+            {
                 return Err(
                     "a data-driven correction of a joint or string needs its target_index".into(),
                 );

@@ -184,3 +184,25 @@ pub fn calibrate_geometric(
     };
     drawcal::pipeline::calibrate(robot, rig, data, &opts, progress)
 }
+
+/// The first data-driven correction `report` kept (panics with the
+/// findings when there is none).
+pub fn data_driven_correction(report: &drawcal::report::Report) -> drawcal::physics::Kind {
+    report
+        .findings
+        .iter()
+        .find_map(|f| f.effect_model().filter(|m| m.kind.is_data_driven()))
+        .map(|m| m.kind.clone())
+        .unwrap_or_else(|| panic!("no data-driven correction: {:#?}", report.findings))
+}
+
+/// The twin (the same session without the error) finds nothing, and
+/// `report`'s held-out RMS comes within 1.15 times the twin's.
+pub fn near_the_twin(report: &drawcal::report::Report, twin: &drawcal::report::Report) {
+    assert!(twin.findings.is_empty(), "{:#?}", twin.findings);
+    let (with, without) = (report.stats.test.after.rms_mm, twin.stats.test.after.rms_mm);
+    assert!(
+        with < 1.15 * without,
+        "held out {with} mm against {without} mm without the error"
+    );
+}

@@ -12,6 +12,7 @@
 //! session. A joint whose angle is off by a non-integer harmonic of itself:
 //! modelled periodically in its own angle, no catalogue harmonic named.
 
+use crate::common;
 use drawcal::model::{Dataset, Measurement, Rig};
 use drawcal::physics::Kind;
 use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
@@ -62,7 +63,6 @@ fn calibrate(sim: &simulate::Simulated, data: &Dataset) -> Report {
 /// its period, and the held-out RMS comes near the twin's.
 fn located_and_modelled(sim: &simulate::Simulated, s: usize, period_mm: f64, side: &str) {
     let twin = calibrate(sim, &sim.dataset);
-    assert!(twin.findings.is_empty(), "{:?}", twin.findings);
     let r = calibrate(sim, &with_pitch(&sim.dataset, s, period_mm));
     let names: Vec<&str> = r.findings.iter().map(|f| f.effect.as_str()).collect();
     assert!(
@@ -82,18 +82,14 @@ fn located_and_modelled(sim: &simulate::Simulated, s: usize, period_mm: f64, sid
         .find(|p| p.driver == "string" && p.sensor == Some(s + 1))
         .unwrap_or_else(|| panic!("not located on string {}: {:?}", s + 1, u.places));
     assert_eq!(place.side, side);
-    let c = r
-        .findings
-        .iter()
-        .find_map(|f| f.effect_model().filter(|m| m.kind.is_data_driven()))
-        .expect("a data-driven correction");
+    let c = common::data_driven_correction(&r);
     let Kind::DataDriven {
         target,
         target_index,
         driver,
         period,
         ..
-    } = &c.kind
+    } = &c
     else {
         unreachable!()
     };
@@ -107,11 +103,7 @@ fn located_and_modelled(sim: &simulate::Simulated, s: usize, period_mm: f64, sid
     );
     let p = period.expect("a periodic correction");
     assert!((p / period_mm - 1.0).abs() < 0.03, "period {p} mm");
-    let (with, without) = (r.stats.test.after.rms_mm, twin.stats.test.after.rms_mm);
-    assert!(
-        with < 1.15 * without,
-        "held out {with} mm against {without} mm without the error"
-    );
+    common::near_the_twin(&r, &twin);
 }
 
 #[test]
@@ -139,7 +131,6 @@ fn a_non_integer_harmonic_of_a_joint_is_modelled_periodically_in_its_angle() {
     let h = 5.3;
     let sim = simulated(8, None);
     let twin = calibrate(&sim, &sim.dataset);
-    assert!(twin.findings.is_empty(), "{:?}", twin.findings);
     // The joint sat at the recorded angle plus the error: recording the
     // true angle minus the error is the same session (the error evaluated
     // a few millidegrees away).
@@ -155,18 +146,14 @@ fn a_non_integer_harmonic_of_a_joint_is_modelled_periodically_in_its_angle() {
             .all(|n| *n == "unexplained" || *n == "data_driven"),
         "a catalogue name was forced: {names:?}"
     );
-    let c = r
-        .findings
-        .iter()
-        .find_map(|f| f.effect_model().filter(|m| m.kind.is_data_driven()))
-        .expect("a data-driven correction");
+    let c = common::data_driven_correction(&r);
     let Kind::DataDriven {
         target,
         target_index,
         driver_index,
         period,
         ..
-    } = &c.kind
+    } = &c
     else {
         unreachable!()
     };
@@ -177,9 +164,5 @@ fn a_non_integer_harmonic_of_a_joint_is_modelled_periodically_in_its_angle() {
     let p = period.expect("a periodic correction");
     let want = 2.0 * std::f64::consts::PI / h;
     assert!((p / want - 1.0).abs() < 0.03, "period {p} rad, want {want}");
-    let (with, without) = (r.stats.test.after.rms_mm, twin.stats.test.after.rms_mm);
-    assert!(
-        with < 1.15 * without,
-        "held out {with} mm against {without} mm without the error"
-    );
+    common::near_the_twin(&r, &twin);
 }

@@ -211,6 +211,20 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                     &JOINT_KNOTS,
                 ));
             }
+            // With point data the rig's origin is the instrument's: its
+            // angle and range errors as functions of its own angles and
+            // distance, in the directions that turn with them.
+            if m == 0 {
+                for c in 3..WORKSPACE_COORDINATES {
+                    out.push(family(
+                        CorrectionTarget::PointSpherical,
+                        None,
+                        CorrectionDriver::Workspace,
+                        Some(c),
+                        &JOINT_KNOTS,
+                    ));
+                }
+            }
         }
         // A string's reading by its direction from its anchor (wrap or
         // friction at its exit, eyelet or pulley): by the angle from its
@@ -231,6 +245,15 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                 ));
             }
         }
+        // The move that led to each pose: T off along it by a function of
+        // its length (overshoot or lag of an arm not settled at the dwell).
+        ("motion", _, _) => out.push(family(
+            CorrectionTarget::Point,
+            None,
+            CorrectionDriver::Motion,
+            None,
+            &JOINT_KNOTS,
+        )),
         ("string", _, Some(s)) if s <= m => {
             out.push(family(
                 CorrectionTarget::StringReading,
@@ -351,10 +374,7 @@ fn own_columns(a: &DMatrix<f64>, base: &[usize], kind: &Kind, at: usize) -> Vec<
         return unaliased(a, base, &own);
     }
     let per_knot = match kind {
-        Kind::DataDriven {
-            target: CorrectionTarget::Point,
-            ..
-        } => 3,
+        Kind::DataDriven { knots, .. } => kind.n_coef() / knots.len().max(1),
         _ => 1,
     };
     own[per_knot..].to_vec()
@@ -512,6 +532,8 @@ fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: 
             lo.to_degrees(),
             hi.to_degrees()
         )
+    } else if *driver == CorrectionDriver::Motion {
+        "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; T was measured before the arm settled: dwell longer at each pose or approach slower, and check the servo tuning".into()
     } else if e.kind.robot_side() {
         "compensation cannot use it: it is a function of this session's clock or temperature history, not of a future target; find what changed during the session (the stand, the tracker, the temperature of the cell), keep it constant, or re-calibrate when it has settled".into()
     } else {

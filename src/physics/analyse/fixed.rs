@@ -370,6 +370,17 @@ mod tests {
                 joint_index: 0,
                 harmonic: 2,
             },
+            // T in the spherical frame about the rig's origin, by azimuth.
+            Kind::DataDriven {
+                target: CorrectionTarget::PointSpherical,
+                target_index: None,
+                driver: CorrectionDriver::Workspace,
+                driver_index: Some(3),
+                knots: vec![-3.0, -1.0, 0.5, 3.0],
+                period: None,
+                range: None,
+                axis: None,
+            },
             // Periodic: the driver taken modulo the period, the last knot
             // joined to the first.
             Kind::DataDriven {

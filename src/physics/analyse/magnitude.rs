@@ -309,7 +309,7 @@ fn fixed_unit(kind: &Kind) -> &'static str {
             ..
         } => "deg (RMS of the correction over the train poses)",
         Kind::DataDriven {
-            target: CorrectionTarget::Point,
+            target: CorrectionTarget::Point | CorrectionTarget::PointSpherical,
             ..
         } => "mm (RMS displacement of T over the train poses)",
         Kind::DataDriven { .. } => "mm (RMS change of the reading over the train poses)",
