@@ -106,7 +106,7 @@ pub(super) fn unexplained(
     let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
     let excess = robot_side_excess(obs, ctx, &res, rpp, n_params);
     let motion = motion_test(obs, ctx, &res, rpp, nb.zcrit).filter(|m| m.z > m.threshold);
-    let confined = if nb.best.is_none() {
+    let confined = {
         let train: Vec<f64> = res
             .chunks(rpp)
             .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
@@ -116,8 +116,6 @@ pub(super) fn unexplained(
             .map(|&(ss, n)| (ss / n.max(1) as f64).sqrt())
             .collect();
         concentrated(obs, ctx, &train, &test, 1e-3)
-    } else {
-        None
     };
     let (winner, located) = located(
         &nb,
@@ -191,9 +189,9 @@ pub(super) fn unexplained(
     })
 }
 
-/// Every place the structure was located: the neighbour tests' places, the
-/// move that led to each pose, a confined stretch of a joint's range, and,
-/// when nothing else placed it, the robot-side excess.
+/// Every place the structure was located: a confined stretch of a joint's
+/// range, the neighbour tests' places, the move that led to each pose,
+/// and, when nothing else placed it, the robot-side excess.
 fn places(
     obs: &Observations,
     ctx: &Context,
@@ -219,21 +217,25 @@ fn places(
             range: None,
         });
     }
+    // A confined stretch first: the winner of `located` whenever it holds.
     if let Some(c) = confined {
-        places.push(Place {
-            driver: "joint".into(),
-            joint: Some(c.joint + 1),
-            sensor: None,
-            side: if obs.anchors.is_empty() {
-                "point"
-            } else {
-                "strings"
-            }
-            .into(),
-            z: normal_quantile(1.0 - c.p),
-            threshold: normal_quantile(1.0 - c.alpha / ctx.n_joints.max(1) as f64),
-            range: Some([c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]),
-        });
+        places.insert(
+            0,
+            Place {
+                driver: "joint".into(),
+                joint: Some(c.joint + 1),
+                sensor: None,
+                side: if obs.anchors.is_empty() {
+                    "point"
+                } else {
+                    "strings"
+                }
+                .into(),
+                z: normal_quantile(1.0 - c.p),
+                threshold: normal_quantile(1.0 - c.alpha / ctx.n_joints.max(1) as f64),
+                range: Some([c.lo_rad.to_degrees(), c.hi_rad.to_degrees()]),
+            },
+        );
     }
     if let Some(x) = excess.filter(|x| x.f > x.threshold && places.is_empty()) {
         places.push(Place {
@@ -544,17 +546,28 @@ fn neighbours(
     rpp: usize,
 ) -> Neighbours {
     let n_plain = pairings.len();
-    let n_tests = n_plain + along.as_ref().map_or(0, |_| n) + extra.len();
+    // Two statistics per test, Bonferroni over both: the products' sum
+    // over its own scale, and their signs. The sum is the stronger where
+    // the mismatch spreads over every pose; a few poses far off carry it
+    // and its scale alike, so where the mismatch lives in a few (a field
+    // growing towards the workspace's edge) the signs are stronger. Both
+    // are sums of terms uncorrelated under independent symmetric noise,
+    // also where pairs share a pose.
+    let n_tests = 2 * (n_plain + along.as_ref().map_or(0, |_| n) + extra.len());
     let alpha = 1e-3 / n_tests as f64;
     let zcrit = normal_quantile(1.0 - alpha);
     let z_of = |pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64| {
-        let (mut s, mut v) = (0.0, 0.0);
+        let (mut s, mut v, mut signs, mut n) = (0.0, 0.0, 0.0, 0usize);
         for &(i, k) in pairs {
             let x = d(i, k);
             s += x;
             v += x * x;
+            if x != 0.0 {
+                signs += x.signum();
+                n += 1;
+            }
         }
-        (v > 0.0).then(|| s / v.sqrt())
+        (v > 0.0).then(|| (s / v.sqrt()).max(signs / (n as f64).sqrt()))
     };
     let mut best: Option<(f64, String)> = None;
     let mut zs = vec![f64::NAN; n_plain];
@@ -661,6 +674,27 @@ fn located(
     };
     let zcrit = nb.zcrit;
     Some(match (&nb.best, excess, nb.winner_at) {
+        // A confined mismatch is the most specific place: the poses far
+        // off the rest also pull the geometry, and what that leaves
+        // elsewhere can agree between neighbours.
+        _ if confined.is_some() => {
+            let c = confined.expect("checked");
+            (
+                c.joint,
+                format!(
+                    "the train poses far off the rest ({ids}: misfit over {FAR_OFF_MEDIANS} times the median) lie with joint {j} between {lo:.0} and {hi:.0} deg, and the {m} held-out poses there confirm it (misfit RMS {a:.3} mm per reading, against {b:.3} elsewhere; Wilcoxon rank-sum p = {p:.1e}, threshold {t:.1e}): the mismatch is confined to that stretch of joint {j}'s range, in a form no catalogue effect has",
+                    ids = c.train_poses.join(", "),
+                    j = c.joint + 1,
+                    lo = c.lo_rad.to_degrees(),
+                    hi = c.hi_rad.to_degrees(),
+                    m = c.n_test_in,
+                    a = c.test_rms_in,
+                    b = c.test_rms_out,
+                    p = c.p,
+                    t = c.alpha,
+                ),
+            )
+        }
         (Some((z, name)), _, Some((pk, false))) if pk >= pairings.len() => {
             let t = &extra[pk - pairings.len()];
             let three = t.side == "strings";
@@ -718,24 +752,6 @@ fn located(
                 j = pk + 1
             ),
         ),
-        (None, _, _) if confined.is_some() => {
-            let c = confined.expect("checked");
-            (
-                c.joint,
-                format!(
-                    "the train poses far off the rest ({ids}: misfit over {FAR_OFF_MEDIANS} times the median) lie with joint {j} between {lo:.0} and {hi:.0} deg, and the {m} held-out poses there confirm it (misfit RMS {a:.3} mm per reading, against {b:.3} elsewhere; Wilcoxon rank-sum p = {p:.1e}, threshold {t:.1e}): the mismatch is confined to that stretch of joint {j}'s range, in a form no catalogue effect has",
-                    ids = c.train_poses.join(", "),
-                    j = c.joint + 1,
-                    lo = c.lo_rad.to_degrees(),
-                    hi = c.hi_rad.to_degrees(),
-                    m = c.n_test_in,
-                    a = c.test_rms_in,
-                    b = c.test_rms_out,
-                    p = c.p,
-                    t = c.alpha,
-                ),
-            )
-        }
         (None, _, _) if motion.is_some() => {
             let m = motion.expect("checked");
             let (w, _) = nearest();

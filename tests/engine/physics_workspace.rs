@@ -252,7 +252,7 @@ fn an_error_driven_by_the_move_is_located_at_the_motion_and_not_named() {
     // And not on the same session without it, whose held-out RMS the
     // correction comes near.
     let (_, _, clean, _, _) = session(43, &|_, _, _| Vector3::zeros());
-    common::near_the_twin(&report, &calibrate(&robot, &rig, &clean));
+    common::near_the_twin(&report, &calibrate(&robot, &rig, &clean), 1.15);
 }
 
 /// A tracker's azimuth encoder erring by a smooth function of the azimuth:
@@ -304,5 +304,40 @@ fn an_instruments_azimuth_error_is_modelled_in_its_own_frame() {
         )
     );
     let (_, _, clean, _, _) = session(45, &|_, _, _| Vector3::zeros());
-    common::near_the_twin(&report, &calibrate(&robot, &rig, &clean));
+    common::near_the_twin(&report, &calibrate(&robot, &rig, &clean), 1.15);
+}
+
+/// A height field whose remainder after the geometry lives in a few poses
+/// at the top and bottom of the workspace (from the third cross-check,
+/// `tests/data/xcheck3_height_field_points`): the products of neighbours'
+/// residuals are dominated by those few, whose scale they also set, so
+/// their sum stays under the threshold; their signs do not. Before the
+/// sign statistic a `joint_periodic` of joint 3 was named for it and the
+/// held-out RMS stayed 4.3 times the twin's. The analysis must locate it in
+/// the workspace, name nothing, model it there and come near the twin.
+#[test]
+fn a_field_growing_towards_the_workspaces_edges_is_located_there() {
+    let (robot, rig, data) = common::load("xcheck3_height_field_points");
+    let report = calibrate(&robot, &rig, &data);
+    let effects: Vec<&str> = report.findings.iter().map(|f| f.effect.as_str()).collect();
+    assert!(
+        effects
+            .iter()
+            .all(|e| matches!(*e, "unexplained" | "data_driven")),
+        "{effects:?}"
+    );
+    let located = report
+        .findings
+        .iter()
+        .filter_map(|f| f.unexplained())
+        .flat_map(|u| u.places.iter())
+        .any(|p| p.driver == "workspace" && p.z > p.threshold);
+    assert!(located, "{:#?}", report.findings);
+    let Kind::DataDriven { driver, .. } = common::data_driven_correction(&report) else {
+        unreachable!()
+    };
+    assert_eq!(driver, CorrectionDriver::Workspace);
+    let (robot, rig, twin) = common::load("xcheck3_height_field_points/twin");
+    // Measured 1.15x (4.3x before).
+    common::near_the_twin(&report, &calibrate(&robot, &rig, &twin), 1.25);
 }
