@@ -153,7 +153,7 @@ pub(super) fn unexplained(
     let resembles = resemblances(&places);
     let parameters = UnexplainedLocation {
         ordering,
-        along_joint_motion: nb.winner_at.is_some_and(|(_, projected)| projected),
+        along_joint_motion: nb.winner_at.is_some_and(|(_, on)| on == Along::Own),
         z,
         confined_joint: confined.as_ref().map(|c| c.joint + 1),
         confined_deg: confined
@@ -359,10 +359,15 @@ fn orderings(obs: &Observations, ctx: &Context) -> Vec<(String, Vec<(usize, usiz
         .map(|(name, key)| {
             let mut order: Vec<usize> = (0..key.len()).collect();
             order.sort_by(|a, b| key[*a].total_cmp(&key[*b]));
-            (
-                name.clone(),
-                order.windows(2).map(|w| (w[0], w[1])).collect(),
-            )
+            // Each pose with the next two: a smooth function of the key
+            // agrees over both, and the products of pairs that share a
+            // pose are still uncorrelated under independent noise.
+            let pairs = order
+                .windows(2)
+                .map(|w| (w[0], w[1]))
+                .chain(order.windows(3).map(|w| (w[0], w[2])))
+                .collect();
+            (name.clone(), pairs)
         })
         .collect();
     pairings.push((
@@ -511,6 +516,20 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
     out
 }
 
+/// What a neighbour test of an ordering compared between neighbours.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Along {
+    /// The residuals themselves.
+    Raw,
+    /// For a joint's ordering, their components along the direction that
+    /// joint moves T: an error of its own angle.
+    Own,
+    /// For a joint's ordering, their components along the directions every
+    /// other joint moves T: another joint's angle error driven by this
+    /// joint's angle (a cable or harness pulling, coupled drives).
+    Others,
+}
+
 /// What the neighbour test found over every ordering (see [`neighbours`]).
 struct Neighbours {
     /// The z the agreement of neighbours must pass (Bonferroni over the
@@ -521,10 +540,10 @@ struct Neighbours {
     /// Per ordering of the pairings (the plot's layout), the larger of the
     /// raw and the along-the-joint z for the joints (NaN: none).
     zs: Vec<f64>,
-    /// The winning test: an ordering of the pairings and whether it was the
-    /// along-the-joint one, or (index at or past the pairings) a string's
-    /// own test, `pairings.len() + k` for `extra[k]`.
-    winner_at: Option<(usize, bool)>,
+    /// The winning test: an ordering of the pairings and what it ran on,
+    /// or (index at or past the pairings) a string's own test,
+    /// `pairings.len() + k` for `extra[k]`.
+    winner_at: Option<(usize, Along)>,
     /// Every test past `zcrit`, strongest first.
     places: Vec<Place>,
 }
@@ -553,7 +572,7 @@ fn neighbours(
     // growing towards the workspace's edge) the signs are stronger. Both
     // are sums of terms uncorrelated under independent symmetric noise,
     // also where pairs share a pose.
-    let n_tests = 2 * (n_plain + along.as_ref().map_or(0, |_| n) + extra.len());
+    let n_tests = 2 * (n_plain + along.as_ref().map_or(0, |_| 2 * n) + extra.len());
     let alpha = 1e-3 / n_tests as f64;
     let zcrit = normal_quantile(1.0 - alpha);
     let z_of = |pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64| {
@@ -571,7 +590,7 @@ fn neighbours(
     };
     let mut best: Option<(f64, String)> = None;
     let mut zs = vec![f64::NAN; n_plain];
-    let mut winner_at: Option<(usize, bool)> = None;
+    let mut winner_at: Option<(usize, Along)> = None;
     let mut places: Vec<Place> = Vec::new();
     let place = |driver: &str, joint, sensor, side: &str, z| Place {
         driver: driver.into(),
@@ -585,33 +604,38 @@ fn neighbours(
     let whole = if point_data { "point" } else { "strings" };
     for (pk, (name, pairs)) in pairings.iter().enumerate() {
         let raw = |i: usize, k: usize| (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
-        let mut tries: Vec<(Option<f64>, bool)> = vec![(z_of(pairs, &raw), false)];
+        let mut tries: Vec<(Option<f64>, Along)> = vec![(z_of(pairs, &raw), Along::Raw)];
         if let (Some(a), true) = (along, pk < n) {
-            let proj = |i: usize, k: usize| a[pk][i] * a[pk][k];
-            tries.push((z_of(pairs, &proj), true));
+            let own = |i: usize, k: usize| a[pk][i] * a[pk][k];
+            tries.push((z_of(pairs, &own), Along::Own));
+            let others =
+                |i: usize, k: usize| (0..n).filter(|&b| b != pk).map(|b| a[b][i] * a[b][k]).sum();
+            tries.push((z_of(pairs, &others), Along::Others));
         }
         let (driver, joint) = driver_of(pk, n, with_temp);
         let mut strongest: Option<Place> = None;
-        for (z, projected) in tries {
+        for (z, on) in tries {
             let Some(z) = z else { continue };
             // (NaN, not yet set, is replaced.)
             if zs[pk].is_nan() || z > zs[pk] {
                 zs[pk] = z;
             }
             if z > zcrit {
-                let side = if projected { "robot" } else { whole };
+                let side = if on == Along::Raw { whole } else { "robot" };
                 if strongest.as_ref().is_none_or(|p| z > p.z) {
                     strongest = Some(place(driver, joint, None, side, z));
                 }
             }
             if z > zcrit && best.as_ref().is_none_or(|b| z > b.0) {
-                let label = if projected {
-                    format!("{name}, along the direction joint {} moves T", pk + 1)
-                } else {
-                    name.clone()
+                let label = match on {
+                    Along::Raw => name.clone(),
+                    Along::Own => format!("{name}, along the direction joint {} moves T", pk + 1),
+                    Along::Others => {
+                        format!("{name}, along the directions the other joints move T")
+                    }
                 };
                 best = Some((z, label));
-                winner_at = Some((pk, projected));
+                winner_at = Some((pk, on));
             }
         }
         places.extend(strongest);
@@ -636,7 +660,7 @@ fn neighbours(
             }
             if best.as_ref().is_none_or(|b| z > b.0) {
                 best = Some((z, t.name.clone()));
-                winner_at = Some((n_plain + k, false));
+                winner_at = Some((n_plain + k, Along::Raw));
             }
         }
     }
@@ -695,7 +719,7 @@ fn located(
                 ),
             )
         }
-        (Some((z, name)), _, Some((pk, false))) if pk >= pairings.len() => {
+        (Some((z, name)), _, Some((pk, Along::Raw))) if pk >= pairings.len() => {
             let t = &extra[pk - pairings.len()];
             let three = t.side == "strings";
             let (whose, reads) = if three {
@@ -739,16 +763,23 @@ fn located(
                 ),
             )
         }
-        (Some((z, name)), _, Some((pk, false))) => (
+        (Some((z, name)), _, Some((pk, Along::Raw))) => (
             pk,
             format!(
                 "residuals of neighbouring poses by {name} agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch varies smoothly with {name}"
             ),
         ),
-        (Some((z, _)), _, Some((pk, true))) => (
+        (Some((z, _)), _, Some((pk, Along::Own))) => (
             pk,
             format!(
                 "along the direction joint {j} moves T, the residuals of poses neighbouring in joint {j}'s angle agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch behaves like an error of joint {j}'s own angle that varies smoothly with the angle, in a form no catalogue effect has",
+                j = pk + 1
+            ),
+        ),
+        (Some((z, _)), _, Some((pk, Along::Others))) => (
+            pk,
+            format!(
+                "along the directions the other joints move T, the residuals of poses neighbouring in joint {j}'s angle agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch behaves like an error of another joint's angle driven by joint {j}'s (a cable or harness pulling, coupled drives), in a form no catalogue effect has",
                 j = pk + 1
             ),
         ),

@@ -47,8 +47,9 @@ fn a_compensation_that_would_swing_the_arm_is_refused_by_name() {
             && m.contains("the calibrated tool point is 15."),
         "{m}"
     );
-    // An ordinary taught pose compensates with the nearest joints: each
-    // moves a fraction of a degree for its 15 mm.
+    // An ordinary taught pose compensates with the nearest joints: none
+    // swings, each moves at most about two degrees for its 15 mm (joint 3
+    // the most: 1.9-2.0 deg, as the analysis's corrections change).
     let ordinary = [-150.0, -80.0, 60.0, -70.0, 40.0, 10.0];
     let c = comp.compensate(&joints("ordinary", &ordinary), false);
     assert_eq!(c.status, CompensationStatus::Ok, "{c:?}");
@@ -59,7 +60,7 @@ fn a_compensation_that_would_swing_the_arm_is_refused_by_name() {
         .zip(ordinary)
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
-    assert!(moved < 2.0, "{moved}");
+    assert!(moved < 2.5, "{moved}");
     // With the flange orientation held it is unreachable, and the answer
     // says how near it came, in position and orientation.
     let c = comp.compensate(&upright, true);
