@@ -955,3 +955,37 @@ impl Delta {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The spherical frame's directions against finite differences of the
+    /// spherical coordinates: a step along the azimuth direction changes
+    /// the azimuth by the step, and so on, each leaving the other two.
+    #[test]
+    fn point_frame_matches_finite_differences_of_the_coordinates() {
+        let h = 1e-6;
+        for p in [
+            Vector3::new(1200.0, -300.0, 450.0),
+            Vector3::new(-800.0, 1500.0, -200.0),
+            Vector3::new(100.0, 50.0, 2000.0),
+        ] {
+            let f = point_frame(CorrectionTarget::PointSpherical, &p);
+            for (c, dir) in f.iter().enumerate() {
+                let index = [3, 4, 5][c];
+                for other in 3..WORKSPACE_COORDINATES {
+                    let want = if other == index { 1.0 } else { 0.0 };
+                    let d = (workspace_coordinate(&(p + h * dir), other)
+                        - workspace_coordinate(&(p - h * dir), other))
+                        / (2.0 * h);
+                    assert!((d - want).abs() < 1e-6, "{p:?} {c} {other}: {d}");
+                }
+            }
+        }
+        assert_eq!(
+            point_frame(CorrectionTarget::Point, &Vector3::new(1.0, 2.0, 3.0)),
+            [Vector3::x(), Vector3::y(), Vector3::z()]
+        );
+    }
+}
