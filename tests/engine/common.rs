@@ -210,3 +210,31 @@ pub fn near_the_twin(
         "held out {with} mm against {without} mm without the error"
     );
 }
+
+/// Every finding of `report` is `unexplained` or `data_driven`: no
+/// catalogue name was forced.
+pub fn nothing_named(report: &drawcal::report::Report) {
+    let names: Vec<&str> = report.findings.iter().map(|f| f.effect.as_str()).collect();
+    assert!(
+        names
+            .iter()
+            .all(|n| matches!(*n, "unexplained" | "data_driven")),
+        "a catalogue name was forced: {names:?}"
+    );
+}
+
+/// The first place of `report`'s unexplained findings that `wanted`
+/// accepts (panics with every place when none does).
+pub fn place_where(
+    report: &drawcal::report::Report,
+    wanted: impl Fn(&drawcal::report::Place) -> bool,
+) -> &drawcal::report::Place {
+    let mut places = report
+        .findings
+        .iter()
+        .filter_map(|f| f.unexplained())
+        .flat_map(|u| u.places.iter());
+    places
+        .find(|p| wanted(p))
+        .unwrap_or_else(|| panic!("no such place among {:#?}", report.findings))
+}

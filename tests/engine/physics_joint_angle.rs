@@ -116,20 +116,10 @@ fn one_effect_beats_two_that_approximate_it() {
 fn one_joint_driven_by_another_is_located_and_corrected() {
     let (robot, rig, data) = common::load("xcheck3_coupling_points");
     let report = common::identify_default(&robot, &rig, &data);
-    let effects: Vec<&str> = report.findings.iter().map(|f| f.effect.as_str()).collect();
-    assert!(
-        effects
-            .iter()
-            .all(|e| matches!(*e, "unexplained" | "data_driven")),
-        "{effects:?}"
-    );
-    let at_joint_2 = report
-        .findings
-        .iter()
-        .filter_map(|f| f.unexplained())
-        .flat_map(|u| u.places.iter())
-        .any(|p| p.driver == "joint" && p.joint == Some(2) && p.z > p.threshold);
-    assert!(at_joint_2, "{:#?}", report.findings);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| {
+        p.driver == "joint" && p.joint == Some(2) && p.z > p.threshold
+    });
     let Kind::DataDriven {
         target,
         target_index,

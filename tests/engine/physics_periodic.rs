@@ -49,14 +49,7 @@ fn with_pitch(data: &Dataset, s: usize, period_mm: f64) -> Dataset {
 }
 
 fn calibrate(sim: &simulate::Simulated, data: &Dataset) -> Report {
-    drawcal::pipeline::calibrate(
-        &sim.robot,
-        &sim.rig,
-        data,
-        &Default::default(),
-        &drawcal::identify::NoProgress,
-    )
-    .unwrap()
+    common::identify_default(&sim.robot, &sim.rig, data)
 }
 
 /// The string's error is located on it, modelled periodically at about
@@ -64,23 +57,8 @@ fn calibrate(sim: &simulate::Simulated, data: &Dataset) -> Report {
 fn located_and_modelled(sim: &simulate::Simulated, s: usize, period_mm: f64, side: &str) {
     let twin = calibrate(sim, &sim.dataset);
     let r = calibrate(sim, &with_pitch(&sim.dataset, s, period_mm));
-    let names: Vec<&str> = r.findings.iter().map(|f| f.effect.as_str()).collect();
-    assert!(
-        names
-            .iter()
-            .all(|n| *n == "unexplained" || *n == "data_driven"),
-        "a catalogue name was forced: {names:?}"
-    );
-    let u = r
-        .findings
-        .iter()
-        .find_map(|f| f.unexplained())
-        .expect("an unexplained finding");
-    let place = u
-        .places
-        .iter()
-        .find(|p| p.driver == "string" && p.sensor == Some(s + 1))
-        .unwrap_or_else(|| panic!("not located on string {}: {:?}", s + 1, u.places));
+    common::nothing_named(&r);
+    let place = common::place_where(&r, |p| p.driver == "string" && p.sensor == Some(s + 1));
     assert_eq!(place.side, side);
     let c = common::data_driven_correction(&r);
     let Kind::DataDriven {
@@ -139,13 +117,7 @@ fn a_non_integer_harmonic_of_a_joint_is_modelled_periodically_in_its_angle() {
         p.q_rad[1] -= 0.02_f64.to_radians() * (h * p.q_rad[1] + 0.4).sin();
     }
     let r = calibrate(&sim, &data);
-    let names: Vec<&str> = r.findings.iter().map(|f| f.effect.as_str()).collect();
-    assert!(
-        names
-            .iter()
-            .all(|n| *n == "unexplained" || *n == "data_driven"),
-        "a catalogue name was forced: {names:?}"
-    );
+    common::nothing_named(&r);
     let c = common::data_driven_correction(&r);
     let Kind::DataDriven {
         target,

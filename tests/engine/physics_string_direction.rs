@@ -41,14 +41,7 @@ fn with_eyelet_wrap(sim: &simulate::Simulated, s: usize, rho_mm_per_rad: f64) ->
 }
 
 fn calibrate(sim: &simulate::Simulated, data: &Dataset) -> Report {
-    drawcal::pipeline::calibrate(
-        &sim.robot,
-        &sim.rig,
-        data,
-        &Default::default(),
-        &drawcal::identify::NoProgress,
-    )
-    .unwrap()
+    common::identify_default(&sim.robot, &sim.rig, data)
 }
 
 #[test]
@@ -63,31 +56,11 @@ fn a_string_reading_wrong_by_its_direction_is_located_on_it_and_not_named() {
 
     let s = 2;
     let r = calibrate(&sim, &with_eyelet_wrap(&sim, s, 1.5));
-    let names: Vec<&str> = r.findings.iter().map(|f| f.effect.as_str()).collect();
-    assert!(
-        names
-            .iter()
-            .all(|n| *n == "unexplained" || *n == "data_driven"),
-        "a catalogue name was forced: {names:?}"
-    );
-    let u = r
-        .findings
-        .iter()
-        .find_map(|f| f.unexplained())
-        .expect("an unexplained finding");
-    let place = u
-        .places
-        .iter()
-        .find(|p| p.driver == "workspace" && p.sensor == Some(s + 1))
-        .unwrap_or_else(|| {
-            panic!(
-                "not located on string {} by direction: {:?}",
-                s + 1,
-                u.places
-            )
-        });
+    common::nothing_named(&r);
+    let place = common::place_where(&r, |p| p.driver == "workspace" && p.sensor == Some(s + 1));
     assert_eq!(place.side, "sensor");
     assert!(place.z > place.threshold, "{place:?}");
+    let u = r.findings.iter().find_map(|f| f.unexplained()).unwrap();
     assert!(
         u.resembles.iter().any(|t| t.contains("by its direction")),
         "{:?}",

@@ -92,14 +92,7 @@ fn session(seed: u64, shift: &Shift) -> (Robot, Rig, Dataset, f64, serde_json::V
 }
 
 fn calibrate(robot: &Robot, rig: &Rig, data: &Dataset) -> Report {
-    drawcal::pipeline::calibrate(
-        robot,
-        rig,
-        data,
-        &Default::default(),
-        &drawcal::identify::NoProgress,
-    )
-    .unwrap()
+    common::identify_default(robot, rig, data)
 }
 
 #[test]
@@ -224,20 +217,8 @@ fn an_error_driven_by_the_move_is_located_at_the_motion_and_not_named() {
         }
     });
     let report = calibrate(&robot, &rig, &data);
-    let named: Vec<&str> = report
-        .findings
-        .iter()
-        .map(|f| f.effect.as_str())
-        .filter(|e| !matches!(*e, "unexplained" | "data_driven"))
-        .collect();
-    assert!(named.is_empty(), "{named:?}");
-    let motion = report
-        .findings
-        .iter()
-        .filter_map(|f| f.unexplained())
-        .flat_map(|u| u.places.iter())
-        .find(|p| p.driver == "motion");
-    let place = motion.unwrap_or_else(|| panic!("{:#?}", report.findings));
+    common::nothing_named(&report);
+    let place = common::place_where(&report, |p| p.driver == "motion");
     assert!(place.z > place.threshold);
     // Modelled there: T off along the move, by a function of its length,
     // which compensation cannot use (the move depends on the program).
@@ -279,13 +260,7 @@ fn an_instruments_azimuth_error_is_modelled_in_its_own_frame() {
     };
     let (robot, rig, data, _, _) = session(45, &azimuth_error);
     let report = calibrate(&robot, &rig, &data);
-    let effects: Vec<&str> = report.findings.iter().map(|f| f.effect.as_str()).collect();
-    assert!(
-        effects
-            .iter()
-            .all(|e| matches!(*e, "unexplained" | "data_driven")),
-        "{effects:?}"
-    );
+    common::nothing_named(&report);
     let Kind::DataDriven {
         target,
         driver,
@@ -319,20 +294,8 @@ fn an_instruments_azimuth_error_is_modelled_in_its_own_frame() {
 fn a_field_growing_towards_the_workspaces_edges_is_located_there() {
     let (robot, rig, data) = common::load("xcheck3_height_field_points");
     let report = calibrate(&robot, &rig, &data);
-    let effects: Vec<&str> = report.findings.iter().map(|f| f.effect.as_str()).collect();
-    assert!(
-        effects
-            .iter()
-            .all(|e| matches!(*e, "unexplained" | "data_driven")),
-        "{effects:?}"
-    );
-    let located = report
-        .findings
-        .iter()
-        .filter_map(|f| f.unexplained())
-        .flat_map(|u| u.places.iter())
-        .any(|p| p.driver == "workspace" && p.z > p.threshold);
-    assert!(located, "{:#?}", report.findings);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| p.driver == "workspace" && p.z > p.threshold);
     let Kind::DataDriven { driver, .. } = common::data_driven_correction(&report) else {
         unreachable!()
     };
