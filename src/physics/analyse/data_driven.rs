@@ -60,8 +60,9 @@ pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
     let mut tried: Vec<Kind> = Vec::new();
     let mut kept = 0;
     // A field over the workspace after the joints and strings (a string's
-    // direction included): it is the most general shape (it can take up part of what one joint's angle
-    // drives), so the specific driver has the first say. Functions of the
+    // direction included): it is the most general shape (it can take up
+    // part of what one joint's angle drives), so the specific driver has
+    // the first say. Functions of the
     // clock or the temperature last: over a long session they carry
     // hundreds of coefficients, and every later candidate's fit would carry
     // them too (its normal equations grow with the cube).
@@ -276,6 +277,50 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
     }
     out.retain(|f| !f.is_empty());
     out
+}
+
+/// Whether and where compensation can use a data-driven correction `kind`,
+/// in words (`point_data`: the session had no strings, so a field over
+/// the workspace cannot be told from the instrument's own distortion).
+fn compensation_words(kind: &Kind, point_data: bool) -> String {
+    let Kind::DataDriven { driver, knots, .. } = kind else {
+        return String::new();
+    };
+    let (lo, hi) = kind
+        .fitted_range()
+        .unwrap_or((knots[0], knots[knots.len() - 1]));
+    let beyond = kind.beyond_range();
+    if *driver == CorrectionDriver::Workspace {
+        let (lo, hi, unit) = match kind {
+            Kind::DataDriven {
+                driver_index: Some(3 | 4),
+                ..
+            } => (lo.to_degrees(), hi.to_degrees(), "deg"),
+            _ => (lo, hi, "mm"),
+        };
+        // Strings that agree place the displacement on the robot's side;
+        // one instrument's points cannot.
+        let caveat = if point_data {
+            "; with point data alone a distortion of the measuring instrument cannot be told from one of the robot: unless the targets were defined with this instrument, measure again from another instrument position before relying on it"
+        } else {
+            ""
+        };
+        format!(
+            "compensation applies it (a function of where T is), inside the region the poses covered ({lo:.1} to {hi:.1} {unit}; beyond it {beyond}, and compensation warns){caveat}"
+        )
+    } else if driver.usable_for_compensation() {
+        format!(
+            "compensation applies it (a function of joint angles), inside the range the poses covered ({:.1} to {:.1} deg; beyond it {beyond}, and compensation warns)",
+            lo.to_degrees(),
+            hi.to_degrees()
+        )
+    } else if *driver == CorrectionDriver::Motion {
+        "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; T was measured before the arm settled: dwell longer at each pose or approach slower, and check the servo tuning".into()
+    } else if kind.robot_side() {
+        "compensation cannot use it: it is a function of this session's clock or temperature history, not of a future target; find what changed during the session (the stand, the tracker, the temperature of the cell), keep it constant, or re-calibrate when it has settled".into()
+    } else {
+        "compensation does not need it: it corrects what a string read, not where the robot went; check that string (its drum, its exit, its mounting)".into()
+    }
 }
 
 /// Knots per period of the periodic corrections scanned over their period;
@@ -503,42 +548,7 @@ fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: 
     let Kind::DataDriven { driver, knots, .. } = &e.kind else {
         return false;
     };
-    let (lo, hi) = e
-        .kind
-        .fitted_range()
-        .unwrap_or((knots[0], knots[knots.len() - 1]));
-    let beyond = e.kind.beyond_range();
-    let usable = if *driver == CorrectionDriver::Workspace {
-        let (lo, hi, unit) = match e.kind {
-            Kind::DataDriven {
-                driver_index: Some(3 | 4),
-                ..
-            } => (lo.to_degrees(), hi.to_degrees(), "deg"),
-            _ => (lo, hi, "mm"),
-        };
-        // Strings that agree place the displacement on the robot's side;
-        // one instrument's points cannot.
-        let caveat = if ctx.anchors.is_empty() {
-            "; with point data alone a distortion of the measuring instrument cannot be told from one of the robot: unless the targets were defined with this instrument, measure again from another instrument position before relying on it"
-        } else {
-            ""
-        };
-        format!(
-            "compensation applies it (a function of where T is), inside the region the poses covered ({lo:.1} to {hi:.1} {unit}; beyond it {beyond}, and compensation warns){caveat}"
-        )
-    } else if driver.usable_for_compensation() {
-        format!(
-            "compensation applies it (a function of joint angles), inside the range the poses covered ({:.1} to {:.1} deg; beyond it {beyond}, and compensation warns)",
-            lo.to_degrees(),
-            hi.to_degrees()
-        )
-    } else if *driver == CorrectionDriver::Motion {
-        "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; T was measured before the arm settled: dwell longer at each pose or approach slower, and check the servo tuning".into()
-    } else if e.kind.robot_side() {
-        "compensation cannot use it: it is a function of this session's clock or temperature history, not of a future target; find what changed during the session (the stand, the tracker, the temperature of the cell), keep it constant, or re-calibrate when it has settled".into()
-    } else {
-        "compensation does not need it: it corrects what a string read, not where the robot went; check that string (its drum, its exit, its mounting)".into()
-    };
+    let usable = compensation_words(&e.kind, ctx.anchors.is_empty());
     let shape = match e.kind {
         Kind::DataDriven {
             period: Some(p),
