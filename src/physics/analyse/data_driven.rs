@@ -94,30 +94,44 @@ pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
     }
 }
 
-/// The candidate families at a place: per family one slot (what is
-/// corrected, what drives it) at every knot count the train poses allow.
-fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
-    let Inputs { obs, ctx, .. } = inputs;
-    let n = ctx.n_joints;
-    let m = ctx.anchors.len();
-    let train = &obs.train;
-    let values = |driver: CorrectionDriver, index: Option<usize>, axis: Option<&[f64; 3]>| {
-        train
+/// The train poses' values of a driver, and the candidate families built
+/// on them.
+struct Slots<'a> {
+    ctx: &'a crate::physics::effects::Context,
+    train: &'a [usize],
+}
+
+impl Slots<'_> {
+    /// The driver's value at every train pose (a string's direction from
+    /// `axis`).
+    fn values(
+        &self,
+        driver: CorrectionDriver,
+        index: Option<usize>,
+        axis: Option<&[f64; 3]>,
+    ) -> Vec<f64> {
+        self.train
             .iter()
-            .map(|&i| ctx.driver_value(&ctx.poses[i], driver, index, axis))
-            .collect::<Vec<f64>>()
-    };
-    let family_about = |target,
-                        target_index,
-                        driver,
-                        driver_index,
-                        axis: Option<[f64; 3]>,
-                        counts: &[usize]|
-     -> Vec<Kind> {
-        let v = values(driver, driver_index, axis.as_ref());
+            .map(|&i| {
+                self.ctx
+                    .driver_value(&self.ctx.poses[i], driver, index, axis)
+            })
+            .collect()
+    }
+
+    /// Piecewise-linear candidates of one slot at each of `counts` knots
+    /// the train poses allow, knots at quantiles of the driver.
+    fn knotted_about(
+        &self,
+        (target, target_index): (CorrectionTarget, Option<usize>),
+        (driver, driver_index): (CorrectionDriver, Option<usize>),
+        axis: Option<[f64; 3]>,
+        counts: &[usize],
+    ) -> Vec<Kind> {
+        let v = self.values(driver, driver_index, axis.as_ref());
         counts
             .iter()
-            .filter(|&&k| k * POSES_PER_KNOT <= train.len())
+            .filter(|&&k| k * POSES_PER_KNOT <= self.train.len())
             .filter_map(|&k| knots_at_quantiles(&v, k))
             .map(|knots| Kind::DataDriven {
                 target,
@@ -130,13 +144,30 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                 axis,
             })
             .collect()
-    };
-    let family = |target, target_index, driver, driver_index, counts: &[usize]| {
-        family_about(target, target_index, driver, driver_index, None, counts)
-    };
-    // Periodic in the driver at every period scanned (see `periodogram`).
-    let periodic_family = |target, target_index, driver, driver_index| -> Vec<Kind> {
-        let v = values(driver, driver_index, None);
+    }
+
+    /// [`Self::knotted_about`] for a driver without an axis.
+    fn knotted(
+        &self,
+        target: CorrectionTarget,
+        target_index: Option<usize>,
+        driver: CorrectionDriver,
+        driver_index: Option<usize>,
+        counts: &[usize],
+    ) -> Vec<Kind> {
+        self.knotted_about((target, target_index), (driver, driver_index), None, counts)
+    }
+
+    /// Periodic candidates of one slot at every period scanned (see
+    /// `periodogram`), [`SCAN_KNOTS`] knots per period.
+    fn periodic_scan(
+        &self,
+        target: CorrectionTarget,
+        target_index: Option<usize>,
+        driver: CorrectionDriver,
+        driver_index: Option<usize>,
+    ) -> Vec<Kind> {
+        let v = self.values(driver, driver_index, None);
         let range = v
             .iter()
             .fold([f64::INFINITY, f64::NEG_INFINITY], |[a, b], &x| {
@@ -154,6 +185,35 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                 )
             })
             .collect()
+    }
+
+    /// The unit vector of string `s`'s (0-based) mean direction from its
+    /// anchor over the train poses; none when the directions cancel.
+    fn mean_direction(&self, s: usize) -> Option<[f64; 3]> {
+        let mean: Vector3<f64> = self
+            .train
+            .iter()
+            .map(|&i| (self.ctx.poses[i].point_rig - self.ctx.anchors[s]).normalize())
+            .sum();
+        mean.try_normalize(0.0).map(Into::into)
+    }
+}
+
+/// The candidate families at a place: per family one slot (what is
+/// corrected, what drives it) at every knot count the train poses allow.
+fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
+    let Inputs { obs, ctx, .. } = inputs;
+    let n = ctx.n_joints;
+    let m = ctx.anchors.len();
+    let slots = Slots {
+        ctx,
+        train: &obs.train,
+    };
+    let family = |target, target_index, driver, driver_index, counts: &[usize]| {
+        slots.knotted(target, target_index, driver, driver_index, counts)
+    };
+    let periodic_family = |target, target_index, driver, driver_index| {
+        slots.periodic_scan(target, target_index, driver, driver_index)
     };
     let mut out = Vec::new();
     match (place.driver.as_str(), place.joint, place.sensor) {
@@ -231,17 +291,11 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
         // friction at its exit, eyelet or pulley): by the angle from its
         // mean direction over the train poses.
         ("workspace", _, Some(s)) if s <= m => {
-            let mean: Vector3<f64> = train
-                .iter()
-                .map(|&i| (ctx.poses[i].point_rig - ctx.anchors[s - 1]).normalize())
-                .sum();
-            if mean.norm() > 0.0 {
-                out.push(family_about(
-                    CorrectionTarget::StringReading,
-                    Some(s - 1),
-                    CorrectionDriver::StringDirection,
-                    Some(s - 1),
-                    Some(mean.normalize().into()),
+            if let Some(axis) = slots.mean_direction(s - 1) {
+                out.push(slots.knotted_about(
+                    (CorrectionTarget::StringReading, Some(s - 1)),
+                    (CorrectionDriver::StringDirection, Some(s - 1)),
+                    Some(axis),
                     &JOINT_KNOTS,
                 ));
             }
