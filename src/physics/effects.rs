@@ -132,7 +132,15 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
             "the position of T in the spherical frame about the rig's origin (azimuth, elevation, distance)".into()
         }
         CorrectionTarget::StringReading => format!("string {at}'s reading"),
+        CorrectionTarget::LinkLength => format!("the length {}", length_name(index)),
     }
+}
+
+/// The name of the length a [`CorrectionTarget::LinkLength`] corrects
+/// (`j2.a`), as the report names parameters.
+pub fn length_name(index: Option<usize>) -> String {
+    let i = index.unwrap_or(0);
+    format!("j{}.{}", i / 5 + 1, JointParam::ALL[i % 5].short())
 }
 
 /// An amount of a correction's driver (internal units: rad, s, degrees C,
@@ -293,6 +301,11 @@ pub struct PoseContext {
     tilt: Vector3<f64>,
     /// Size of that gravity moment (N·m; zero without masses).
     pub base_moment_nm: f64,
+    /// Displacement of T in the rig frame (mm) per mm of each length of
+    /// [`Context::lengths`], in that order, at the nominal geometry (a
+    /// length's change moves T by this to first order; the deviations
+    /// change it by a part in a thousand).
+    d_lengths: Vec<Vector3<f64>>,
 }
 
 /// The pose contexts of a whole session and the fixed quantities effects use.
@@ -515,6 +528,7 @@ impl Context {
         let qs: Vec<&[f64]> = poses.iter().map(|p| p.q_rad).collect();
         let dirs = approach_directions(&qs);
         let lengths = nominal_lengths(robot);
+        let mut jac = chain.new_jacobian();
         let ctx_poses = poses
             .iter()
             .zip(dirs)
@@ -532,6 +546,11 @@ impl Context {
                     }
                     None => (Vector3::zeros(), 0.0),
                 };
+                chain.point_jacobian(&nominal.values, p.q_rad, OutputFrame::Base, &mut jac);
+                let d_lengths = lengths
+                    .iter()
+                    .map(|&(k, _)| base_rotation * jac.d_params[k])
+                    .collect();
                 let thermal = match thermal_driver {
                     ThermalDriver::Temperature => p.temp_c.unwrap_or(temp_ref) - temp_ref,
                     ThermalDriver::Time => (p.time_s.unwrap_or(t_ref) - t_ref) / 3600.0,
@@ -556,6 +575,7 @@ impl Context {
                     torque,
                     tilt,
                     base_moment_nm,
+                    d_lengths,
                 }
             })
             .collect();
@@ -737,6 +757,16 @@ impl Context {
                 let x = self.driver_value(pc, *driver, *driver_index, axis.as_ref());
                 // Along the move that led to the pose (none for the first).
                 let along = pc.move_rig.try_normalize(0.0).unwrap_or_default();
+                // How T moves with the corrected length (none for a length
+                // the model does not have).
+                let by_length = match target {
+                    CorrectionTarget::LinkLength => self
+                        .lengths
+                        .iter()
+                        .position(|&(k, _)| Some(k) == *target_index)
+                        .map_or(Vector3::zeros(), |l| pc.d_lengths[l]),
+                    _ => Vector3::zeros(),
+                };
                 for (k, w) in hat_weights(knots, *period, x) {
                     if w == 0.0 {
                         continue;
@@ -753,6 +783,11 @@ impl Context {
                         CorrectionTarget::StringReading => {
                             out.dl[k * m + target_index.unwrap_or(0)] += w;
                         }
+                        CorrectionTarget::LinkLength => {
+                            for r in 0..3 {
+                                out.dp[k * 3 + r] += w * by_length[r];
+                            }
+                        }
                         CorrectionTarget::Point | CorrectionTarget::PointSpherical => {
                             let frame = point_frame(*target, &pc.point_rig);
                             for (c, dir) in frame.iter().enumerate() {
@@ -764,6 +799,28 @@ impl Context {
                     }
                 }
             }
+        }
+    }
+
+    /// The weights of a data-driven correction's coefficients at pose `i`
+    /// (its driver's two hat functions there): the correction's own value
+    /// at the pose (an angle, a reading, a length) is their sum with the
+    /// coefficients. Zero for a named effect.
+    pub fn knot_weights(&self, kind: &Kind, i: usize) -> [(usize, f64); 2] {
+        match kind {
+            Kind::DataDriven {
+                driver,
+                driver_index,
+                knots,
+                period,
+                axis,
+                ..
+            } => hat_weights(
+                knots,
+                *period,
+                self.driver_value(&self.poses[i], *driver, *driver_index, axis.as_ref()),
+            ),
+            _ => [(0, 0.0), (0, 0.0)],
         }
     }
 

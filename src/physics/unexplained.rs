@@ -131,8 +131,6 @@ pub(super) fn unexplained(
     } else {
         worst_region(ctx, &obs.train, &res, rpp)
     };
-    let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
-    let test = rms(&errors_with_effects(obs, ctx, p, effects, &obs.test));
     let places = places(
         obs,
         ctx,
@@ -166,7 +164,78 @@ pub(super) fn unexplained(
         places,
         resembles,
     };
-    Some(Finding {
+    let plot = super::evidence::unexplained_plot(
+        obs,
+        ctx,
+        p,
+        effects,
+        winner.min(plot_len - 1),
+        &nb.zs[..plot_len],
+    );
+    let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
+    Some(finding(
+        obs,
+        ctx,
+        (p, effects),
+        rms_res,
+        parameters,
+        format!("{located}{region}"),
+        plot,
+    ))
+}
+
+/// An `unexplained` finding at one `place` that a shape test located
+/// (not the neighbour tests): `evidence` says how, `resembles` which
+/// catalogue effect was set aside and why. Its plot orders the poses by
+/// the place's driver (time, temperature or a joint's angle).
+pub(super) fn unexplained_at(
+    obs: &Observations,
+    ctx: &Context,
+    (p, effects): (&[f64], &[EffectModel]),
+    place: Place,
+    evidence: String,
+    resembles: Vec<String>,
+) -> Finding {
+    let (res, _) = train_residuals(obs, ctx, p, effects);
+    let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();
+    let nj = ctx.n_joints;
+    let with_temp = has_temperature(obs);
+    let winner = match (place.driver.as_str(), place.joint) {
+        ("temperature", _) if with_temp => nj + 1,
+        ("joint", Some(j)) if j >= 1 && j <= nj => j - 1,
+        _ => nj,
+    };
+    let plot_z = vec![f64::NAN; nj + 2 + usize::from(with_temp)];
+    let plot = super::evidence::unexplained_plot(obs, ctx, p, effects, winner, &plot_z);
+    let parameters = UnexplainedLocation {
+        ordering: place.driver.clone(),
+        along_joint_motion: false,
+        z: place.z,
+        confined_joint: None,
+        confined_deg: None,
+        confined_train_poses: None,
+        confined_p: None,
+        robot_side_variance_ratio: None,
+        variance_ratio_threshold: None,
+        places: vec![place],
+        resembles,
+    };
+    finding(obs, ctx, (p, effects), rms_res, parameters, evidence, plot)
+}
+
+/// The `unexplained` finding of the model `(p, effects)`: `rms_res` its
+/// train residual RMS per reading, `parameters` where it lives.
+fn finding(
+    obs: &Observations,
+    ctx: &Context,
+    (p, effects): (&[f64], &[EffectModel]),
+    rms_res: f64,
+    parameters: UnexplainedLocation,
+    evidence: String,
+    evidence_plot: Option<crate::report::EvidencePlot>,
+) -> Finding {
+    let test = rms(&errors_with_effects(obs, ctx, p, effects, &obs.test));
+    Finding {
         effect: "unexplained".into(),
         joint: None,
         sensor: None,
@@ -174,19 +243,12 @@ pub(super) fn unexplained(
         sigma: f64::NAN, // no fitted parameter: no uncertainty (null)
         unit: "mm (train residual RMS per reading)".into(),
         explanation: "structure remains that no effect of the catalogue explains; it is reported rather than forced onto a wrong name".into(),
-        evidence: format!("{located}{region}"),
+        evidence,
         test_rms_before_mm: test,
         test_rms_after_mm: test,
         parameters: Some(FindingModel::Unexplained(parameters)),
-        evidence_plot: super::evidence::unexplained_plot(
-            obs,
-            ctx,
-            p,
-            effects,
-            winner.min(plot_len - 1),
-            &nb.zs[..plot_len],
-        ),
-    })
+        evidence_plot,
+    }
 }
 
 /// Every place the structure was located: a confined stretch of a joint's

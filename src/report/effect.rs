@@ -36,6 +36,14 @@ pub enum CorrectionTarget {
     /// line of sight). An instrument's angle encoders and range err in
     /// these directions, which turn with where T is.
     PointSpherical,
+    /// One length of the model (an `a` or a `d`, mm): `target_index` is
+    /// its index in the parameter vector (`5 · joint + 0` for a, `+ 2` for
+    /// d). T moves as that length's change moves it. A link that grows
+    /// with the temperature while the others do not (one aluminium part,
+    /// one link warmed by a motor) is such a correction of one length in
+    /// the temperature, where the catalogue's thermal expansion grows every
+    /// length in proportion.
+    LinkLength,
 }
 
 /// What drives a data-driven correction.
@@ -295,7 +303,8 @@ impl Kind {
                 | Kind::DataDriven {
                     target: CorrectionTarget::JointAngle
                         | CorrectionTarget::Point
-                        | CorrectionTarget::PointSpherical,
+                        | CorrectionTarget::PointSpherical
+                        | CorrectionTarget::LinkLength,
                     ..
                 }
         )

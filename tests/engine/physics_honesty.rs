@@ -457,3 +457,43 @@ fn compensation_applies_a_joint_driven_correction_and_warns_outside_its_range() 
         "{outside:?}"
     );
 }
+
+/// One link growing with the temperature (from the third cross-check,
+/// `tests/data/xcheck3_link_thermal_std4`): a UR5's upper arm (joint 2's
+/// a) alone grows, the other lengths keep their size. The catalogue's
+/// `thermal_expansion` (every length in proportion) takes most of it and
+/// was named on every such recording; it is the wrong physics (an
+/// engineer would look at the whole arm's temperature, not at one link).
+/// The analysis must name nothing, locate the growth at the temperature
+/// and in joint 2's length, correct that length alone as a function of
+/// the temperature, and come near the twin without the growth.
+#[test]
+fn one_link_growing_with_the_temperature_is_not_thermal_expansion() {
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget, Kind};
+    let (robot, rig, data) = common::load("xcheck3_link_thermal_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| {
+        p.driver == "temperature" && p.joint == Some(2) && p.z > p.threshold
+    });
+    let Kind::DataDriven {
+        target,
+        target_index,
+        driver,
+        ..
+    } = common::data_driven_correction(&report)
+    else {
+        unreachable!()
+    };
+    // j2.a: joint 2 (0-based 1), parameter a.
+    assert_eq!(
+        (target, target_index, driver),
+        (
+            CorrectionTarget::LinkLength,
+            Some(5),
+            CorrectionDriver::Temperature
+        )
+    );
+    let (robot, rig, twin) = common::load("xcheck3_link_thermal_std4/twin");
+    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.1);
+}

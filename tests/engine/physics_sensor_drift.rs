@@ -135,3 +135,43 @@ fn a_partly_filled_clock_is_the_row_order() {
         f.sigma
     );
 }
+
+/// One string's zero oscillating in time (from the third cross-check,
+/// `tests/data/xcheck3_string_zero_osc_std4`): string 4 of the four, 2.5
+/// cycles over the session. It moves the located point, so every string
+/// follows the clock; before, T's position in time was corrected (3
+/// coefficients per knot, too few knots for the cycles) and the held-out
+/// RMS stayed 3.5 times the twin's. The analysis must name nothing,
+/// correct string 4's reading as a function of the clock and come near the
+/// twin without the oscillation.
+#[test]
+fn one_strings_zero_cycling_in_time_is_corrected_on_that_string() {
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget, Kind};
+    let (robot, rig, data) = common::load("xcheck3_string_zero_osc_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| p.driver == "time" && p.z > p.threshold);
+    let Kind::DataDriven {
+        target,
+        target_index,
+        driver,
+        ..
+    } = common::data_driven_correction(&report)
+    else {
+        unreachable!()
+    };
+    assert_eq!(
+        (target, target_index, driver),
+        (
+            CorrectionTarget::StringReading,
+            Some(3),
+            CorrectionDriver::Time
+        )
+    );
+    let (robot, rig, twin) = common::load("xcheck3_string_zero_osc_std4/twin");
+    common::near_the_twin(
+        &report,
+        &common::identify_default(&robot, &rig, &twin),
+        1.25,
+    );
+}

@@ -238,13 +238,37 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
                 Some(j - 1),
             ));
         }
-        ("time", None, None) => out.push(family(
-            CorrectionTarget::Point,
-            None,
-            CorrectionDriver::Time,
-            None,
-            &CLOCK_KNOTS,
-        )),
+        // The clock: T relative to the rig, or one string's zero (a
+        // string's error in time moves the located point too, so every
+        // string's residual follows the clock; cross-validation tells one
+        // string's reading, a third of the columns, from a displacement).
+        ("time", None, None) => {
+            out.push(family(
+                CorrectionTarget::Point,
+                None,
+                CorrectionDriver::Time,
+                None,
+                &CLOCK_KNOTS,
+            ));
+            for s in 0..m {
+                out.push(family(
+                    CorrectionTarget::StringReading,
+                    Some(s),
+                    CorrectionDriver::Time,
+                    None,
+                    &CLOCK_KNOTS,
+                ));
+                // Or a cycle (a sensor's electronics or spool following
+                // the cell's heating cycle; a zero that creeps and resets):
+                // several cycles need more knots than the poses hold.
+                out.push(periodic_family(
+                    CorrectionTarget::StringReading,
+                    Some(s),
+                    CorrectionDriver::Time,
+                    None,
+                ));
+            }
+        }
         ("temperature", _, _) => out.push(family(
             CorrectionTarget::Point,
             None,
@@ -333,6 +357,37 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
     out
 }
 
+/// Knot counts of one length's growth in the thermal driver: linear (two
+/// knots, as expansion is), or a curve that bends (a warm-up settling).
+const LENGTH_KNOTS: [usize; 3] = [2, 3, 4];
+
+/// One family per length of the model ([`Context::lengths`]): that length
+/// alone changing as a function of `driver` (the temperature or the
+/// clock), what a link that grows unlike the others needs.
+///
+/// [`Context::lengths`]: crate::physics::effects::Context::lengths
+pub(super) fn length_families(inputs: &Inputs, driver: CorrectionDriver) -> Vec<Vec<Kind>> {
+    let slots = Slots {
+        ctx: &inputs.ctx,
+        train: &inputs.obs.train,
+    };
+    inputs
+        .ctx
+        .lengths
+        .iter()
+        .map(|&(k, _)| {
+            slots.knotted(
+                CorrectionTarget::LinkLength,
+                Some(k),
+                driver,
+                None,
+                &LENGTH_KNOTS,
+            )
+        })
+        .filter(|f| !f.is_empty())
+        .collect()
+}
+
 /// Whether and where compensation can use a data-driven correction `kind`,
 /// in words (`point_data`: the session had no strings, so a field over
 /// the workspace cannot be told from the instrument's own distortion).
@@ -367,6 +422,21 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
             "compensation applies it (a function of joint angles), inside the range the poses covered ({:.1} to {:.1} deg; beyond it {beyond}, and compensation warns)",
             lo.to_degrees(),
             hi.to_degrees()
+        )
+    } else if let Kind::DataDriven {
+        target: CorrectionTarget::LinkLength,
+        target_index,
+        ..
+    } = kind
+    {
+        format!(
+            "compensation does not apply it: it follows this session's {} history; {} grew unlike the other lengths: check that link (its material, a motor or drive warming it, a loose joint in it), or calibrate at the temperature the robot works at",
+            if *driver == CorrectionDriver::Temperature {
+                "temperature"
+            } else {
+                "clock (a warm-up)"
+            },
+            crate::physics::effects::length_name(*target_index)
         )
     } else if *driver == CorrectionDriver::Motion {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; T was measured before the arm settled: dwell longer at each pose or approach slower, and check the servo tuning".into()
@@ -536,7 +606,12 @@ fn linearise<'a>(
 
 /// The best candidate of `families` by cross-validated SSE, through the
 /// held-out gate; kept: its finding written and `state` moved to it.
-fn try_place(inputs: &Inputs, state: &mut State, families: &[Vec<Kind>], place: &Place) -> bool {
+pub(super) fn try_place(
+    inputs: &Inputs,
+    state: &mut State,
+    families: &[Vec<Kind>],
+    place: &Place,
+) -> bool {
     // Ranked by cross-validation; only the scores are kept (the normal
     // equations of a long session's many-knot candidates are large), and
     // the best that also solves in full is linearised again.

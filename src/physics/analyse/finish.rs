@@ -43,6 +43,11 @@ pub(super) fn finish(
         &state.accepted,
         &mut state.findings,
     );
+    // The catalogue's thermal expansion grows every length in proportion;
+    // one link growing alone is another physics.
+    if naming::uneven_thermal(&inputs, &mut state) {
+        pruned_and_restated(&inputs, &mut state);
+    }
     // Named terms whose shape is no one physical effect (a series of terms
     // of one joint, several moves of the rig or of one anchor) are taken
     // out and the structure they fitted is located and modelled without a
@@ -131,6 +136,14 @@ fn locate_and_correct(inputs: &Inputs, state: &mut State) -> bool {
     if state.accepted.len() == n_before {
         return false;
     }
+    pruned_and_restated(inputs, state);
+    true
+}
+
+/// Once a data-driven correction is in: the named effects it makes
+/// redundant dropped ([`naming::prune`]), the whole model refit and every
+/// finding restated from the refit.
+fn pruned_and_restated(inputs: &Inputs, state: &mut State) {
     naming::prune(inputs, state);
     if let Some((p, accepted, fit)) = data_driven::linear_refit(inputs, state) {
         state.p = p;
@@ -147,7 +160,6 @@ fn locate_and_correct(inputs: &Inputs, state: &mut State) -> bool {
             &mut state.findings,
         );
     }
-    true
 }
 
 /// Later rounds refit the earlier effects: every finding reports its

@@ -165,6 +165,20 @@ fn data_driven_size(
                             nz.push((0, k, w));
                         }
                     }
+                    Kind::DataDriven {
+                        target: CorrectionTarget::LinkLength,
+                        ..
+                    } => {
+                        let w: f64 = ctx
+                            .knot_weights(kind, i)
+                            .iter()
+                            .filter(|&&(at, _)| at == k)
+                            .map(|&(_, w)| w)
+                            .sum();
+                        if w != 0.0 {
+                            nz.push((0, k, w));
+                        }
+                    }
                     _ => {
                         for r in 0..3 {
                             let w = buf.dp[k * 3 + r];
@@ -241,6 +255,15 @@ fn data_driven_spread(ctx: &Context, kind: &Kind, coef: &[f64], poses: &[usize])
                     target_index,
                     ..
                 } => vec![sum(&buf.dl, m, target_index.unwrap_or(0))],
+                Kind::DataDriven {
+                    target: CorrectionTarget::LinkLength,
+                    ..
+                } => vec![
+                    ctx.knot_weights(kind, i)
+                        .iter()
+                        .map(|&(k, w)| coef[k] * w)
+                        .sum(),
+                ],
                 _ => (0..3).map(|r| sum(&buf.dp, 3, r)).collect(),
             }
         })
@@ -312,6 +335,10 @@ fn fixed_unit(kind: &Kind) -> &'static str {
             target: CorrectionTarget::Point | CorrectionTarget::PointSpherical,
             ..
         } => "mm (RMS displacement of T over the train poses)",
+        Kind::DataDriven {
+            target: CorrectionTarget::LinkLength,
+            ..
+        } => "mm (RMS change of the length over the train poses)",
         Kind::DataDriven { .. } => "mm (RMS change of the reading over the train poses)",
     }
 }

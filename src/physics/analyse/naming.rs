@@ -200,6 +200,80 @@ fn without_all(
     Some(problem.unpack(&x))
 }
 
+/// Thermal expansion grows every length in proportion to it. When one
+/// length's growth alone (a data-driven correction of that length in the
+/// same driver) predicts the held-out readings clearly better (paired z
+/// of at least [`HELD_OUT_Z`](super::HELD_OUT_Z)), the lengths did not
+/// grow in proportion and the catalogue's effect is not the physics: it
+/// is dropped, an `unexplained` finding at the thermal driver says so and
+/// the length's growth is kept as the correction. True when done.
+pub(super) fn uneven_thermal(inputs: &Inputs, state: &mut State) -> bool {
+    use crate::physics::effects::{CorrectionDriver, Kind, ThermalDriver};
+    let Some(k) = state
+        .accepted
+        .iter()
+        .position(|e| matches!(e.kind, Kind::ThermalExpansion { .. }))
+    else {
+        return false;
+    };
+    let (driver, place_driver) = match inputs.ctx.thermal_driver {
+        ThermalDriver::Temperature => (CorrectionDriver::Temperature, "temperature"),
+        ThermalDriver::Time | ThermalDriver::Order => (CorrectionDriver::Time, "time"),
+    };
+    let Some((p, eff)) = without(inputs, state, k) else {
+        return false;
+    };
+    let gone = state.accepted[k].kind.clone();
+    let mut alt = state.clone();
+    alt.findings
+        .retain(|f| f.effect_model().is_none_or(|m| m.kind != gone));
+    alt.p = p;
+    alt.accepted = eff;
+    let bare = (alt.p.clone(), alt.accepted.clone());
+    let at = alt.findings.len();
+    let mut place = crate::report::Place {
+        driver: place_driver.into(),
+        joint: None,
+        sensor: None,
+        side: "robot".into(),
+        z: f64::NAN,
+        threshold: super::HELD_OUT_Z,
+        range: None,
+    };
+    let families = super::data_driven::length_families(inputs, driver);
+    if !super::data_driven::try_place(inputs, &mut alt, &families, &place) {
+        return false;
+    }
+    let z = held_out_gain_z(inputs, (&state.p, &state.accepted), (&alt.p, &alt.accepted));
+    if z < super::HELD_OUT_Z {
+        return false;
+    }
+    let Some(Kind::DataDriven { target_index, .. }) = alt.accepted.last().map(|e| &e.kind) else {
+        return false;
+    };
+    let length = crate::physics::effects::length_name(*target_index);
+    place.joint = target_index.map(|i| i / 5 + 1);
+    place.z = z;
+    let why = format!(
+        "thermal_expansion (every a and d growing in proportion with the {place_driver}) was kept, but {length} growing alone predicts the held-out readings better (paired z = {z:.1}, needs {}): the lengths did not grow in proportion, so it is not the catalogue's expansion of the arm",
+        super::HELD_OUT_Z
+    );
+    let finding = crate::physics::unexplained::unexplained_at(
+        inputs.obs,
+        &inputs.ctx,
+        (&bare.0, &bare.1),
+        place,
+        format!(
+            "a growth with the {place_driver} located in one length, {length}, by the test of thermal expansion's shape (every length in proportion against each length alone)"
+        ),
+        vec![why.clone()],
+    );
+    alt.findings.insert(at, finding);
+    alt.notes.push(why);
+    *state = alt;
+    true
+}
+
 /// A set of named effects whose shape is no one physical effect.
 pub(super) struct Series {
     /// Their positions in the accepted effects.
