@@ -147,7 +147,9 @@ pub fn length_name(index: Option<usize>) -> String {
 /// mm) in words with its unit.
 pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, v: f64) -> String {
     match driver {
-        CorrectionDriver::JointAngle | CorrectionDriver::StringDirection => {
+        CorrectionDriver::JointAngle
+        | CorrectionDriver::JointMove
+        | CorrectionDriver::StringDirection => {
             format!("{:.1} deg", v.to_degrees())
         }
         CorrectionDriver::Workspace if matches!(index, Some(3 | 4)) => {
@@ -166,6 +168,7 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
     let at = index.map_or(0, |i| i + 1);
     match driver {
         CorrectionDriver::JointAngle => format!("joint {at}'s angle"),
+        CorrectionDriver::JointMove => format!("joint {at}'s last move"),
         CorrectionDriver::Time => "the session's clock".into(),
         CorrectionDriver::Temperature => "the temperature".into(),
         CorrectionDriver::StringLength => format!("string {at}'s length"),
@@ -279,6 +282,9 @@ pub struct PoseContext {
     pub q_rad: Vec<f64>,
     /// Direction each joint last moved (+1, -1; 0 before any motion).
     pub direction: Vec<f64>,
+    /// Each joint's last move: its angle less the previous pose's (rad;
+    /// zero for the first pose).
+    pub move_q_rad: Vec<f64>,
     /// Seconds since the session began.
     pub time_s: f64,
     /// Thermal driver value (K or h).
@@ -559,6 +565,15 @@ impl Context {
                 PoseContext {
                     q_rad: p.q_rad.to_vec(),
                     direction,
+                    move_q_rad: match i {
+                        0 => vec![0.0; p.q_rad.len()],
+                        _ => p
+                            .q_rad
+                            .iter()
+                            .zip(poses[i - 1].q_rad)
+                            .map(|(q, r)| q - r)
+                            .collect(),
+                    },
                     // A partly filled time_s column is no clock: the row
                     // index stands in throughout, never mixed with seconds.
                     time_s: match p.time_s {
@@ -837,6 +852,7 @@ impl Context {
         let i = index.unwrap_or(0);
         match driver {
             CorrectionDriver::JointAngle => pc.q_rad.get(i).copied().unwrap_or(0.0),
+            CorrectionDriver::JointMove => pc.move_q_rad.get(i).copied().unwrap_or(0.0),
             CorrectionDriver::Time => pc.time_s,
             CorrectionDriver::Temperature => pc.temp_c.or(self.temp_ref_c).unwrap_or(0.0),
             CorrectionDriver::Workspace => workspace_coordinate(&pc.point_rig, i),

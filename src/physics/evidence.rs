@@ -127,7 +127,7 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
         } => {
             let words = super::effects::correction_driver_words(*driver, *driver_index);
             match driver {
-                CorrectionDriver::JointAngle => d(words, "deg"),
+                CorrectionDriver::JointAngle | CorrectionDriver::JointMove => d(words, "deg"),
                 CorrectionDriver::Time => {
                     let (label, unit) = ctx.time_axis();
                     d(label.into(), unit)
@@ -200,7 +200,9 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
         } => {
             let v = ctx.driver_value(pc, *driver, *driver_index, axis.as_ref());
             match driver {
-                CorrectionDriver::JointAngle | CorrectionDriver::StringDirection => v.to_degrees(),
+                CorrectionDriver::JointAngle
+                | CorrectionDriver::JointMove
+                | CorrectionDriver::StringDirection => v.to_degrees(),
                 CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {
                     v.to_degrees()
                 }

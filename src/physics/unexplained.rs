@@ -345,6 +345,9 @@ fn resemblances(places: &[Place]) -> Vec<String> {
             ("temperature", _, _) => say(
                 "temperature: thermal_expansion (every length in proportion) was tried; the structure is not a uniform growth".into(),
             ),
+            ("motion", Some(j), _) => say(format!(
+                "joint {j}'s last move: backlash (a fixed amount by the side the joint arrived from) was tried; the error is graded with the move's size, which friction or elastic wind-up in the drive would give"
+            )),
             ("motion", _, _) => say(
                 "the move that led to each pose: no catalogue effect depends on it (backlash depends only on the side a joint arrived from); an arm not settled at the dwell (overshoot or lag), a servo's following error or a tool still swinging would".into(),
             ),

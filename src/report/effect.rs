@@ -75,6 +75,12 @@ pub enum CorrectionDriver {
     /// that move (one coefficient per knot, mm): an arm not settled at the
     /// dwell overshoots or lags along its last move.
     Motion,
+    /// One joint's last move: its commanded angle less the previous
+    /// pose's (knots in rad; zero for the first pose). A drive that stops
+    /// short by an amount graded with the move (friction, elastic wind-up),
+    /// where backlash is a fixed amount by the side it arrived from, is a
+    /// function of it.
+    JointMove,
 }
 
 /// Number of workspace coordinates a [`CorrectionDriver::Workspace`]
@@ -87,7 +93,8 @@ impl CorrectionDriver {
     /// describe this session, not the next, and a string's length exists
     /// only with the rig mounted. Where T is in the workspace is known for
     /// a target too (the target itself, in the rig's frame); the move that
-    /// leads to it depends on the program that visits it.
+    /// leads to it, of T or of a joint, depends on the program that visits
+    /// it.
     pub fn usable_for_compensation(self) -> bool {
         matches!(
             self,
@@ -498,6 +505,12 @@ impl EffectModel {
                     "a correction over the workspace needs a driver_index from 0 to {}",
                     WORKSPACE_COORDINATES - 1
                 ));
+            }
+            if *driver == CorrectionDriver::JointMove && *target != CorrectionTarget::JointAngle {
+                return Err(
+                    "a correction by a joint's last move corrects a joint's angle: its target must be joint_angle"
+                        .into(),
+                );
             }
             if *driver == CorrectionDriver::Motion && *target != CorrectionTarget::Point {
                 return Err("a correction by the motion moves T: its target must be point".into());

@@ -1,9 +1,12 @@
+//! Backlash, and an error graded with the move that is not backlash.
+//!
 //! Backlash when the recording cannot say how a joint arrived at the first
 //! poses (the robot came from home, which the file does not carry): the
 //! unknown approach is a nuisance offset, the dead band is still named on
 //! the right joint with its true size, and that first pose's error is not
 //! handed to another effect (a rig move fitted to one pose).
 
+use crate::common;
 use drawcal::identify::{IdentifyOptions, NoProgress, Observations, geometric};
 use drawcal::physics::{self, simulate};
 
@@ -78,4 +81,45 @@ fn backlash_on_a_wrist_joint_with_an_unknown_first_approach() {
 #[test]
 fn backlash_on_an_elbow_with_an_unknown_first_approach() {
     run("ur5", 3, 12);
+}
+
+/// A joint that stops short by an amount graded with its move (friction or
+/// elastic wind-up, from the fourth cross-check,
+/// `tests/data/xcheck4_joint_hysteresis_std4`: joint 1 of the ER3A short by
+/// b * tanh(dq / w)) is not a dead band: backlash takes most of it and was
+/// named on every such recording. The analysis must name nothing, locate
+/// the error at joint 1's last move, correct joint 1's angle as a function
+/// of that move and come near the twin without the error. (The backlash
+/// tests above are the other side of the gate: a true dead band stays
+/// backlash.)
+#[test]
+fn a_stop_short_graded_with_the_move_is_not_backlash() {
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget, Kind};
+    let (robot, rig, data) = common::load("xcheck4_joint_hysteresis_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| {
+        p.driver == "motion" && p.joint == Some(1) && p.z > p.threshold
+    });
+    let Kind::DataDriven {
+        target,
+        target_index,
+        driver,
+        driver_index,
+        ..
+    } = common::data_driven_correction(&report)
+    else {
+        unreachable!()
+    };
+    assert_eq!(
+        (target, target_index, driver, driver_index),
+        (
+            CorrectionTarget::JointAngle,
+            Some(0),
+            CorrectionDriver::JointMove,
+            Some(0)
+        )
+    );
+    let (robot, rig, twin) = common::load("xcheck4_joint_hysteresis_std4/twin");
+    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.2);
 }

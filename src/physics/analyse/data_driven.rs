@@ -388,6 +388,28 @@ pub(super) fn length_families(inputs: &Inputs, driver: CorrectionDriver) -> Vec<
         .collect()
 }
 
+/// The candidates of joint `j`'s (0-based) angle corrected by a smooth
+/// function of its signed last move, at every knot count the train poses
+/// allow: friction or wind-up that stops a drive short by an amount graded
+/// with the move.
+pub(super) fn joint_move_family(inputs: &Inputs, j: usize) -> Vec<Kind> {
+    Slots {
+        ctx: &inputs.ctx,
+        train: &inputs.obs.train,
+    }
+    .knotted(
+        CorrectionTarget::JointAngle,
+        Some(j),
+        CorrectionDriver::JointMove,
+        Some(j),
+        &MOVE_KNOTS,
+    )
+}
+
+/// Knot counts of a correction by a joint's last move: an odd, saturating
+/// shape (a stop short growing with the move, then bounded) needs few.
+const MOVE_KNOTS: [usize; 4] = [3, 4, 6, 8];
+
 /// Whether and where compensation can use a data-driven correction `kind`,
 /// in words (`point_data`: the session had no strings, so a field over
 /// the workspace cannot be told from the instrument's own distortion).
@@ -438,6 +460,8 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
             },
             crate::physics::effects::length_name(*target_index)
         )
+    } else if *driver == CorrectionDriver::JointMove {
+        "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; the joint stops short by an amount that grows with the move: check its drive for friction or elastic wind-up (a brake dragging, a worn or preloaded gear, a soft coupling), or approach every target with the same move".into()
     } else if *driver == CorrectionDriver::Motion {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; T was measured before the arm settled: dwell longer at each pose or approach slower, and check the servo tuning".into()
     } else if kind.robot_side() {

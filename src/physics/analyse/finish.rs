@@ -48,6 +48,11 @@ pub(super) fn finish(
     if naming::uneven_thermal(&inputs, &mut state) {
         pruned_and_restated(&inputs, &mut state);
     }
+    // Backlash is a fixed amount by the side a joint arrived from; an
+    // error graded with the move's size is another physics.
+    if naming::graded_backlash(&inputs, &mut state) {
+        pruned_and_restated(&inputs, &mut state);
+    }
     // Named terms whose shape is no one physical effect (a series of terms
     // of one joint, several moves of the rig or of one anchor) are taken
     // out and the structure they fitted is located and modelled without a

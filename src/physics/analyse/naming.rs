@@ -220,6 +220,109 @@ pub(super) fn uneven_thermal(inputs: &Inputs, state: &mut State) -> bool {
         ThermalDriver::Temperature => (CorrectionDriver::Temperature, "temperature"),
         ThermalDriver::Time | ThermalDriver::Order => (CorrectionDriver::Time, "time"),
     };
+    let families = super::data_driven::length_families(inputs, driver);
+    replace_by_correction(
+        inputs,
+        state,
+        k,
+        (place_driver, None),
+        &families,
+        |kind, z| {
+            let Kind::DataDriven { target_index, .. } = kind else {
+                return None;
+            };
+            let length = crate::physics::effects::length_name(*target_index);
+            Some(Replacement {
+                joint: target_index.map(|i| i / 5 + 1),
+                located: format!(
+                    "a growth with the {place_driver} located in one length, {length}, by the test of thermal expansion's shape (every length in proportion against each length alone)"
+                ),
+                why: format!(
+                    "thermal_expansion (every a and d growing in proportion with the {place_driver}) was kept, but {length} growing alone predicts the held-out readings better (paired z = {z:.1}, needs {}): the lengths did not grow in proportion, so it is not the catalogue's expansion of the arm",
+                    super::HELD_OUT_Z
+                ),
+            })
+        },
+    )
+}
+
+/// Backlash stops a joint short by a fixed amount by the side it arrived
+/// from. When a correction of that joint's angle by the size of its last
+/// move (signed) predicts the held-out readings clearly better (paired z
+/// of at least [`HELD_OUT_Z`](super::HELD_OUT_Z)), the error is graded
+/// with the move, which a dead band is not (friction or elastic wind-up in
+/// the drive is): the backlash is dropped, an `unexplained` finding at the
+/// joint's last move says so and the graded correction is kept. Each
+/// backlash kept is tried; true when any was replaced.
+pub(super) fn graded_backlash(inputs: &Inputs, state: &mut State) -> bool {
+    use crate::physics::effects::Kind;
+    let mut any = false;
+    let joints: Vec<usize> = state
+        .accepted
+        .iter()
+        .filter_map(|e| match e.kind {
+            Kind::Backlash { joint_index } => Some(joint_index),
+            _ => None,
+        })
+        .collect();
+    for j in joints {
+        let Some(k) = state
+            .accepted
+            .iter()
+            .position(|e| e.kind == Kind::Backlash { joint_index: j })
+        else {
+            continue;
+        };
+        let families = vec![super::data_driven::joint_move_family(inputs, j)];
+        any |= replace_by_correction(
+            inputs,
+            state,
+            k,
+            ("motion", Some(j + 1)),
+            &families,
+            |_, z| {
+                Some(Replacement {
+                    joint: Some(j + 1),
+                    located: format!(
+                        "an error of joint {}'s angle graded with the size of its last move, located by the test of backlash's shape (a fixed amount by the side the joint arrived from, against a smooth function of the signed move)",
+                        j + 1
+                    ),
+                    why: format!(
+                        "backlash of joint {} (a fixed amount by the side it arrived from) was kept, but a smooth function of the joint's signed last move predicts the held-out readings better (paired z = {z:.1}, needs {}): the error grows with the move, which a dead band does not; friction or elastic wind-up in the drive would",
+                        j + 1,
+                        super::HELD_OUT_Z
+                    ),
+                })
+            },
+        );
+    }
+    any
+}
+
+/// What a catalogue effect replaced by a data-driven correction is
+/// reported as: the joint of the place, how it was located, why the name
+/// was dropped.
+struct Replacement {
+    joint: Option<usize>,
+    located: String,
+    why: String,
+}
+
+/// Replace the accepted named effect `k` by the best data-driven
+/// correction of `families` at the place `(driver, joint)` when the model
+/// with it predicts the held-out readings clearly better than with the
+/// named effect (paired z of at least [`HELD_OUT_Z`](super::HELD_OUT_Z)).
+/// `describe` words the replacement from the correction kept and z. The
+/// named effect's finding gives way to an `unexplained` finding at the
+/// place; true when done.
+fn replace_by_correction(
+    inputs: &Inputs,
+    state: &mut State,
+    k: usize,
+    (driver, joint): (&str, Option<usize>),
+    families: &[Vec<crate::physics::effects::Kind>],
+    describe: impl Fn(&crate::physics::effects::Kind, f64) -> Option<Replacement>,
+) -> bool {
     let Some((p, eff)) = without(inputs, state, k) else {
         return false;
     };
@@ -232,44 +335,36 @@ pub(super) fn uneven_thermal(inputs: &Inputs, state: &mut State) -> bool {
     let bare = (alt.p.clone(), alt.accepted.clone());
     let at = alt.findings.len();
     let mut place = crate::report::Place {
-        driver: place_driver.into(),
-        joint: None,
+        driver: driver.into(),
+        joint,
         sensor: None,
         side: "robot".into(),
         z: f64::NAN,
         threshold: super::HELD_OUT_Z,
         range: None,
     };
-    let families = super::data_driven::length_families(inputs, driver);
-    if !super::data_driven::try_place(inputs, &mut alt, &families, &place) {
+    if !super::data_driven::try_place(inputs, &mut alt, families, &place) {
         return false;
     }
     let z = held_out_gain_z(inputs, (&state.p, &state.accepted), (&alt.p, &alt.accepted));
     if z < super::HELD_OUT_Z {
         return false;
     }
-    let Some(Kind::DataDriven { target_index, .. }) = alt.accepted.last().map(|e| &e.kind) else {
+    let Some(r) = alt.accepted.last().and_then(|e| describe(&e.kind, z)) else {
         return false;
     };
-    let length = crate::physics::effects::length_name(*target_index);
-    place.joint = target_index.map(|i| i / 5 + 1);
+    place.joint = r.joint;
     place.z = z;
-    let why = format!(
-        "thermal_expansion (every a and d growing in proportion with the {place_driver}) was kept, but {length} growing alone predicts the held-out readings better (paired z = {z:.1}, needs {}): the lengths did not grow in proportion, so it is not the catalogue's expansion of the arm",
-        super::HELD_OUT_Z
-    );
     let finding = crate::physics::unexplained::unexplained_at(
         inputs.obs,
         &inputs.ctx,
         (&bare.0, &bare.1),
         place,
-        format!(
-            "a growth with the {place_driver} located in one length, {length}, by the test of thermal expansion's shape (every length in proportion against each length alone)"
-        ),
-        vec![why.clone()],
+        r.located,
+        vec![r.why.clone()],
     );
     alt.findings.insert(at, finding);
-    alt.notes.push(why);
+    alt.notes.push(r.why);
     *state = alt;
     true
 }
