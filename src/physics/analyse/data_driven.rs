@@ -388,22 +388,33 @@ pub(super) fn length_families(inputs: &Inputs, driver: CorrectionDriver) -> Vec<
         .collect()
 }
 
-/// The candidates of joint `j`'s (0-based) angle corrected by a smooth
-/// function of its signed last move, at every knot count the train poses
-/// allow: friction or wind-up that stops a drive short by an amount graded
-/// with the move.
-pub(super) fn joint_move_family(inputs: &Inputs, j: usize) -> Vec<Kind> {
-    Slots {
+/// The candidates where joint `j` (0-based) kept a backlash: its angle
+/// corrected by a smooth function of its signed last move (friction or
+/// wind-up that stops a drive short by an amount graded with the move),
+/// and, competing with it, T moved along the move that led to the pose by
+/// a function of its length (an arm not settled at the dwell, which a
+/// backlash also takes part of), at every knot count the train poses allow.
+pub(super) fn move_families(inputs: &Inputs, j: usize) -> Vec<Vec<Kind>> {
+    let slots = Slots {
         ctx: &inputs.ctx,
         train: &inputs.obs.train,
-    }
-    .knotted(
-        CorrectionTarget::JointAngle,
-        Some(j),
-        CorrectionDriver::JointMove,
-        Some(j),
-        &MOVE_KNOTS,
-    )
+    };
+    vec![
+        slots.knotted(
+            CorrectionTarget::JointAngle,
+            Some(j),
+            CorrectionDriver::JointMove,
+            Some(j),
+            &MOVE_KNOTS,
+        ),
+        slots.knotted(
+            CorrectionTarget::Point,
+            None,
+            CorrectionDriver::Motion,
+            None,
+            &JOINT_KNOTS,
+        ),
+    ]
 }
 
 /// Knot counts of a correction by a joint's last move: an odd, saturating

@@ -252,10 +252,12 @@ pub(super) fn uneven_thermal(inputs: &Inputs, state: &mut State) -> bool {
 /// of at least [`HELD_OUT_Z`](super::HELD_OUT_Z)), the error is graded
 /// with the move, which a dead band is not (friction or elastic wind-up in
 /// the drive is): the backlash is dropped, an `unexplained` finding at the
-/// joint's last move says so and the graded correction is kept. Each
-/// backlash kept is tried; true when any was replaced.
+/// joint's last move says so and the graded correction is kept; not when T
+/// off along its move (an arm not settled) fits better still, which the
+/// locator places later. Each backlash kept is tried; true when any was
+/// replaced.
 pub(super) fn graded_backlash(inputs: &Inputs, state: &mut State) -> bool {
-    use crate::physics::effects::Kind;
+    use crate::physics::effects::{CorrectionDriver, Kind};
     let mut any = false;
     let joints: Vec<usize> = state
         .accepted
@@ -273,14 +275,23 @@ pub(super) fn graded_backlash(inputs: &Inputs, state: &mut State) -> bool {
         else {
             continue;
         };
-        let families = vec![super::data_driven::joint_move_family(inputs, j)];
+        let families = super::data_driven::move_families(inputs, j);
         any |= replace_by_correction(
             inputs,
             state,
             k,
             ("motion", Some(j + 1)),
             &families,
-            |_, z| {
+            |kind, z| {
+                // T off along its move is the arm not settled, which the
+                // locator places at the motion without this test.
+                let Kind::DataDriven {
+                    driver: CorrectionDriver::JointMove,
+                    ..
+                } = kind
+                else {
+                    return None;
+                };
                 Some(Replacement {
                     joint: Some(j + 1),
                     located: format!(
