@@ -196,6 +196,29 @@ pub fn data_driven_correction(report: &drawcal::report::Report) -> drawcal::phys
         .unwrap_or_else(|| panic!("no data-driven correction: {:#?}", report.findings))
 }
 
+/// What the first data-driven correction of `report` corrects and what
+/// drives it: `(target, target_index, driver, driver_index)`.
+pub fn correction_slot(
+    report: &drawcal::report::Report,
+) -> (
+    drawcal::physics::effects::CorrectionTarget,
+    Option<usize>,
+    drawcal::physics::effects::CorrectionDriver,
+    Option<usize>,
+) {
+    let drawcal::physics::Kind::DataDriven {
+        target,
+        target_index,
+        driver,
+        driver_index,
+        ..
+    } = data_driven_correction(report)
+    else {
+        unreachable!("data_driven_correction returns a data-driven kind")
+    };
+    (target, target_index, driver, driver_index)
+}
+
 /// The twin (the same session without the error) finds nothing, and
 /// `report`'s held-out RMS comes within `factor` times the twin's.
 pub fn near_the_twin(

@@ -94,25 +94,15 @@ fn backlash_on_an_elbow_with_an_unknown_first_approach() {
 /// backlash.)
 #[test]
 fn a_stop_short_graded_with_the_move_is_not_backlash() {
-    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget, Kind};
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
     let (robot, rig, data) = common::load("xcheck4_joint_hysteresis_std4");
     let report = common::identify_default(&robot, &rig, &data);
     common::nothing_named(&report);
     common::place_where(&report, |p| {
         p.driver == "motion" && p.joint == Some(1) && p.z > p.threshold
     });
-    let Kind::DataDriven {
-        target,
-        target_index,
-        driver,
-        driver_index,
-        ..
-    } = common::data_driven_correction(&report)
-    else {
-        unreachable!()
-    };
     assert_eq!(
-        (target, target_index, driver, driver_index),
+        common::correction_slot(&report),
         (
             CorrectionTarget::JointAngle,
             Some(0),

@@ -9,7 +9,7 @@
 use crate::common;
 
 use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
-use drawcal::physics::{self, Kind, simulate};
+use drawcal::physics::{self, simulate};
 
 /// Simulate one effect and analyse the recording blind: the recording, the
 /// analysis, its final held-out 3-D RMS (mm).
@@ -120,18 +120,8 @@ fn one_joint_driven_by_another_is_located_and_corrected() {
     common::place_where(&report, |p| {
         p.driver == "joint" && p.joint == Some(2) && p.z > p.threshold
     });
-    let Kind::DataDriven {
-        target,
-        target_index,
-        driver,
-        driver_index,
-        ..
-    } = common::data_driven_correction(&report)
-    else {
-        unreachable!()
-    };
     assert_eq!(
-        (target, target_index, driver, driver_index),
+        common::correction_slot(&report),
         (
             CorrectionTarget::JointAngle,
             Some(2),
