@@ -77,7 +77,7 @@ pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
         if kept == MAX_CORRECTIONS {
             break;
         }
-        let family: Vec<Vec<Kind>> = families(inputs, place)
+        let family: Vec<Vec<Kind>> = families(inputs, place, &state.jumps_s)
             .into_iter()
             .filter(|f| {
                 f.first()
@@ -99,6 +99,8 @@ pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
 struct Slots<'a> {
     ctx: &'a crate::physics::effects::Context,
     train: &'a [usize],
+    /// Where a function of the clock may jump ([`State::jumps_s`]).
+    jumps_s: &'a [f64],
 }
 
 impl Slots<'_> {
@@ -144,6 +146,41 @@ impl Slots<'_> {
                 axis,
             })
             .collect()
+    }
+
+    /// Candidates of one slot as a function of the clock at every knot
+    /// count the train poses allow; with named steps taken out of the
+    /// model, the same again with a jump at each of them (what a knock,
+    /// a re-homing or a lost encoder count does, which a smooth function
+    /// spreads over a knot's interval).
+    fn clocked(&self, target: CorrectionTarget, target_index: Option<usize>) -> Vec<Kind> {
+        let mut out = self.knotted(
+            target,
+            target_index,
+            CorrectionDriver::Time,
+            None,
+            &CLOCK_KNOTS,
+        );
+        if self.jumps_s.is_empty() {
+            return out;
+        }
+        let times: Vec<f64> = self.ctx.poses.iter().map(|p| p.time_s).collect();
+        let jumped: Vec<Kind> = out
+            .iter()
+            .filter_map(|k| {
+                let Kind::DataDriven { knots, .. } = k else {
+                    return None;
+                };
+                let knots = with_jumps(knots, &times, self.jumps_s)?;
+                let mut k = k.clone();
+                if let Kind::DataDriven { knots: kk, .. } = &mut k {
+                    *kk = knots;
+                }
+                Some(k)
+            })
+            .collect();
+        out.extend(jumped);
+        out
     }
 
     /// [`Self::knotted_about`] for a driver without an axis.
@@ -201,13 +238,14 @@ impl Slots<'_> {
 
 /// The candidate families at a place: per family one slot (what is
 /// corrected, what drives it) at every knot count the train poses allow.
-fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
+fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
     let Inputs { obs, ctx, .. } = inputs;
     let n = ctx.n_joints;
     let m = ctx.anchors.len();
     let slots = Slots {
         ctx,
         train: &obs.train,
+        jumps_s,
     };
     let family = |target, target_index, driver, driver_index, counts: &[usize]| {
         slots.knotted(target, target_index, driver, driver_index, counts)
@@ -243,21 +281,15 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
         // string's residual follows the clock; cross-validation tells one
         // string's reading, a third of the columns, from a displacement).
         ("time", None, None) => {
-            out.push(family(
-                CorrectionTarget::Point,
-                None,
-                CorrectionDriver::Time,
-                None,
-                &CLOCK_KNOTS,
-            ));
+            out.push(slots.clocked(CorrectionTarget::Point, None));
+            // Or one joint's zero (a re-homing, a lost encoder count, a
+            // motor warming): T moves as that joint turns, which no
+            // function of the clock alone moving T can follow.
+            for t in 0..n {
+                out.push(slots.clocked(CorrectionTarget::JointAngle, Some(t)));
+            }
             for s in 0..m {
-                out.push(family(
-                    CorrectionTarget::StringReading,
-                    Some(s),
-                    CorrectionDriver::Time,
-                    None,
-                    &CLOCK_KNOTS,
-                ));
+                out.push(slots.clocked(CorrectionTarget::StringReading, Some(s)));
                 // Or a cycle (a sensor's electronics or spool following
                 // the cell's heating cycle; a zero that creeps and resets):
                 // several cycles need more knots than the poses hold.
@@ -276,13 +308,9 @@ fn families(inputs: &Inputs, place: &Place) -> Vec<Vec<Kind>> {
             None,
             &CLOCK_KNOTS,
         )),
-        ("time", _, Some(s)) if s <= m => out.push(family(
-            CorrectionTarget::StringReading,
-            Some(s - 1),
-            CorrectionDriver::Time,
-            None,
-            &CLOCK_KNOTS,
-        )),
+        ("time", _, Some(s)) if s <= m => {
+            out.push(slots.clocked(CorrectionTarget::StringReading, Some(s - 1)))
+        }
         // A field over the workspace: T's displacement as a function of
         // one coordinate of where T is, Cartesian or, for an instrument at
         // the rig's origin, its own angles and distance.
@@ -370,6 +398,7 @@ pub(super) fn length_families(inputs: &Inputs, driver: CorrectionDriver) -> Vec<
     let slots = Slots {
         ctx: &inputs.ctx,
         train: &inputs.obs.train,
+        jumps_s: &[],
     };
     inputs
         .ctx
@@ -398,6 +427,7 @@ pub(super) fn move_families(inputs: &Inputs, j: usize) -> Vec<Vec<Kind>> {
     let slots = Slots {
         ctx: &inputs.ctx,
         train: &inputs.obs.train,
+        jumps_s: &[],
     };
     vec![
         slots.knotted(
@@ -473,6 +503,21 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
         )
     } else if *driver == CorrectionDriver::JointMove {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; the joint stops short by an amount that grows with the move: check its drive for friction or elastic wind-up (a brake dragging, a worn or preloaded gear, a soft coupling), or approach every target with the same move".into()
+    } else if let Kind::DataDriven {
+        target: CorrectionTarget::JointAngle,
+        target_index: Some(t),
+        ..
+    } = kind
+    {
+        format!(
+            "compensation cannot use it: joint {}'s zero changed with this session's {} (a re-homing, a lost encoder count, a drive warming up), which a future target does not carry; check that joint's homing and encoder, then re-reference its zero or re-calibrate",
+            t + 1,
+            if *driver == CorrectionDriver::Temperature {
+                "temperature"
+            } else {
+                "clock"
+            }
+        )
     } else if *driver == CorrectionDriver::Motion {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; T was measured before the arm settled: dwell longer at each pose or approach slower, and check the servo tuning".into()
     } else if kind.robot_side() {
@@ -567,6 +612,36 @@ fn knots_at_quantiles(values: &[f64], k: usize) -> Option<Vec<f64>> {
     let mut knots: Vec<f64> = (0..k).map(|i| v[(i * (v.len() - 1)) / (k - 1)]).collect();
     knots.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * (1.0 + b.abs()));
     (knots.len() >= 2 && knots.len() == k).then_some(knots)
+}
+
+/// `knots` (of a function of the clock) with a jump at each of `jumps_s`:
+/// two knots a quarter and three quarters of the way from the last pose at
+/// or before the jump to the first after it, so that no pose of `times_s`
+/// falls between them. `None` when no jump lies inside the session.
+fn with_jumps(knots: &[f64], times_s: &[f64], jumps_s: &[f64]) -> Option<Vec<f64>> {
+    let mut out = knots.to_vec();
+    for &t0 in jumps_s {
+        let before = times_s
+            .iter()
+            .copied()
+            .filter(|&t| t <= t0)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let after = times_s
+            .iter()
+            .copied()
+            .filter(|&t| t > t0)
+            .fold(f64::INFINITY, f64::min);
+        if !(before.is_finite() && after.is_finite()) {
+            continue;
+        }
+        let gap = after - before;
+        out.retain(|&k| k <= before || k >= after);
+        out.push(before + 0.25 * gap);
+        out.push(before + 0.75 * gap);
+    }
+    out.sort_by(f64::total_cmp);
+    out.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * (1.0 + b.abs()));
+    (out.len() > knots.len()).then_some(out)
 }
 
 /// The columns of effect `kind` (starting at `at`) that are fitted beside

@@ -57,24 +57,39 @@ pub(super) fn finish(
     // of one joint, several moves of the rig or of one anchor) are taken
     // out and the structure they fitted is located and modelled without a
     // name, unless they predict the held-out poses clearly better.
-    let series = naming::series(&state);
+    // So are named effects of the clock after which the remainder still
+    // follows the clock.
+    let mut series = naming::series(&state);
+    let mut located = None;
+    if series.is_empty() {
+        let mut with_remainder = state.clone();
+        locate_and_correct(&inputs, &mut with_remainder);
+        series = naming::left_in_time(&state, &with_remainder);
+        located = Some(with_remainder);
+    }
     if !series.is_empty() {
         let named = state.clone();
         naming::take_out(&inputs, &mut state, &series);
         let corrected = locate_and_correct(&inputs, &mut state);
+        // Against what stays otherwise: the named model, with its
+        // remainder's correction when that is what stays.
+        let stays = located.as_ref().unwrap_or(&named);
         let z = naming::held_out_gain_z(
             &inputs,
-            (&named.p, &named.accepted),
+            (&stays.p, &stays.accepted),
             (&state.p, &state.accepted),
         );
         if corrected && z > naming::series_threshold(&series) {
             naming::say_why(&mut state, &series, z);
         } else {
-            state = named;
-            locate_and_correct(&inputs, &mut state);
+            state = located.unwrap_or_else(|| {
+                let mut s = named;
+                locate_and_correct(&inputs, &mut s);
+                s
+            });
         }
-    } else {
-        locate_and_correct(&inputs, &mut state);
+    } else if let Some(with_remainder) = located {
+        state = with_remainder;
     }
     let dropped = naming::drop_backlash_beside_motion(&inputs, &mut state);
     if !dropped.is_empty() {
@@ -136,13 +151,57 @@ fn locate_and_correct(inputs: &Inputs, state: &mut State) -> bool {
         .map(|u| u.places.clone())
         .unwrap_or_default();
     state.findings.push(f);
+    let at = state.findings.len() - 1;
     let n_before = state.accepted.len();
     data_driven::correct(inputs, state, &places);
     if state.accepted.len() == n_before {
         return false;
     }
+    let kept: Vec<_> = state.accepted[n_before..]
+        .iter()
+        .map(|e| e.kind.clone())
+        .collect();
+    placed_by_correction(&mut state.findings[at], &kept);
     pruned_and_restated(inputs, state);
     true
+}
+
+/// A correction of one joint's angle by the clock, kept where the
+/// remainder was located in time, says where that structure lives: the
+/// `unexplained` finding's time place takes the joint, and its evidence
+/// says why.
+fn placed_by_correction(finding: &mut Finding, kept: &[crate::physics::effects::Kind]) {
+    use crate::physics::effects::{CorrectionDriver, CorrectionTarget, Kind};
+    let Some(FindingModel::Unexplained(u)) = &mut finding.parameters else {
+        return;
+    };
+    for kind in kept {
+        let Kind::DataDriven {
+            target: CorrectionTarget::JointAngle,
+            target_index: Some(t),
+            driver: CorrectionDriver::Time,
+            ..
+        } = kind
+        else {
+            continue;
+        };
+        let mut placed = false;
+        for p in u
+            .places
+            .iter_mut()
+            .filter(|p| p.driver == "time" && p.joint.is_none() && p.sensor.is_none())
+        {
+            p.joint = Some(t + 1);
+            placed = true;
+        }
+        if placed {
+            finding.evidence = format!(
+                "{}; in time it lives in joint {}'s angle: a correction of that joint's angle by the clock predicted the train poses best (cross-validated against T moved, each string's reading and every other joint's angle)",
+                finding.evidence,
+                t + 1
+            );
+        }
+    }
 }
 
 /// Once a data-driven correction is in: the named effects it makes

@@ -451,6 +451,7 @@ mod tests {
                 notes: vec![],
                 rejected: vec![],
                 final_fit: None,
+                jumps_s: vec![],
             };
             let fixed = FixedBase::new(&inputs, &state);
             f(&inputs, &state, &fixed);

@@ -153,6 +153,9 @@ struct State {
     rejected: Vec<Kind>,
     /// Covariance of the latest refit (none until an effect is kept).
     final_fit: Option<FitInfo>,
+    /// Instants (the clock's units) where a named step was taken out of
+    /// the model: a data-driven correction in time may jump there.
+    jumps_s: Vec<f64>,
 }
 
 /// Run the analysis after `geometric()`.
@@ -165,6 +168,7 @@ pub fn analyse(obs: &Observations, geo: &Geometric, progress: &dyn Progress) -> 
         notes: Vec::new(),
         rejected: Vec::new(),
         final_fit: None,
+        jumps_s: Vec::new(),
     };
     // Where the residual lives: robot side versus sensor side.
     let share = robot_side_share(obs, &state.p);

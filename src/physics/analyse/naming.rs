@@ -429,9 +429,9 @@ pub(super) fn series(state: &State) -> Vec<Series> {
             names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
             members,
             why: if strong {
-                "three or more terms of one joint together fit one error of its angle"
+                "three or more terms of one joint together fit one error of its angle, which is no one physical effect"
             } else {
-                "two shape terms of one joint together fit one error of its angle"
+                "two shape terms of one joint together fit one error of its angle, which is no one physical effect"
             },
             strong,
         });
@@ -443,7 +443,7 @@ pub(super) fn series(state: &State) -> Vec<Series> {
         out.push(Series {
             names: rig.iter().map(|&k| described(&acc[k].kind)).collect(),
             members: rig,
-            why: "several moves of the rig in one session fit one motion of another shape",
+            why: "several moves of the rig in one session fit one motion of another shape, which is no one physical effect",
             strong: true,
         });
     }
@@ -465,12 +465,49 @@ pub(super) fn series(state: &State) -> Vec<Series> {
             out.push(Series {
                 names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
                 members,
-                why: "several steps or creeps of one string in one session fit one change of another shape",
+                why: "several steps or creeps of one string in one session fit one change of another shape, which is no one physical effect",
                 strong: true,
             });
         }
     }
     out
+}
+
+/// The named effects of the clock (a step or a creep of the rig or of
+/// one string) of `state` when the remainder after them, as `located`
+/// (the same model with its remainder located) places it, still follows
+/// the clock where they act: they did not explain the structure in time
+/// they were found on (a knock that springs back, a joint's zero that
+/// jumped, a creep that settles), so they are condemned like a series.
+pub(super) fn left_in_time(state: &State, located: &State) -> Vec<Series> {
+    use crate::physics::effects::Kind;
+    let places: Vec<&crate::report::Place> = located
+        .findings
+        .iter()
+        .filter_map(|f| f.unexplained())
+        .flat_map(|u| u.places.iter())
+        .filter(|p| p.driver == "time" || p.driver == "order")
+        .collect();
+    let rig_wide = places.iter().any(|p| p.sensor.is_none());
+    let acc = &state.accepted;
+    let members: Vec<usize> = (0..acc.len())
+        .filter(|&k| match acc[k].kind {
+            Kind::RigStep { .. } | Kind::RigDrift => rig_wide,
+            Kind::AnchorStep { sensor_index, .. } | Kind::SensorDrift { sensor_index } => places
+                .iter()
+                .any(|p| p.sensor.is_none_or(|s| s == sensor_index + 1)),
+            _ => false,
+        })
+        .collect();
+    if members.is_empty() {
+        return Vec::new();
+    }
+    vec![Series {
+        names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
+        members,
+        why: "the remainder still followed the clock after it, so it did not explain the structure in time it was found on",
+        strong: true,
+    }]
 }
 
 /// The paired z the model without the series (with what replaced it)
@@ -496,6 +533,9 @@ pub(super) fn take_out(inputs: &Inputs, state: &mut State, series: &[Series]) {
     state
         .findings
         .retain(|f| f.effect_model().is_none_or(|m| !gone.contains(&m.kind)));
+    state
+        .jumps_s
+        .extend(gone.iter().filter_map(|k| k.change_time_s()));
     state.p = p;
     state.accepted = eff;
 }
@@ -505,10 +545,16 @@ pub(super) fn take_out(inputs: &Inputs, state: &mut State, series: &[Series]) {
 pub(super) fn say_why(state: &mut State, series: &[Series], z: f64) {
     for s in series {
         let why = format!(
-            "{} were first fitted to this structure, but {}, which is no one physical effect; the data-driven correction predicts the held-out readings {} (paired z = {z:.1}), so they are not reported as physics",
+            "{} {} first fitted to this structure, but {}; the data-driven correction predicts the held-out readings {} (paired z = {z:.1}), so {} not reported as physics",
             s.names.join(", "),
+            if s.names.len() > 1 { "were" } else { "was" },
             s.why,
-            if z >= 0.0 { "better" } else { "about as well" }
+            if z >= 0.0 { "better" } else { "about as well" },
+            if s.names.len() > 1 {
+                "they are"
+            } else {
+                "it is"
+            }
         );
         for f in state.findings.iter_mut() {
             if let Some(FindingModel::Unexplained(u)) = &mut f.parameters {
