@@ -339,6 +339,9 @@ fn resemblances(places: &[Place]) -> Vec<String> {
             ("string", _, Some(s)) => say(format!(
                 "string {s} by its length: sensor_scale (proportional) and sensor_offset (constant) were tried; the structure is neither"
             )),
+            ("time", Some(j), None) => say(format!(
+                "joint {j} over time: no catalogue effect changes a joint's zero during the session; rig_step and rig_drift (the rig moving) were tried and move T alike at every pose, where a joint's zero moves it as the pose turns that joint's axis"
+            )),
             ("time", _, None) => say(
                 "time: rig_step (one move), rig_drift (linear creep) and thermal_expansion (warm-up) were tried; the structure is none of them".into(),
             ),
@@ -593,6 +596,12 @@ enum Along {
     /// other joint moves T: another joint's angle error driven by this
     /// joint's angle (a cable or harness pulling, coupled drives).
     Others,
+    /// For the clock's ordering, their components along the direction
+    /// joint `.0` (0-based) moves T: that joint's zero changing during the
+    /// session (a re-homing, a lost encoder count, a drive warming), whose
+    /// displacement of T turns with the pose, so raw residuals of poses
+    /// neighbouring in time need not agree while these components do.
+    JointInTime(usize),
 }
 
 /// What the neighbour test found over every ordering (see [`neighbours`]).
@@ -637,7 +646,7 @@ fn neighbours(
     // growing towards the workspace's edge) the signs are stronger. Both
     // are sums of terms uncorrelated under independent symmetric noise,
     // also where pairs share a pose.
-    let n_tests = 2 * (n_plain + along.as_ref().map_or(0, |_| 2 * n) + extra.len());
+    let n_tests = 2 * (n_plain + along.as_ref().map_or(0, |_| 3 * n) + extra.len());
     let alpha = 1e-3 / n_tests as f64;
     let zcrit = normal_quantile(1.0 - alpha);
     let z_of = |pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64| {
@@ -677,6 +686,14 @@ fn neighbours(
                 |i: usize, k: usize| (0..n).filter(|&b| b != pk).map(|b| a[b][i] * a[b][k]).sum();
             tries.push((z_of(pairs, &others), Along::Others));
         }
+        if let (Some(a), true) = (along, pk == n) {
+            for (b, ab) in a.iter().enumerate() {
+                tries.push((
+                    z_of(pairs, &|i: usize, k: usize| ab[i] * ab[k]),
+                    Along::JointInTime(b),
+                ));
+            }
+        }
         let (driver, joint) = driver_of(pk, n, with_temp);
         let mut strongest: Option<Place> = None;
         for (z, on) in tries {
@@ -687,6 +704,10 @@ fn neighbours(
             }
             if z > zcrit {
                 let side = if on == Along::Raw { whole } else { "robot" };
+                let joint = match on {
+                    Along::JointInTime(b) => Some(b + 1),
+                    _ => joint,
+                };
                 if strongest.as_ref().is_none_or(|p| z > p.z) {
                     strongest = Some(place(driver, joint, None, side, z));
                 }
@@ -697,6 +718,9 @@ fn neighbours(
                     Along::Own => format!("{name}, along the direction joint {} moves T", pk + 1),
                     Along::Others => {
                         format!("{name}, along the directions the other joints move T")
+                    }
+                    Along::JointInTime(b) => {
+                        format!("{name}, along the direction joint {} moves T", b + 1)
                     }
                 };
                 best = Some((z, label));
@@ -839,6 +863,13 @@ fn located(
             format!(
                 "along the direction joint {j} moves T, the residuals of poses neighbouring in joint {j}'s angle agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch behaves like an error of joint {j}'s own angle that varies smoothly with the angle, in a form no catalogue effect has",
                 j = pk + 1
+            ),
+        ),
+        (Some((z, _)), _, Some((pk, Along::JointInTime(b)))) => (
+            pk,
+            format!(
+                "along the direction joint {j} moves T, the residuals of poses neighbouring in time agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch behaves like an error of joint {j}'s angle that changes during the session (its zero re-set, an encoder count lost, a drive warming), in a form no catalogue effect has",
+                j = b + 1
             ),
         ),
         (Some((z, _)), _, Some((pk, Along::Others))) => (

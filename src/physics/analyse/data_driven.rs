@@ -280,7 +280,7 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         // string's error in time moves the located point too, so every
         // string's residual follows the clock; cross-validation tells one
         // string's reading, a third of the columns, from a displacement).
-        ("time", None, None) => {
+        ("time", _, None) => {
             out.push(slots.clocked(CorrectionTarget::Point, None));
             // Or one joint's zero (a re-homing, a lost encoder count, a
             // motor warming): T moves as that joint turns, which no

@@ -189,7 +189,7 @@ fn placed_by_correction(finding: &mut Finding, kept: &[crate::physics::effects::
         for p in u
             .places
             .iter_mut()
-            .filter(|p| p.driver == "time" && p.joint.is_none() && p.sensor.is_none())
+            .filter(|p| p.driver == "time" && p.sensor.is_none())
         {
             p.joint = Some(t + 1);
             placed = true;
