@@ -29,6 +29,7 @@ mod physics_derivatives;
 mod physics_eval;
 mod physics_evidence;
 mod physics_honesty;
+mod physics_in_time;
 mod physics_joint_angle;
 mod physics_payload;
 mod physics_periodic;

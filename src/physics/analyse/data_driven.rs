@@ -933,3 +933,18 @@ fn stepped(lin: &Linearised) -> Option<(Vec<f64>, Vec<EffectModel>, FitInfo)> {
         },
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::with_jumps;
+
+    #[test]
+    fn a_jump_is_two_knots_between_the_poses_either_side_of_it() {
+        let times = [0.0, 10.0, 20.0, 30.0, 40.0];
+        let knots = with_jumps(&[0.0, 20.0, 40.0], &times, &[25.0]).unwrap();
+        // The last pose before the jump is at 20 s, the first after at 30 s.
+        assert_eq!(knots, vec![0.0, 20.0, 22.5, 27.5, 40.0]);
+        // A jump outside the session adds nothing.
+        assert_eq!(with_jumps(&[0.0, 40.0], &times, &[50.0]), None);
+    }
+}
