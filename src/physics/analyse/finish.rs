@@ -57,14 +57,14 @@ pub(super) fn finish(
     // of one joint, several moves of the rig or of one anchor) are taken
     // out and the structure they fitted is located and modelled without a
     // name, unless they predict the held-out poses clearly better.
-    // So are named effects of the clock after which the remainder still
-    // follows the clock.
+    // So are named effects after which the remainder still follows the
+    // driver they act through.
     let mut series = naming::series(&state);
     let mut located = None;
     if series.is_empty() {
         let mut with_remainder = state.clone();
         locate_and_correct(&inputs, &mut with_remainder);
-        series = naming::left_in_time(&state, &with_remainder);
+        series = naming::left_in_their_driver(&state, &with_remainder);
         located = Some(with_remainder);
     }
     if !series.is_empty() {

@@ -473,29 +473,49 @@ pub(super) fn series(state: &State) -> Vec<Series> {
     out
 }
 
-/// The named effects of the clock (a step or a creep of the rig or of
-/// one string) of `state` when the remainder after them, as `located`
+/// The named effects of `state` after which the remainder, as `located`
 /// (the same model with its remainder located) places it, still follows
-/// the clock where they act: they did not explain the structure in time
+/// the driver they act through: the clock for a step or a creep of the rig
+/// or of one string (and a thermal expansion driven by the clock), the
+/// temperature for a thermal expansion driven by it, a string's length
+/// for that string's scale or offset. They did not explain the structure
 /// they were found on (a knock that springs back, a joint's zero that
-/// jumped, a creep that settles), so they are condemned like a series.
-pub(super) fn left_in_time(state: &State, located: &State) -> Vec<Series> {
-    use crate::physics::effects::Kind;
+/// jumped, a frame that grows with the temperature, a drum that winds
+/// unevenly), so they are condemned like a series.
+pub(super) fn left_in_their_driver(state: &State, located: &State) -> Vec<Series> {
+    use crate::physics::effects::{Kind, ThermalDriver};
     let places: Vec<&crate::report::Place> = located
         .findings
         .iter()
         .filter_map(|f| f.unexplained())
         .flat_map(|u| u.places.iter())
-        .filter(|p| p.driver == "time" || p.driver == "order")
         .collect();
-    let rig_wide = places.iter().any(|p| p.sensor.is_none());
+    let at = |driver: &str, sensor: Option<usize>| {
+        places.iter().any(|p| {
+            (p.driver == driver || (driver == "time" && p.driver == "order"))
+                && (sensor.is_none() && p.sensor.is_none()
+                    || sensor.is_some_and(|s| p.sensor.is_none_or(|ps| ps == s + 1)))
+        })
+    };
     let acc = &state.accepted;
     let members: Vec<usize> = (0..acc.len())
         .filter(|&k| match acc[k].kind {
-            Kind::RigStep { .. } | Kind::RigDrift => rig_wide,
-            Kind::AnchorStep { sensor_index, .. } | Kind::SensorDrift { sensor_index } => places
+            Kind::RigStep { .. }
+            | Kind::RigDrift
+            | Kind::ThermalExpansion {
+                driver: ThermalDriver::Time | ThermalDriver::Order,
+                ..
+            } => at("time", None),
+            Kind::ThermalExpansion {
+                driver: ThermalDriver::Temperature,
+                ..
+            } => at("temperature", None),
+            Kind::AnchorStep { sensor_index, .. } | Kind::SensorDrift { sensor_index } => {
+                at("time", Some(sensor_index))
+            }
+            Kind::SensorScale { sensor_index } | Kind::SensorOffset { sensor_index } => places
                 .iter()
-                .any(|p| p.sensor.is_none_or(|s| s == sensor_index + 1)),
+                .any(|p| p.driver == "string" && p.sensor == Some(sensor_index + 1)),
             _ => false,
         })
         .collect();
@@ -505,7 +525,7 @@ pub(super) fn left_in_time(state: &State, located: &State) -> Vec<Series> {
     vec![Series {
         names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
         members,
-        why: "the remainder still followed the clock after it, so it did not explain the structure in time it was found on",
+        why: "the remainder still followed the driver they act through after them, so they did not explain the structure they were found on",
         strong: true,
     }]
 }
