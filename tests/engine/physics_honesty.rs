@@ -497,3 +497,27 @@ fn one_link_growing_with_the_temperature_is_not_thermal_expansion() {
     let (robot, rig, twin) = common::load("xcheck3_link_thermal_std4/twin");
     common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.1);
 }
+
+/// A catalogue shape fitted the wrong way round is not that physics: a
+/// joint that moves against its gravity load is no compliance, strings
+/// reading shorter than their chords are no sag. Simulated with the
+/// catalogue's own models at negative coefficients (no elastic joint or
+/// hanging string does that), the analysis must not name them, and must
+/// not be silent either.
+#[test]
+fn an_effect_fitted_the_wrong_way_round_is_not_named() {
+    for (effect, joint) in [("joint_compliance", Some(2)), ("cable_sag", None)] {
+        let sim = simulated(serde_json::json!({
+            "robot": "er3a", "n_poses": 150, "seed": 11,
+            "effects": [{"effect": effect, "joint": joint, "magnitude": -1.0, "size_x_noise": 6}]
+        }));
+        assert!(
+            sim.effects[0].coef[0] < 0.0,
+            "{effect}: simulated the right way"
+        );
+        let (findings, _) = analyse(&sim, &sim.dataset);
+        let names: Vec<&str> = findings.iter().map(|f| f.effect.as_str()).collect();
+        assert!(!names.contains(&effect), "{effect}: named: {findings:#?}");
+        assert!(!findings.is_empty(), "{effect}: silent");
+    }
+}

@@ -295,11 +295,55 @@ pub(super) fn magnitudes(
         (!distinguishable_from_zero(e, &info, mag, sig))
             .then(|| format!("{} ({}): {mag:.4} ± {sig:.4} {unit}", c.kind.name(), c.what))
     });
-    match weak {
-        Some(w) => Err(Turned::rejected(Some(format!(
+    if let Some(w) = weak {
+        return Err(Turned::rejected(Some(format!(
             "{w} improved the held-out error but its magnitude is within {MAGNITUDE_Z} sigma of zero: not kept"
+        ))));
+    }
+    let wrong_way = cs.iter().enumerate().find_map(|(mi, c)| {
+        let e = &eff_new[accepted.len() + mi];
+        unphysical(e).map(|why| format!("{} ({}): {why}", c.kind.name(), c.what))
+    });
+    match wrong_way {
+        Some(w) => Err(Turned::rejected(Some(format!(
+            "{w}; it improved the held-out error by fitting a structure of another physics: not kept"
         )))),
         None => Ok(()),
+    }
+}
+
+/// Most negative thermal expansion coefficient of an arm's material
+/// (per K): carbon-fibre composites reach about -1e-6, every metal is
+/// positive.
+const MIN_EXPANSION_PER_K: f64 = -5e-6;
+
+/// Why the fitted effect `e` goes the way its physics cannot, if it does:
+/// a string hangs longer than its chord, never shorter; a joint and a
+/// robot's mount yield with their gravity load, not against it; an arm
+/// does not shrink as it warms. (The catalogue's shapes fit part of many
+/// other structures; fitted the wrong way round they are not that physics.)
+fn unphysical(e: &EffectModel) -> Option<String> {
+    use crate::physics::effects::ThermalDriver;
+    let c = *e.coef.first()?;
+    match &e.kind {
+        Kind::CableSag if c < 0.0 => Some(
+            "fitted negative, strings reading shorter than their chords, which a hanging string never does".into(),
+        ),
+        Kind::JointCompliance { regressors, .. } if regressors.is_empty() && c < 0.0 => Some(
+            "fitted negative, the joint moving against its gravity load, which an elastic joint never does (a balancer that over-compensates, or a play that gravity takes up, would)".into(),
+        ),
+        Kind::BaseTilt if c < 0.0 => Some(
+            "fitted negative, the mount tilting against the arm's gravity moment, which a yielding mount never does".into(),
+        ),
+        Kind::ThermalExpansion {
+            driver: ThermalDriver::Temperature,
+            ..
+        } if c < MIN_EXPANSION_PER_K => Some(format!(
+            "fitted at {:.1} ppm/K, the arm shrinking as it warms, beyond any arm's material (at least {:.0} ppm/K)",
+            c * 1e6,
+            MIN_EXPANSION_PER_K * 1e6
+        )),
+        _ => None,
     }
 }
 
