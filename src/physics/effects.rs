@@ -157,7 +157,10 @@ pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, 
         }
         CorrectionDriver::Time => format!("{v:.0} s"),
         CorrectionDriver::Temperature => format!("{v:.2} degrees C"),
-        CorrectionDriver::StringLength | CorrectionDriver::Workspace | CorrectionDriver::Motion => {
+        CorrectionDriver::StringLength
+        | CorrectionDriver::StringMove
+        | CorrectionDriver::Workspace
+        | CorrectionDriver::Motion => {
             format!("{v:.1} mm")
         }
     }
@@ -172,6 +175,7 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
         CorrectionDriver::Time => "the session's clock".into(),
         CorrectionDriver::Temperature => "the temperature".into(),
         CorrectionDriver::StringLength => format!("string {at}'s length"),
+        CorrectionDriver::StringMove => format!("string {at}'s last change of length"),
         CorrectionDriver::StringDirection => {
             format!("string {at}'s angle from its mean direction")
         }
@@ -861,6 +865,9 @@ impl Context {
                 .get(i)
                 .map_or(0.0, |a| (pc.point_rig - a).norm() - self.r_mm),
             CorrectionDriver::Motion => pc.move_rig.norm(),
+            CorrectionDriver::StringMove => self.anchors.get(i).map_or(0.0, |a| {
+                (pc.point_rig - a).norm() - (pc.point_rig - pc.move_rig - a).norm()
+            }),
             CorrectionDriver::StringDirection => match (self.anchors.get(i), axis) {
                 (Some(a), Some(axis)) => {
                     let u = (pc.point_rig - a).normalize();

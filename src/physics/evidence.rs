@@ -133,7 +133,7 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
                     d(label.into(), unit)
                 }
                 CorrectionDriver::Temperature => d(words, "degrees C"),
-                CorrectionDriver::StringLength => d(words, "mm"),
+                CorrectionDriver::StringLength | CorrectionDriver::StringMove => d(words, "mm"),
                 CorrectionDriver::StringDirection => d(words, "deg"),
                 CorrectionDriver::Motion => d(words, "mm"),
                 CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {

@@ -348,6 +348,9 @@ fn resemblances(places: &[Place]) -> Vec<String> {
             ("temperature", _, _) => say(
                 "temperature: thermal_expansion (every length in proportion) was tried; the structure is not a uniform growth".into(),
             ),
+            ("motion", _, Some(s)) => say(format!(
+                "string {s}'s last change of length: no catalogue effect depends on the way a string last moved; friction in its drum or stretch of its cable (reading differently pulled out than retracted) would"
+            )),
             ("motion", Some(j), _) => say(format!(
                 "joint {j}'s last move: backlash (a fixed amount by the side the joint arrived from) was tried; the error is graded with the move's size, which friction or elastic wind-up in the drive would give"
             )),
@@ -570,6 +573,22 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
                 |a, c| dir(a)[c],
                 |a, b| (dir(a) - dir(b)).norm_squared(),
             )),
+            values: values.clone(),
+        });
+        // By its last change of length, signed: a string that reads
+        // differently pulled out than retracted (friction in its drum,
+        // stretch of its cable).
+        let change = |a: usize| {
+            let pc = &ctx.poses[obs.train[a]];
+            (pc.point_rig - obs.anchors[k]).norm()
+                - (pc.point_rig - pc.move_rig - obs.anchors[k]).norm()
+        };
+        out.push(ScalarTest {
+            name: format!("string {}'s last change of length ({part})", k + 1),
+            sensor: k + 1,
+            driver: "motion",
+            side,
+            test: ScalarTestKind::Neighbours(sorted_pairs(&change)),
             values: values.clone(),
         });
         out.push(ScalarTest {

@@ -81,6 +81,12 @@ pub enum CorrectionDriver {
     /// where backlash is a fixed amount by the side it arrived from, is a
     /// function of it.
     JointMove,
+    /// One string's last change of length: its length less at the pose
+    /// recorded before (knots in mm, signed: positive pulled out; zero
+    /// for the first pose). A string whose reading depends on the way it
+    /// last moved (friction in its drum, stretch of its cable: pulled out
+    /// against retracted) is a function of it.
+    StringMove,
 }
 
 /// Number of workspace coordinates a [`CorrectionDriver::Workspace`]

@@ -36,6 +36,7 @@ mod physics_periodic;
 mod physics_rig;
 mod physics_sensor_drift;
 mod physics_string_direction;
+mod physics_string_move;
 mod physics_workspace;
 mod plan;
 mod report_html;

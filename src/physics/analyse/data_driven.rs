@@ -165,21 +165,30 @@ impl Slots<'_> {
             return out;
         }
         let times: Vec<f64> = self.ctx.poses.iter().map(|p| p.time_s).collect();
-        let jumped: Vec<Kind> = out
+        out.extend(jumping(&out, &times, self.jumps_s));
+        out
+    }
+
+    /// Candidates of string `s`'s (0-based) reading as a function of its
+    /// last change of length, smooth and, as well, jumping where the
+    /// change turns from retracted to pulled out (a friction or a stretch
+    /// that takes the direction of travel's sign).
+    fn by_string_move(&self, s: usize) -> Vec<Kind> {
+        let driver = CorrectionDriver::StringMove;
+        let mut out = self.knotted(
+            CorrectionTarget::StringReading,
+            Some(s),
+            driver,
+            Some(s),
+            &MOVE_KNOTS,
+        );
+        let moves: Vec<f64> = self
+            .ctx
+            .poses
             .iter()
-            .filter_map(|k| {
-                let Kind::DataDriven { knots, .. } = k else {
-                    return None;
-                };
-                let knots = with_jumps(knots, &times, self.jumps_s)?;
-                let mut k = k.clone();
-                if let Kind::DataDriven { knots: kk, .. } = &mut k {
-                    *kk = knots;
-                }
-                Some(k)
-            })
+            .map(|pc| self.ctx.driver_value(pc, driver, Some(s), None))
             .collect();
-        out.extend(jumped);
+        out.extend(jumping(&out, &moves, &[0.0]));
         out
     }
 
@@ -352,6 +361,9 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
                 ));
             }
         }
+        // One string's last change of length: its reading off by the way
+        // it last moved (friction in its drum, stretch of its cable).
+        ("motion", _, Some(s)) if s <= m => out.push(slots.by_string_move(s - 1)),
         // The move that led to each pose: T off along it by a function of
         // its length (overshoot or lag of an arm not settled at the dwell).
         ("motion", _, _) => out.push(family(
@@ -612,6 +624,26 @@ fn knots_at_quantiles(values: &[f64], k: usize) -> Option<Vec<f64>> {
     let mut knots: Vec<f64> = (0..k).map(|i| v[(i * (v.len() - 1)) / (k - 1)]).collect();
     knots.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * (1.0 + b.abs()));
     (knots.len() >= 2 && knots.len() == k).then_some(knots)
+}
+
+/// The data-driven `kinds` again, each with a jump at each of `at` (see
+/// [`with_jumps`]; `values` the driver's at every pose); those where no
+/// jump falls inside the driver's range are left out.
+fn jumping(kinds: &[Kind], values: &[f64], at: &[f64]) -> Vec<Kind> {
+    kinds
+        .iter()
+        .filter_map(|k| {
+            let Kind::DataDriven { knots, .. } = k else {
+                return None;
+            };
+            let knots = with_jumps(knots, values, at)?;
+            let mut k = k.clone();
+            if let Kind::DataDriven { knots: kk, .. } = &mut k {
+                *kk = knots;
+            }
+            Some(k)
+        })
+        .collect()
 }
 
 /// `knots` (of a function of the clock) with a jump at each of `jumps_s`:
