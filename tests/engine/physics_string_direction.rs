@@ -91,3 +91,28 @@ fn a_string_reading_wrong_by_its_direction_is_located_on_it_and_not_named() {
     assert!((norm - 1.0).abs() < 1e-9);
     common::near_the_twin(&r, &twin, 1.15);
 }
+
+/// An anchor post bent by its string's horizontal pull reads by the
+/// string's elevation; the tour's order mixes that with the clock, so a
+/// forward selection first fits an anchor step. The step's shape test
+/// (one move at one instant, against a smooth function of the string's
+/// direction) replaces it, and the correction is by the angle from the
+/// vertical.
+#[test]
+fn a_post_bending_with_the_pull_is_not_an_anchor_step() {
+    let (robot, rig, data) = common::load("xcheck4_anchor_post_flex_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| p.driver == "workspace" && p.sensor == Some(1));
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::StringReading,
+            Some(0),
+            CorrectionDriver::StringDirection,
+            Some(0)
+        )
+    );
+    let (robot, rig, twin) = common::load("xcheck4_anchor_post_flex_std4/twin");
+    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.2);
+}

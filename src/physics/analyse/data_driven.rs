@@ -243,6 +243,28 @@ impl Slots<'_> {
             .sum();
         mean.try_normalize(0.0).map(Into::into)
     }
+
+    /// Candidates of string `s`'s (0-based) reading as a smooth function
+    /// of its direction from its anchor: the angle from its mean direction
+    /// (wrap over a rounded exit grows with it), and the angle from the
+    /// vertical (a post bent by the string's horizontal pull, a sag: what
+    /// gravity orders), each a family.
+    fn by_direction(&self, s: usize) -> Vec<Vec<Kind>> {
+        let down: [f64; 3] = self.ctx.gravity_rig.into();
+        self.mean_direction(s)
+            .into_iter()
+            .chain((self.ctx.gravity_rig.norm() > 0.5).then_some(down))
+            .map(|axis| {
+                self.knotted_about(
+                    (CorrectionTarget::StringReading, Some(s)),
+                    (CorrectionDriver::StringDirection, Some(s)),
+                    Some(axis),
+                    &JOINT_KNOTS,
+                )
+            })
+            .filter(|f| !f.is_empty())
+            .collect()
+    }
 }
 
 /// The candidate families at a place: per family one slot (what is
@@ -351,16 +373,7 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         // A string's reading by its direction from its anchor (wrap or
         // friction at its exit, eyelet or pulley): by the angle from its
         // mean direction over the train poses.
-        ("workspace", _, Some(s)) if s <= m => {
-            if let Some(axis) = slots.mean_direction(s - 1) {
-                out.push(slots.knotted_about(
-                    (CorrectionTarget::StringReading, Some(s - 1)),
-                    (CorrectionDriver::StringDirection, Some(s - 1)),
-                    Some(axis),
-                    &JOINT_KNOTS,
-                ));
-            }
-        }
+        ("workspace", _, Some(s)) if s <= m => out.extend(slots.by_direction(s - 1)),
         // One string's last change of length: its reading off by the way
         // it last moved (friction in its drum, stretch of its cable).
         ("motion", _, Some(s)) if s <= m => out.push(slots.by_string_move(s - 1)),
@@ -457,6 +470,19 @@ pub(super) fn move_families(inputs: &Inputs, j: usize) -> Vec<Vec<Kind>> {
             &JOINT_KNOTS,
         ),
     ]
+}
+
+/// The candidates of string `s`'s (0-based) reading as a smooth function
+/// of its direction from its anchor ([`Slots::by_direction`]), at every
+/// knot count the train poses allow: what an anchor step is tested
+/// against.
+pub(super) fn direction_families(inputs: &Inputs, s: usize) -> Vec<Vec<Kind>> {
+    let slots = Slots {
+        ctx: &inputs.ctx,
+        train: &inputs.obs.train,
+        jumps_s: &[],
+    };
+    slots.by_direction(s)
 }
 
 /// Knot counts of a correction by a joint's last move: an odd, saturating

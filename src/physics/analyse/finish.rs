@@ -53,6 +53,11 @@ pub(super) fn finish(
     if naming::graded_backlash(&inputs, &mut state) {
         pruned_and_restated(&inputs, &mut state);
     }
+    // An anchor step is one move at one instant; an error that follows
+    // where the string points is another physics.
+    if naming::steady_anchor(&inputs, &mut state) {
+        pruned_and_restated(&inputs, &mut state);
+    }
     // Named terms whose shape is no one physical effect (a series of terms
     // of one joint, several moves of the rig or of one anchor) are taken
     // out and the structure they fitted is located and modelled without a

@@ -225,7 +225,7 @@ pub(super) fn uneven_thermal(inputs: &Inputs, state: &mut State) -> bool {
         inputs,
         state,
         k,
-        (place_driver, None),
+        (place_driver, None, None),
         &families,
         |kind, z| {
             let Kind::DataDriven { target_index, .. } = kind else {
@@ -280,7 +280,7 @@ pub(super) fn graded_backlash(inputs: &Inputs, state: &mut State) -> bool {
             inputs,
             state,
             k,
-            ("motion", Some(j + 1)),
+            ("motion", Some(j + 1), None),
             &families,
             |kind, z| {
                 // T off along its move is the arm not settled, which the
@@ -310,6 +310,57 @@ pub(super) fn graded_backlash(inputs: &Inputs, state: &mut State) -> bool {
     any
 }
 
+/// An anchor step moves one anchor once: that string's reading changes at
+/// one instant by the anchor's displacement along it. When the string's
+/// reading as a smooth function of its direction from the anchor (a post
+/// that bends with the string's pull, wrap or friction at its exit)
+/// predicts the held-out readings clearly better (paired z of at least
+/// [`HELD_OUT_Z`](super::HELD_OUT_Z)), the step was fitting a structure
+/// of the string's geometry that the tour's order mixed with time: the
+/// step is dropped, an `unexplained` finding at the string's direction
+/// says so and the correction is kept. Each anchor step kept is tried;
+/// true when any was replaced.
+pub(super) fn steady_anchor(inputs: &Inputs, state: &mut State) -> bool {
+    use crate::physics::effects::Kind;
+    let mut any = false;
+    let steps: Vec<Kind> = state
+        .accepted
+        .iter()
+        .filter(|e| matches!(e.kind, Kind::AnchorStep { .. }))
+        .map(|e| e.kind.clone())
+        .collect();
+    for step in steps {
+        let Kind::AnchorStep { sensor_index, .. } = step else {
+            continue;
+        };
+        let Some(k) = state.accepted.iter().position(|e| e.kind == step) else {
+            continue;
+        };
+        let families = super::data_driven::direction_families(inputs, sensor_index);
+        let s = sensor_index + 1;
+        any |= replace_by_correction(
+            inputs,
+            state,
+            k,
+            ("workspace", None, Some(s)),
+            &families,
+            |_, z| {
+                Some(Replacement {
+                    joint: None,
+                    located: format!(
+                        "an error of string {s}'s reading that follows its direction from its anchor, located by the test of anchor_step's shape (one move of the anchor at one instant, against a smooth function of the string's direction)"
+                    ),
+                    why: format!(
+                        "anchor_step on string {s} (its anchor moved once) was kept, but the string's reading as a smooth function of its direction from the anchor predicts the held-out readings better (paired z = {z:.1}, needs {}): the error follows where the string points, which the tour's order had mixed with the clock; a post bending with the string's pull, or wrap or friction at its exit, would",
+                        super::HELD_OUT_Z
+                    ),
+                })
+            },
+        );
+    }
+    any
+}
+
 /// What a catalogue effect replaced by a data-driven correction is
 /// reported as: the joint of the place, how it was located, why the name
 /// was dropped.
@@ -330,7 +381,7 @@ fn replace_by_correction(
     inputs: &Inputs,
     state: &mut State,
     k: usize,
-    (driver, joint): (&str, Option<usize>),
+    (driver, joint, sensor): (&str, Option<usize>, Option<usize>),
     families: &[Vec<crate::physics::effects::Kind>],
     describe: impl Fn(&crate::physics::effects::Kind, f64) -> Option<Replacement>,
 ) -> bool {
@@ -348,8 +399,8 @@ fn replace_by_correction(
     let mut place = crate::report::Place {
         driver: driver.into(),
         joint,
-        sensor: None,
-        side: "robot".into(),
+        sensor,
+        side: if sensor.is_some() { "sensor" } else { "robot" }.into(),
         z: f64::NAN,
         threshold: super::HELD_OUT_Z,
         range: None,
