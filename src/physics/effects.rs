@@ -122,6 +122,19 @@ impl Kind {
     }
 }
 
+/// How much more a string from `anchor` to `point` reads per unit of the
+/// rig's scale about `centroid` (the anchors moved to centroid + (1 + s) ·
+/// (anchor - centroid)), to first order: the string shortens by its
+/// direction times the anchor's outward move.
+pub fn reading_per_scale(
+    point: &Vector3<f64>,
+    anchor: &Vector3<f64>,
+    centroid: &Vector3<f64>,
+) -> f64 {
+    let u = (point - anchor).try_normalize(0.0).unwrap_or_default();
+    -u.dot(&(anchor - centroid))
+}
+
 /// What a data-driven correction corrects, in words.
 pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -> String {
     let at = index.map_or(0, |i| i + 1);
@@ -133,6 +146,9 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
         }
         CorrectionTarget::StringReading => format!("string {at}'s reading"),
         CorrectionTarget::LinkLength => format!("the length {}", length_name(index)),
+        CorrectionTarget::InstrumentScale => {
+            "the measuring instrument's scale (the anchors about their centroid, or a tracker's points about its origin)".into()
+        }
     }
 }
 
@@ -807,6 +823,18 @@ impl Context {
                                 out.dp[k * 3 + r] += w * by_length[r];
                             }
                         }
+                        CorrectionTarget::InstrumentScale if m == 0 => {
+                            for r in 0..3 {
+                                out.dp[k * 3 + r] += w * pc.point_rig[r];
+                            }
+                        }
+                        CorrectionTarget::InstrumentScale => {
+                            let centroid = self.anchors.iter().sum::<Vector3<f64>>() / m as f64;
+                            for (s, a) in self.anchors.iter().enumerate() {
+                                out.dl[k * m + s] +=
+                                    w * reading_per_scale(&pc.point_rig, a, &centroid);
+                            }
+                        }
                         CorrectionTarget::Point | CorrectionTarget::PointSpherical => {
                             let frame = point_frame(*target, &pc.point_rig);
                             for (c, dir) in frame.iter().enumerate() {
@@ -1039,6 +1067,23 @@ impl Delta {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The reading change per unit of the rig's scale against the exact
+    /// change of the string's length when the anchor moves outward.
+    #[test]
+    fn reading_per_scale_matches_the_string_length_of_a_scaled_rig() {
+        let centroid = Vector3::new(500.0, 400.0, 300.0);
+        let anchor = Vector3::new(-200.0, 1300.0, -50.0);
+        let point = Vector3::new(700.0, 350.0, 800.0);
+        let eps = 1e-7;
+        let scaled: Vector3<f64> = centroid + (anchor - centroid) * (1.0 + eps);
+        let exact = ((point - scaled).norm() - (point - anchor).norm()) / eps;
+        let linear = reading_per_scale(&point, &anchor, &centroid);
+        assert!(
+            (exact - linear).abs() < 1e-4 * linear.abs(),
+            "{exact} vs {linear}"
+        );
+    }
 
     /// The spherical frame's directions against finite differences of the
     /// spherical coordinates: a step along the azimuth direction changes

@@ -44,6 +44,14 @@ pub enum CorrectionTarget {
     /// the temperature, where the catalogue's thermal expansion grows every
     /// length in proportion.
     LinkLength,
+    /// The measuring instrument's scale (dimensionless, one coefficient
+    /// per knot): the anchors spread about their centroid by it (each
+    /// string reads less by its direction times its anchor's offset from
+    /// the centroid, times the scale), or a tracker's points about its own
+    /// origin. A string frame that grows with the temperature, a tracker's
+    /// range off with the air's, is such a correction in the temperature,
+    /// where the catalogue's thermal expansion grows the arm.
+    InstrumentScale,
 }
 
 /// What drives a data-driven correction.
@@ -530,7 +538,9 @@ impl EffectModel {
             }
             if !matches!(
                 target,
-                CorrectionTarget::Point | CorrectionTarget::PointSpherical
+                CorrectionTarget::Point
+                    | CorrectionTarget::PointSpherical
+                    | CorrectionTarget::InstrumentScale
             ) && target_index.is_none()
             {
                 return Err(

@@ -1,7 +1,8 @@
-//! Structure in time that no named step or creep explains: a joint's zero
-//! that jumps, a rig knocked that springs back. Each is located in time
-//! (at the joint, for the joint's zero) and modelled without a name; the
-//! rig moves a forward selection first fits to it are not reported.
+//! Structure in time or temperature that no named effect explains: a
+//! joint's zero that jumps, a rig knocked that springs back, a string frame
+//! that grows with the temperature. Each is located in time (at the joint,
+//! for the joint's zero) and modelled without a name; the rig moves or the
+//! arm's expansion a forward selection first fits to it are not reported.
 
 use crate::common;
 use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
@@ -57,4 +58,16 @@ fn a_knock_that_springs_back_is_located_in_time_and_not_named_rig_steps() {
     );
     let (robot, rig, twin) = common::load("xcheck4_knock_recover_std4/twin");
     common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.5);
+}
+
+#[test]
+fn a_string_frame_growing_with_the_temperature_is_not_the_arm_expanding() {
+    let (robot, rig, data) = common::load("xcheck4_rig_thermal_s5np");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| p.driver == "temperature");
+    let (target, _, _, _) = common::correction_slot(&report);
+    assert_eq!(target, CorrectionTarget::InstrumentScale);
+    let (robot, rig, twin) = common::load("xcheck4_rig_thermal_s5np/twin");
+    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.2);
 }

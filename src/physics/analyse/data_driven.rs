@@ -313,6 +313,7 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         // string's reading, a third of the columns, from a displacement).
         ("time", _, None) => {
             out.push(slots.clocked(CorrectionTarget::Point, None));
+            out.push(slots.clocked(CorrectionTarget::InstrumentScale, None));
             // Or one joint's zero (a re-homing, a lost encoder count, a
             // motor warming): T moves as that joint turns, which no
             // function of the clock alone moving T can follow.
@@ -332,13 +333,24 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
                 ));
             }
         }
-        ("temperature", _, _) => out.push(family(
-            CorrectionTarget::Point,
-            None,
-            CorrectionDriver::Temperature,
-            None,
-            &CLOCK_KNOTS,
-        )),
+        ("temperature", _, _) => {
+            out.push(family(
+                CorrectionTarget::Point,
+                None,
+                CorrectionDriver::Temperature,
+                None,
+                &CLOCK_KNOTS,
+            ));
+            // Or the instrument's scale: a string frame growing with the
+            // temperature, a tracker's range with the air's.
+            out.push(family(
+                CorrectionTarget::InstrumentScale,
+                None,
+                CorrectionDriver::Temperature,
+                None,
+                &CLOCK_KNOTS,
+            ));
+        }
         ("time", _, Some(s)) if s <= m => {
             out.push(slots.clocked(CorrectionTarget::StringReading, Some(s - 1)))
         }
@@ -539,6 +551,12 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
             },
             crate::physics::effects::length_name(*target_index)
         )
+    } else if let Kind::DataDriven {
+        target: CorrectionTarget::InstrumentScale,
+        ..
+    } = kind
+    {
+        "compensation does not need it: it corrects the measuring instrument's scale, not where the robot went; the rig's frame (or a tracker's range, with the air) changed with this session's conditions: hold the instrument's temperature steady, give a tracker the air's temperature and pressure, or measure the rig again at the temperature it is used at".into()
     } else if *driver == CorrectionDriver::JointMove {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; the joint stops short by an amount that grows with the move: check its drive for friction or elastic wind-up (a brake dragging, a worn or preloaded gear, a soft coupling), or approach every target with the same move".into()
     } else if let Kind::DataDriven {

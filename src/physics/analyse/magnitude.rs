@@ -129,6 +129,10 @@ fn data_driven_size(
             target: CorrectionTarget::JointAngle,
             ..
         } => 180.0 / std::f64::consts::PI,
+        Kind::DataDriven {
+            target: CorrectionTarget::InstrumentScale,
+            ..
+        } => 1e6,
         _ => 1.0,
     };
     let v = data_driven_spread(ctx, kind, coef, poses);
@@ -166,7 +170,7 @@ fn data_driven_size(
                         }
                     }
                     Kind::DataDriven {
-                        target: CorrectionTarget::LinkLength,
+                        target: CorrectionTarget::LinkLength | CorrectionTarget::InstrumentScale,
                         ..
                     } => {
                         let w: f64 = ctx
@@ -256,7 +260,7 @@ fn data_driven_spread(ctx: &Context, kind: &Kind, coef: &[f64], poses: &[usize])
                     ..
                 } => vec![sum(&buf.dl, m, target_index.unwrap_or(0))],
                 Kind::DataDriven {
-                    target: CorrectionTarget::LinkLength,
+                    target: CorrectionTarget::LinkLength | CorrectionTarget::InstrumentScale,
                     ..
                 } => vec![
                     ctx.knot_weights(kind, i)
@@ -339,6 +343,10 @@ fn fixed_unit(kind: &Kind) -> &'static str {
             target: CorrectionTarget::LinkLength,
             ..
         } => "mm (RMS change of the length over the train poses)",
+        Kind::DataDriven {
+            target: CorrectionTarget::InstrumentScale,
+            ..
+        } => "ppm (RMS change of the instrument's scale over the train poses)",
         Kind::DataDriven { .. } => "mm (RMS change of the reading over the train poses)",
     }
 }
