@@ -179,6 +179,7 @@ pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, 
         | CorrectionDriver::Motion => {
             format!("{v:.1} mm")
         }
+        CorrectionDriver::GravityTorque => format!("{v:.1} N*m"),
     }
 }
 
@@ -192,6 +193,7 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
         CorrectionDriver::Temperature => "the temperature".into(),
         CorrectionDriver::StringLength => format!("string {at}'s length"),
         CorrectionDriver::StringMove => format!("string {at}'s last change of length"),
+        CorrectionDriver::GravityTorque => format!("joint {at}'s gravity torque"),
         CorrectionDriver::StringDirection => {
             format!("string {at}'s angle from its mean direction")
         }
@@ -893,6 +895,13 @@ impl Context {
                 .get(i)
                 .map_or(0.0, |a| (pc.point_rig - a).norm() - self.r_mm),
             CorrectionDriver::Motion => pc.move_rig.norm(),
+            CorrectionDriver::GravityTorque if self.has_masses => pc
+                .torque
+                .get(i)
+                .and_then(|t| t.first())
+                .copied()
+                .unwrap_or(0.0),
+            CorrectionDriver::GravityTorque => 0.0,
             CorrectionDriver::StringMove => self.anchors.get(i).map_or(0.0, |a| {
                 (pc.point_rig - a).norm() - (pc.point_rig - pc.move_rig - a).norm()
             }),

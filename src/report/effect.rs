@@ -95,6 +95,12 @@ pub enum CorrectionDriver {
     /// last moved (friction in its drum, stretch of its cable: pulled out
     /// against retracted) is a function of it.
     StringMove,
+    /// One joint's gravity torque (knots in N·m; the robot's link masses
+    /// and the payload at T): a joint whose angle error follows its load
+    /// in a way no linear stiffness does (a play that gravity takes up as
+    /// the load changes sign, a stiffness that hardens) is a function of
+    /// it.
+    GravityTorque,
 }
 
 /// Number of workspace coordinates a [`CorrectionDriver::Workspace`]

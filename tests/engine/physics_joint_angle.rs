@@ -136,3 +136,26 @@ fn one_joint_driven_by_another_is_located_and_corrected() {
         1.15,
     );
 }
+
+/// A play that gravity takes up follows the sign of the joint's gravity
+/// torque, not its size: the compliance a forward selection first names
+/// (an angle in proportion to the torque) loses to a function of the
+/// torque jumping where it changes sign, and is not reported.
+#[test]
+fn a_play_gravity_takes_up_is_not_a_compliance() {
+    let (robot, rig, data) = common::load("xcheck5_gravity_play_s3tilt");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| p.driver == "joint" && p.joint == Some(3));
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::JointAngle,
+            Some(2),
+            CorrectionDriver::GravityTorque,
+            Some(2)
+        )
+    );
+    let (robot, rig, twin) = common::load("xcheck5_gravity_play_s3tilt/twin");
+    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.3);
+}

@@ -497,6 +497,37 @@ pub(super) fn direction_families(inputs: &Inputs, s: usize) -> Vec<Vec<Kind>> {
     slots.by_direction(s)
 }
 
+/// The candidates where joint `j` (0-based) kept a compliance: its angle
+/// corrected by a smooth function of its gravity torque, and the same
+/// jumping where the torque changes sign (a play gravity takes up), at
+/// every knot count the train poses allow. Empty without link masses.
+pub(super) fn load_families(inputs: &Inputs, j: usize) -> Vec<Vec<Kind>> {
+    if !inputs.ctx.has_masses {
+        return Vec::new();
+    }
+    let slots = Slots {
+        ctx: &inputs.ctx,
+        train: &inputs.obs.train,
+        jumps_s: &[],
+    };
+    let driver = CorrectionDriver::GravityTorque;
+    let mut family = slots.knotted(
+        CorrectionTarget::JointAngle,
+        Some(j),
+        driver,
+        Some(j),
+        &MOVE_KNOTS,
+    );
+    let loads: Vec<f64> = inputs
+        .ctx
+        .poses
+        .iter()
+        .map(|pc| inputs.ctx.driver_value(pc, driver, Some(j), None))
+        .collect();
+    family.extend(jumping(&family, &loads, &[0.0]));
+    vec![family].into_iter().filter(|f| !f.is_empty()).collect()
+}
+
 /// Knot counts of a correction by a joint's last move: an odd, saturating
 /// shape (a stop short growing with the move, then bounded) needs few.
 const MOVE_KNOTS: [usize; 4] = [3, 4, 6, 8];
@@ -557,6 +588,8 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
     } = kind
     {
         "compensation does not need it: it corrects the measuring instrument's scale, not where the robot went; the rig's frame (or a tracker's range, with the air) changed with this session's conditions: hold the instrument's temperature steady, give a tracker the air's temperature and pressure, or measure the rig again at the temperature it is used at".into()
+    } else if *driver == CorrectionDriver::GravityTorque {
+        "compensation does not apply it: it follows the joint's gravity load at the target (its angles and the payload), which compensation does not yet evaluate for a data-driven correction; the joint's error is not in proportion to its load as an elastic joint's is: check it for play that gravity takes up or a stiffness that changes with the load".into()
     } else if *driver == CorrectionDriver::JointMove {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; the joint stops short by an amount that grows with the move: check its drive for friction or elastic wind-up (a brake dragging, a worn or preloaded gear, a soft coupling), or approach every target with the same move".into()
     } else if let Kind::DataDriven {

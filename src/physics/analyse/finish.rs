@@ -53,6 +53,11 @@ pub(super) fn finish(
     if naming::graded_backlash(&inputs, &mut state) {
         pruned_and_restated(&inputs, &mut state);
     }
+    // A compliance is in proportion to the gravity load; an error that
+    // follows the load otherwise is another physics.
+    if naming::uneven_load(&inputs, &mut state) {
+        pruned_and_restated(&inputs, &mut state);
+    }
     // An anchor step is one move at one instant; an error that follows
     // where the string points is another physics.
     if naming::steady_anchor(&inputs, &mut state) {
