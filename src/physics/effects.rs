@@ -195,7 +195,7 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
         CorrectionDriver::StringMove => format!("string {at}'s last change of length"),
         CorrectionDriver::GravityTorque => format!("joint {at}'s gravity torque"),
         CorrectionDriver::StringDirection => {
-            format!("string {at}'s angle from its mean direction")
+            format!("string {at}'s angle from its axis (its mean direction, or the vertical)")
         }
         CorrectionDriver::Motion => "the length of the move that led to the pose".into(),
         CorrectionDriver::Workspace => format!(

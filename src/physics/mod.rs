@@ -62,9 +62,16 @@ impl JointEffects {
     /// `robot` is the nominal robot of the calibration (its geometry and
     /// link masses drive compliance).
     pub fn new(findings: &[Finding], robot: &Robot) -> Option<Self> {
+        // A data-driven correction of a joint only where its driver is
+        // known for a future target (a joint's angle): one by the clock,
+        // a move or the gravity load is this session's, not the target's.
         let effects: Vec<EffectModel> = effects_of(findings)
             .into_iter()
             .filter(|e| e.kind.joint().is_some() || e.kind == Kind::BaseTilt)
+            .filter(|e| match &e.kind {
+                Kind::DataDriven { driver, .. } => driver.usable_for_compensation(),
+                _ => true,
+            })
             .collect();
         if effects.is_empty() {
             return None;

@@ -532,6 +532,33 @@ impl EffectModel {
                         .into(),
                 );
             }
+            if *driver == CorrectionDriver::StringMove
+                && (*target != CorrectionTarget::StringReading || driver_index != target_index)
+            {
+                return Err(
+                    "a correction by a string's last change corrects that string's reading: its target must be string_reading with target_index equal to driver_index"
+                        .into(),
+                );
+            }
+            if *driver == CorrectionDriver::GravityTorque && *target != CorrectionTarget::JointAngle
+            {
+                return Err(
+                    "a correction by a joint's gravity torque corrects a joint's angle: its target must be joint_angle"
+                        .into(),
+                );
+            }
+            if *target == CorrectionTarget::InstrumentScale
+                && (target_index.is_some()
+                    || !matches!(
+                        driver,
+                        CorrectionDriver::Time | CorrectionDriver::Temperature
+                    ))
+            {
+                return Err(
+                    "a correction of the instrument's scale has no target_index and follows the clock or the temperature"
+                        .into(),
+                );
+            }
             if *driver == CorrectionDriver::Motion && *target != CorrectionTarget::Point {
                 return Err("a correction by the motion moves T: its target must be point".into());
             }

@@ -22,6 +22,17 @@ fn a_joint_zero_that_jumps_is_located_at_that_joint_in_time_and_not_named_a_rig_
             None
         )
     );
+    // Located by the clock's test along joint 2's direction, not only
+    // placed there by the correction.
+    assert!(
+        report.findings.iter().any(|f| f.effect == "unexplained"
+            && f.evidence.contains("along the direction joint 2 moves T")),
+        "{:#?}",
+        report.findings
+    );
+    // The correction follows this session's clock: compensation leaves it
+    // out (and there is no other joint effect to apply).
+    assert!(drawcal::physics::JointEffects::new(&report.findings, &robot).is_none());
     let (robot, rig, twin) = common::load("xcheck4_joint_zero_step_std4/twin");
     common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.2);
 }

@@ -77,6 +77,11 @@ fn overlapping(state: &State) -> Vec<usize> {
         for (k, e) in state.accepted.iter().enumerate() {
             let hit = match (target, driver, &e.kind) {
                 (_, _, other) if other.is_data_driven() => false,
+                (
+                    CorrectionTarget::JointAngle,
+                    CorrectionDriver::Time | CorrectionDriver::Temperature,
+                    _,
+                ) => false,
                 (CorrectionTarget::JointAngle, _, other) => other.joint() == *target_index,
                 (CorrectionTarget::StringReading, _, other) => other.sensor() == *target_index,
                 (CorrectionTarget::Point, CorrectionDriver::Time, other) => matches!(
@@ -603,17 +608,24 @@ pub(super) fn series(state: &State) -> Vec<Series> {
 /// unevenly), so they are condemned like a series.
 pub(super) fn left_in_their_driver(state: &State, located: &State) -> Vec<Series> {
     use crate::physics::effects::{Kind, ThermalDriver};
+    // Only the remainder located now (earlier shape tests' findings said
+    // where what they replaced lived, not what is left).
     let places: Vec<&crate::report::Place> = located
         .findings
         .iter()
+        .skip(state.findings.len())
         .filter_map(|f| f.unexplained())
         .flat_map(|u| u.places.iter())
         .collect();
+    // The rig's effects by a place of the whole residual (no string), a
+    // string's by that string's own.
     let at = |driver: &str, sensor: Option<usize>| {
         places.iter().any(|p| {
-            (p.driver == driver || (driver == "time" && p.driver == "order"))
-                && (sensor.is_none() && p.sensor.is_none()
-                    || sensor.is_some_and(|s| p.sensor.is_none_or(|ps| ps == s + 1)))
+            p.driver == driver
+                && match sensor {
+                    None => p.sensor.is_none(),
+                    Some(s) => p.sensor == Some(s + 1),
+                }
         })
     };
     let acc = &state.accepted;
@@ -713,9 +725,13 @@ pub(super) fn say_why(state: &mut State, series: &[Series], z: f64) {
 /// The names dropped, for a sentence; empty when nothing was done.
 pub(super) fn drop_backlash_beside_motion(inputs: &Inputs, state: &mut State) -> Vec<String> {
     use crate::physics::effects::Kind;
+    // T's motion, not one string's last change (a sensor's own).
     let motion = state.findings.iter().any(|f| {
-        f.unexplained()
-            .is_some_and(|u| u.places.iter().any(|p| p.driver == "motion"))
+        f.unexplained().is_some_and(|u| {
+            u.places
+                .iter()
+                .any(|p| p.driver == "motion" && p.sensor.is_none())
+        })
     });
     let ks: Vec<usize> = (0..state.accepted.len())
         .filter(|&k| matches!(state.accepted[k].kind, Kind::Backlash { .. }))
