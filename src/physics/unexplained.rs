@@ -579,9 +579,12 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         // differently pulled out than retracted (friction in its drum,
         // stretch of its cable).
         let change = |a: usize| {
-            let pc = &ctx.poses[obs.train[a]];
-            (pc.point_rig - obs.anchors[k]).norm()
-                - (pc.point_rig - pc.move_rig - obs.anchors[k]).norm()
+            ctx.driver_value(
+                &ctx.poses[obs.train[a]],
+                crate::physics::effects::CorrectionDriver::StringMove,
+                Some(k),
+                None,
+            )
         };
         out.push(ScalarTest {
             name: format!("string {}'s last change of length ({part})", k + 1),

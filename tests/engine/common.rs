@@ -261,3 +261,27 @@ pub fn place_where(
         .find(|p| wanted(p))
         .unwrap_or_else(|| panic!("no such place among {:#?}", report.findings))
 }
+
+/// A recording of the cross-checks with physics outside the catalogue
+/// (`tests/data/<dir>`, its effect-free twin in `<dir>/twin`), analysed
+/// with the defaults: nothing is named, some unexplained place is one
+/// `wanted` accepts, and the held-out RMS comes within `factor` of the
+/// twin's. The report, and the recording's robot and data, for the
+/// case's own checks.
+pub fn unnamed_near_the_twin(
+    dir: &str,
+    wanted: impl Fn(&drawcal::report::Place) -> bool,
+    factor: f64,
+) -> (drawcal::report::Report, Robot, Dataset) {
+    let (robot, rig, data) = load(dir);
+    let report = identify_default(&robot, &rig, &data);
+    nothing_named(&report);
+    place_where(&report, wanted);
+    let (twin_robot, twin_rig, twin) = load(&format!("{dir}/twin"));
+    near_the_twin(
+        &report,
+        &identify_default(&twin_robot, &twin_rig, &twin),
+        factor,
+    );
+    (report, robot, data)
+}

@@ -95,12 +95,11 @@ fn backlash_on_an_elbow_with_an_unknown_first_approach() {
 #[test]
 fn a_stop_short_graded_with_the_move_is_not_backlash() {
     use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
-    let (robot, rig, data) = common::load("xcheck4_joint_hysteresis_std4");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    common::place_where(&report, |p| {
-        p.driver == "motion" && p.joint == Some(1) && p.z > p.threshold
-    });
+    let (report, _, _) = common::unnamed_near_the_twin(
+        "xcheck4_joint_hysteresis_std4",
+        |p| p.driver == "motion" && p.joint == Some(1) && p.z > p.threshold,
+        1.2,
+    );
     assert_eq!(
         common::correction_slot(&report),
         (
@@ -110,6 +109,4 @@ fn a_stop_short_graded_with_the_move_is_not_backlash() {
             Some(0)
         )
     );
-    let (robot, rig, twin) = common::load("xcheck4_joint_hysteresis_std4/twin");
-    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.2);
 }

@@ -9,10 +9,11 @@ use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
 
 #[test]
 fn a_joint_zero_that_jumps_is_located_at_that_joint_in_time_and_not_named_a_rig_move() {
-    let (robot, rig, data) = common::load("xcheck4_joint_zero_step_std4");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    common::place_where(&report, |p| p.driver == "time" && p.joint == Some(2));
+    let (report, robot, _) = common::unnamed_near_the_twin(
+        "xcheck4_joint_zero_step_std4",
+        |p| p.driver == "time" && p.joint == Some(2),
+        1.2,
+    );
     assert_eq!(
         common::correction_slot(&report),
         (
@@ -33,30 +34,25 @@ fn a_joint_zero_that_jumps_is_located_at_that_joint_in_time_and_not_named_a_rig_
     // The correction follows this session's clock: compensation leaves it
     // out (and there is no other joint effect to apply).
     assert!(drawcal::physics::JointEffects::new(&report.findings, &robot).is_none());
-    let (robot, rig, twin) = common::load("xcheck4_joint_zero_step_std4/twin");
-    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.2);
 }
 
 #[test]
 fn a_knock_that_springs_back_is_located_in_time_and_not_named_rig_steps() {
-    let (robot, rig, data) = common::load("xcheck4_knock_recover_std4");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    common::place_where(&report, |p| p.driver == "time" && p.joint.is_none());
+    let (report, _, data) = common::unnamed_near_the_twin(
+        "xcheck4_knock_recover_std4",
+        |p| p.driver == "time" && p.joint.is_none(),
+        1.5,
+    );
     // The correction jumps where the steps were taken out: two knots
     // straddle the knock (1127.6 s) with no pose between them.
-    let knots = report
-        .findings
-        .iter()
-        .find_map(|f| match f.effect_model().map(|m| &m.kind) {
-            Some(drawcal::physics::effects::Kind::DataDriven {
-                driver: CorrectionDriver::Time,
-                knots,
-                ..
-            }) => Some(knots.clone()),
-            _ => None,
-        })
-        .expect("a correction in time");
+    let knots = match common::data_driven_correction(&report) {
+        drawcal::physics::effects::Kind::DataDriven {
+            driver: CorrectionDriver::Time,
+            knots,
+            ..
+        } => knots,
+        other => panic!("not a correction in time: {other:?}"),
+    };
     let times: Vec<f64> = data.poses.iter().filter_map(|p| p.time_s).collect();
     assert!(
         knots.windows(2).any(|w| {
@@ -67,18 +63,15 @@ fn a_knock_that_springs_back_is_located_in_time_and_not_named_rig_steps() {
         }),
         "no jump near the knock: {knots:?}"
     );
-    let (robot, rig, twin) = common::load("xcheck4_knock_recover_std4/twin");
-    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.5);
 }
 
 #[test]
 fn a_string_frame_growing_with_the_temperature_is_not_the_arm_expanding() {
-    let (robot, rig, data) = common::load("xcheck4_rig_thermal_s5np");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    common::place_where(&report, |p| p.driver == "temperature");
+    let (report, _, _) = common::unnamed_near_the_twin(
+        "xcheck4_rig_thermal_s5np",
+        |p| p.driver == "temperature",
+        1.2,
+    );
     let (target, _, _, _) = common::correction_slot(&report);
     assert_eq!(target, CorrectionTarget::InstrumentScale);
-    let (robot, rig, twin) = common::load("xcheck4_rig_thermal_s5np/twin");
-    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.2);
 }

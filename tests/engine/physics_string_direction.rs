@@ -100,10 +100,11 @@ fn a_string_reading_wrong_by_its_direction_is_located_on_it_and_not_named() {
 /// vertical.
 #[test]
 fn a_post_bending_with_the_pull_is_not_an_anchor_step() {
-    let (robot, rig, data) = common::load("xcheck4_anchor_post_flex_std4");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    common::place_where(&report, |p| p.driver == "workspace" && p.sensor == Some(1));
+    let (report, _, _) = common::unnamed_near_the_twin(
+        "xcheck4_anchor_post_flex_std4",
+        |p| p.driver == "workspace" && p.sensor == Some(1),
+        1.2,
+    );
     assert_eq!(
         common::correction_slot(&report),
         (
@@ -113,6 +114,4 @@ fn a_post_bending_with_the_pull_is_not_an_anchor_step() {
             Some(0)
         )
     );
-    let (robot, rig, twin) = common::load("xcheck4_anchor_post_flex_std4/twin");
-    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.2);
 }

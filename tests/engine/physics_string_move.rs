@@ -7,10 +7,11 @@ use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
 
 #[test]
 fn a_string_reading_by_its_direction_of_travel_is_located_at_its_last_change() {
-    let (robot, rig, data) = common::load("xcheck4_string_hysteresis_std4");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    common::place_where(&report, |p| p.driver == "motion" && p.sensor == Some(2));
+    let (report, _, _) = common::unnamed_near_the_twin(
+        "xcheck4_string_hysteresis_std4",
+        |p| p.driver == "motion" && p.sensor == Some(2),
+        1.2,
+    );
     assert_eq!(
         common::correction_slot(&report),
         (
@@ -20,6 +21,4 @@ fn a_string_reading_by_its_direction_of_travel_is_located_at_its_last_change() {
             Some(1)
         )
     );
-    let (robot, rig, twin) = common::load("xcheck4_string_hysteresis_std4/twin");
-    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.2);
 }

@@ -169,26 +169,23 @@ impl Slots<'_> {
         out
     }
 
-    /// Candidates of string `s`'s (0-based) reading as a function of its
-    /// last change of length, smooth and, as well, jumping where the
-    /// change turns from retracted to pulled out (a friction or a stretch
-    /// that takes the direction of travel's sign).
-    fn by_string_move(&self, s: usize) -> Vec<Kind> {
-        let driver = CorrectionDriver::StringMove;
-        let mut out = self.knotted(
-            CorrectionTarget::StringReading,
-            Some(s),
-            driver,
-            Some(s),
-            &MOVE_KNOTS,
-        );
-        let moves: Vec<f64> = self
+    /// Candidates of one slot at [`MOVE_KNOTS`], smooth and, as well,
+    /// jumping where the driver changes sign: a string's last change
+    /// turning from retracted to pulled out, a joint's gravity torque
+    /// turning over (a friction, a stretch or a play that takes the sign).
+    fn signed(
+        &self,
+        (target, target_index): (CorrectionTarget, Option<usize>),
+        (driver, driver_index): (CorrectionDriver, Option<usize>),
+    ) -> Vec<Kind> {
+        let mut out = self.knotted(target, target_index, driver, driver_index, &MOVE_KNOTS);
+        let values: Vec<f64> = self
             .ctx
             .poses
             .iter()
-            .map(|pc| self.ctx.driver_value(pc, driver, Some(s), None))
+            .map(|pc| self.ctx.driver_value(pc, driver, driver_index, None))
             .collect();
-        out.extend(jumping(&out, &moves, &[0.0]));
+        out.extend(jumping(&out, &values, &[0.0]));
         out
     }
 
@@ -388,7 +385,10 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         ("workspace", _, Some(s)) if s <= m => out.extend(slots.by_direction(s - 1)),
         // One string's last change of length: its reading off by the way
         // it last moved (friction in its drum, stretch of its cable).
-        ("motion", _, Some(s)) if s <= m => out.push(slots.by_string_move(s - 1)),
+        ("motion", _, Some(s)) if s <= m => out.push(slots.signed(
+            (CorrectionTarget::StringReading, Some(s - 1)),
+            (CorrectionDriver::StringMove, Some(s - 1)),
+        )),
         // The move that led to each pose: T off along it by a function of
         // its length (overshoot or lag of an arm not settled at the dwell).
         ("motion", _, _) => out.push(family(
@@ -510,21 +510,10 @@ pub(super) fn load_families(inputs: &Inputs, j: usize) -> Vec<Vec<Kind>> {
         train: &inputs.obs.train,
         jumps_s: &[],
     };
-    let driver = CorrectionDriver::GravityTorque;
-    let mut family = slots.knotted(
-        CorrectionTarget::JointAngle,
-        Some(j),
-        driver,
-        Some(j),
-        &MOVE_KNOTS,
+    let family = slots.signed(
+        (CorrectionTarget::JointAngle, Some(j)),
+        (CorrectionDriver::GravityTorque, Some(j)),
     );
-    let loads: Vec<f64> = inputs
-        .ctx
-        .poses
-        .iter()
-        .map(|pc| inputs.ctx.driver_value(pc, driver, Some(j), None))
-        .collect();
-    family.extend(jumping(&family, &loads, &[0.0]));
     vec![family].into_iter().filter(|f| !f.is_empty()).collect()
 }
 
