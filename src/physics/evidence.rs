@@ -279,7 +279,17 @@ pub fn evidence_plot(
         .collect();
     let n = obs.data.poses.len();
     let m = ctx.anchors.len();
-    let robot = e.kind.robot_side();
+    // The instrument's scale moves a tracker's points (there are no
+    // strings to plot): plotted as T's displacement.
+    let robot = e.kind.robot_side()
+        || (m == 0
+            && matches!(
+                e.kind,
+                Kind::DataDriven {
+                    target: crate::physics::effects::CorrectionTarget::InstrumentScale,
+                    ..
+                }
+            ));
     if !robot && (m == 0 || obs.data.n_strings != m) {
         return None;
     }

@@ -17,6 +17,13 @@
 //! function of the clock or of the temperature history describes this
 //! session, not the next; a string's reading is the measurement's, not the
 //! robot's).
+//!
+//! Beyond those: a joint's angle or the measuring instrument's scale as a
+//! function of the clock (or the temperature, for the scale), a string's
+//! reading by its last change of length, a joint's angle by its gravity
+//! torque (the last two smooth or jumping where the driver changes sign),
+//! and, where the naming gate took named steps out, a function of the
+//! clock jumping there.
 
 use nalgebra::{DMatrix, Vector3};
 
@@ -712,34 +719,37 @@ fn jumping(kinds: &[Kind], values: &[f64], at: &[f64]) -> Vec<Kind> {
         .collect()
 }
 
-/// `knots` (of a function of the clock) with a jump at each of `jumps_s`:
-/// two knots a quarter and three quarters of the way from the last pose at
-/// or before the jump to the first after it, so that no pose of `times_s`
-/// falls between them. `None` when no jump lies inside the session.
-fn with_jumps(knots: &[f64], times_s: &[f64], jumps_s: &[f64]) -> Option<Vec<f64>> {
+/// `knots` (of a function of some driver) with a jump at each of `at`:
+/// two knots a quarter and three quarters of the way from the last of
+/// `values` (the driver at every pose) at or below the jump to the first
+/// above it, so that no pose falls between them. `None` when no jump lies
+/// inside the driver's range.
+fn with_jumps(knots: &[f64], values: &[f64], at: &[f64]) -> Option<Vec<f64>> {
     let mut out = knots.to_vec();
-    for &t0 in jumps_s {
-        let before = times_s
+    let mut jumped = false;
+    for &x0 in at {
+        let below = values
             .iter()
             .copied()
-            .filter(|&t| t <= t0)
+            .filter(|&v| v <= x0)
             .fold(f64::NEG_INFINITY, f64::max);
-        let after = times_s
+        let above = values
             .iter()
             .copied()
-            .filter(|&t| t > t0)
+            .filter(|&v| v > x0)
             .fold(f64::INFINITY, f64::min);
-        if !(before.is_finite() && after.is_finite()) {
+        if !(below.is_finite() && above.is_finite()) {
             continue;
         }
-        let gap = after - before;
-        out.retain(|&k| k <= before || k >= after);
-        out.push(before + 0.25 * gap);
-        out.push(before + 0.75 * gap);
+        let gap = above - below;
+        out.retain(|&k| k <= below || k >= above);
+        out.push(below + 0.25 * gap);
+        out.push(below + 0.75 * gap);
+        jumped = true;
     }
     out.sort_by(f64::total_cmp);
     out.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * (1.0 + b.abs()));
-    (out.len() > knots.len()).then_some(out)
+    jumped.then_some(out)
 }
 
 /// The columns of effect `kind` (starting at `at`) that are fitted beside

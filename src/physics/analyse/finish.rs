@@ -185,32 +185,33 @@ fn placed_by_correction(finding: &mut Finding, kept: &[crate::physics::effects::
     let Some(FindingModel::Unexplained(u)) = &mut finding.parameters else {
         return;
     };
-    for kind in kept {
-        let Kind::DataDriven {
+    // The first such correction kept says where (one joint per place).
+    let Some(t) = kept.iter().find_map(|k| match k {
+        Kind::DataDriven {
             target: CorrectionTarget::JointAngle,
             target_index: Some(t),
             driver: CorrectionDriver::Time,
             ..
-        } = kind
-        else {
-            continue;
-        };
-        let mut placed = false;
-        for p in u
-            .places
-            .iter_mut()
-            .filter(|p| p.driver == "time" && p.sensor.is_none())
-        {
-            p.joint = Some(t + 1);
-            placed = true;
-        }
-        if placed {
-            finding.evidence = format!(
-                "{}; in time it lives in joint {}'s angle: a correction of that joint's angle by the clock predicted the train poses best (cross-validated against T moved, each string's reading and every other joint's angle)",
-                finding.evidence,
-                t + 1
-            );
-        }
+        } => Some(*t),
+        _ => None,
+    }) else {
+        return;
+    };
+    let mut placed = false;
+    for p in u
+        .places
+        .iter_mut()
+        .filter(|p| p.driver == "time" && p.sensor.is_none())
+    {
+        p.joint = Some(t + 1);
+        placed = true;
+    }
+    if placed {
+        finding.evidence = format!(
+            "{}; in time it lives in joint {}'s angle: a correction of that joint's angle by the clock predicted the train poses best (cross-validated against T moved, each string's reading and every other joint's angle)",
+            finding.evidence,
+            t + 1
+        );
     }
 }
 

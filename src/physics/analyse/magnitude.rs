@@ -102,10 +102,10 @@ fn size_of<'a>(
         Kind::DataDriven { target, .. } => {
             let kind = e.kind.clone();
             let train = obs.train.clone();
-            let scale = if *target == CorrectionTarget::JointAngle {
-                deg
-            } else {
-                1.0
+            let scale = match target {
+                CorrectionTarget::JointAngle => deg,
+                CorrectionTarget::InstrumentScale => 1e6,
+                _ => 1.0,
             };
             Box::new(move |c: &[f64]| data_driven_spread(ctx, &kind, c, &train) * scale)
         }
