@@ -207,9 +207,14 @@ fn share_note(s: f64, s0: f64) -> String {
     )
 }
 
-/// Build the effect context of a session (located or measured points).
+/// Build the effect context of a session: T at each pose is the located
+/// point with strings (what each string's geometry is), and the model's T
+/// (`p` at the commanded angles) with point data, whose measured point is
+/// the reading itself: a correction driven by where T is must not read the
+/// error it corrects.
 pub fn effect_context(obs: &Observations, p: &Params) -> Context {
     let (rb, _) = p.base_rt();
+    let points = obs.anchors.is_empty();
     let inputs: Vec<PoseInput> = obs
         .data
         .poses
@@ -220,7 +225,17 @@ pub fn effect_context(obs: &Observations, p: &Params) -> Context {
             time_s: pose.time_s,
             temp_c: pose.temp_c,
             payload_kg: pose.payload_kg,
-            point_rig: *m,
+            point_rig: if points {
+                obs.chain
+                    .point(
+                        &p.values,
+                        &pose.q_rad,
+                        crate::kinematics::chain::OutputFrame::Rig,
+                    )
+                    .1
+            } else {
+                *m
+            },
         })
         .collect();
     Context::new(obs.robot, obs.anchors.clone(), obs.rig.r_mm, &rb, &inputs)
