@@ -149,6 +149,7 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
         CorrectionTarget::InstrumentScale => {
             "the measuring instrument's scale (the anchors about their centroid, or a tracker's points about its origin)".into()
         }
+        CorrectionTarget::ToolPoint => "the tool point in the flange frame".into(),
     }
 }
 
@@ -334,6 +335,9 @@ pub struct PoseContext {
     /// length's change moves T by this to first order; the deviations
     /// change it by a part in a thousand).
     d_lengths: Vec<Vector3<f64>>,
+    /// The flange's x, y and z axes in the rig frame at the nominal
+    /// geometry: how T moves per mm of the tool point along each.
+    pub flange_axes_rig: [Vector3<f64>; 3],
 }
 
 /// The pose contexts of a whole session and the fixed quantities effects use.
@@ -564,7 +568,8 @@ impl Context {
             .map(|(i, (p, direction))| {
                 let frames = chain.link_frames(&nominal.values, p.q_rad, OutputFrame::Base);
                 let axes = chain.joint_axes(&nominal.values, p.q_rad, OutputFrame::Base);
-                let (_, tool) = chain.point(&nominal.values, p.q_rad, OutputFrame::Base);
+                let (flange, tool) = chain.point(&nominal.values, p.q_rad, OutputFrame::Base);
+                let flange_axes_rig = [0, 1, 2].map(|c| base_rotation * flange.r.column(c));
                 let payload = p.payload_kg.unwrap_or(0.0);
                 let torque = gravity_torques(&frames, &axes, &tool, masses, g_base, payload);
                 let (tilt, base_moment_nm) = match masses {
@@ -613,6 +618,7 @@ impl Context {
                     tilt,
                     base_moment_nm,
                     d_lengths,
+                    flange_axes_rig,
                 }
             })
             .collect();
@@ -837,6 +843,13 @@ impl Context {
                                     w * reading_per_scale(&pc.point_rig, a, &centroid);
                             }
                         }
+                        CorrectionTarget::ToolPoint => {
+                            for (c, dir) in pc.flange_axes_rig.iter().enumerate() {
+                                for r in 0..3 {
+                                    out.dp[(3 * k + c) * 3 + r] += w * dir[r];
+                                }
+                            }
+                        }
                         CorrectionTarget::Point | CorrectionTarget::PointSpherical => {
                             let frame = point_frame(*target, &pc.point_rig);
                             for (c, dir) in frame.iter().enumerate() {
@@ -995,6 +1008,21 @@ impl Context {
         d
     }
 
+    /// The flange's axes at each pose taken from `flange_rig(i)` (pose
+    /// `i`'s flange orientation in the rig frame, as a calibrated geometry
+    /// has it) rather than the nominal geometry: a correction of the tool
+    /// point then moves T exactly as the geometry's own tool point does,
+    /// so that its constant part is aliased with it exactly (and left to
+    /// it by the alias check) rather than nearly, which a joint fit would
+    /// cancel in large opposite amounts that the nonlinear model does not.
+    pub fn with_flange_of(mut self, flange_rig: impl Fn(usize) -> nalgebra::Matrix3<f64>) -> Self {
+        for (i, pc) in self.poses.iter_mut().enumerate() {
+            let r = flange_rig(i);
+            pc.flange_axes_rig = [0, 1, 2].map(|c| r.column(c).into_owned());
+        }
+        self
+    }
+
     /// Parameters with the thermal multiplier applied to the nominal lengths.
     pub fn apply_thermal(&self, p: &mut [f64], thermal: f64) {
         if thermal != 0.0 {
@@ -1092,6 +1120,68 @@ mod tests {
             (exact - linear).abs() < 1e-4 * linear.abs(),
             "{exact} vs {linear}"
         );
+    }
+
+    /// A correction of the tool point moves T as the tool point parameter
+    /// does: its basis, per coefficient, against central differences of T
+    /// (rig frame) in the model's tool point along the flange's x, y, z.
+    #[test]
+    fn tool_point_basis_matches_finite_differences_of_the_tool_point() {
+        let robot = crate::model::Robot::from_json(include_str!(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/real_ur10_ipa_random/robot.json"
+        )))
+        .unwrap();
+        let n = robot.dof();
+        let base_rotation = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 1.1).into_inner();
+        let qs = [
+            vec![0.3, -1.1, 0.9, -0.4, 1.2, 0.7],
+            vec![-1.4, -0.6, 1.8, 0.5, -0.9, 2.1],
+        ];
+        let poses: Vec<PoseInput> = qs
+            .iter()
+            .enumerate()
+            .map(|(i, q)| PoseInput {
+                q_rad: &q[..n],
+                time_s: Some(100.0 * i as f64),
+                temp_c: None,
+                payload_kg: None,
+                point_rig: Vector3::zeros(),
+            })
+            .collect();
+        let ctx = Context::new(&robot, vec![], 0.0, &base_rotation, &poses);
+        let kind = Kind::DataDriven {
+            target: CorrectionTarget::ToolPoint,
+            target_index: None,
+            driver: CorrectionDriver::Time,
+            driver_index: None,
+            knots: vec![0.0, 100.0],
+            period: None,
+            range: None,
+            axis: None,
+        };
+        let nominal = Params::of_robot(&robot);
+        let chain = Chain::new(robot.convention, n, 0);
+        let t = nominal.layout.tool();
+        let h = 1e-4;
+        let mut buf = Basis::default();
+        for (i, q) in qs.iter().enumerate() {
+            ctx.basis(&kind, i, &mut buf);
+            for c in 0..3 {
+                let at = |step: f64| {
+                    let mut v = nominal.values.clone();
+                    v[t + c] += step;
+                    base_rotation * chain.point(&v, &q[..n], OutputFrame::Base).1
+                };
+                let fd = (at(h) - at(-h)) / (2.0 * h);
+                // Pose i sits on knot i: its weight is 1 there.
+                let col = Vector3::from_fn(|r, _| buf.dp[(3 * i + c) * 3 + r]);
+                assert!(
+                    (fd - col).norm() < 1e-6,
+                    "pose {i} axis {c}: {fd:?} vs {col:?}"
+                );
+            }
+        }
     }
 
     /// The spherical frame's directions against finite differences of the

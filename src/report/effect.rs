@@ -52,6 +52,12 @@ pub enum CorrectionTarget {
     /// range off with the air's, is such a correction in the temperature,
     /// where the catalogue's thermal expansion grows the arm.
     InstrumentScale,
+    /// The tool point in the flange frame (mm; three coefficients per
+    /// knot, along the flange's x, y, z): T moves with the flange's
+    /// orientation, where a correction of T relative to the rig does not
+    /// turn. A probe that grows with the process's heat, a tool that slips
+    /// in its holder or is re-seated is such a correction in the clock.
+    ToolPoint,
 }
 
 /// What drives a data-driven correction.
@@ -331,7 +337,8 @@ impl Kind {
                     target: CorrectionTarget::JointAngle
                         | CorrectionTarget::Point
                         | CorrectionTarget::PointSpherical
-                        | CorrectionTarget::LinkLength,
+                        | CorrectionTarget::LinkLength
+                        | CorrectionTarget::ToolPoint,
                     ..
                 }
         )
@@ -400,7 +407,10 @@ impl Kind {
                 ..
             } => knots.len(),
             Kind::DataDriven {
-                target: CorrectionTarget::Point | CorrectionTarget::PointSpherical,
+                target:
+                    CorrectionTarget::Point
+                    | CorrectionTarget::PointSpherical
+                    | CorrectionTarget::ToolPoint,
                 knots,
                 ..
             } => 3 * knots.len(),
@@ -475,111 +485,8 @@ impl EffectModel {
                 ));
             }
         }
-        if let Kind::DataDriven {
-            target,
-            target_index,
-            driver,
-            driver_index,
-            knots,
-            period,
-            range,
-            axis,
-        } = &self.kind
-        {
-            if (*driver == CorrectionDriver::StringDirection) != axis.is_some()
-                || axis.is_some_and(|a| {
-                    !(a.iter().all(|c| c.is_finite())
-                        && (a.iter().map(|c| c * c).sum::<f64>().sqrt() - 1.0).abs() < 1e-6)
-                })
-            {
-                return Err(
-                    "a correction by a string's direction needs its axis (a unit vector), and only it has one"
-                        .into(),
-                );
-            }
-            if range.is_some_and(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && lo <= hi)) {
-                return Err(
-                    "a data-driven correction's range must be two finite, ordered values".into(),
-                );
-            }
-            if knots.len() < 2
-                || knots.iter().any(|k| !k.is_finite())
-                || knots.windows(2).any(|w| w[1] <= w[0])
-            {
-                return Err(
-                    "a data-driven correction needs two or more finite, increasing knots".into(),
-                );
-            }
-            if let Some(p) = period
-                && !(p.is_finite() && *p > 0.0 && knots[0] >= 0.0 && knots[knots.len() - 1] < *p)
-            {
-                return Err(
-                    "a periodic correction needs a finite, positive period and its knots within one period"
-                        .into(),
-                );
-            }
-            if *driver == CorrectionDriver::Workspace
-                && driver_index.is_none_or(|d| d >= WORKSPACE_COORDINATES)
-            {
-                return Err(format!(
-                    "a correction over the workspace needs a driver_index from 0 to {}",
-                    WORKSPACE_COORDINATES - 1
-                ));
-            }
-            if *driver == CorrectionDriver::JointMove && *target != CorrectionTarget::JointAngle {
-                return Err(
-                    "a correction by a joint's last move corrects a joint's angle: its target must be joint_angle"
-                        .into(),
-                );
-            }
-            if *driver == CorrectionDriver::StringMove
-                && (*target != CorrectionTarget::StringReading || driver_index != target_index)
-            {
-                return Err(
-                    "a correction by a string's last change corrects that string's reading: its target must be string_reading with target_index equal to driver_index"
-                        .into(),
-                );
-            }
-            if *driver == CorrectionDriver::GravityTorque && *target != CorrectionTarget::JointAngle
-            {
-                return Err(
-                    "a correction by a joint's gravity torque corrects a joint's angle: its target must be joint_angle"
-                        .into(),
-                );
-            }
-            if *target == CorrectionTarget::InstrumentScale
-                && (target_index.is_some()
-                    || !matches!(
-                        driver,
-                        CorrectionDriver::Time | CorrectionDriver::Temperature
-                    ))
-            {
-                return Err(
-                    "a correction of the instrument's scale has no target_index and follows the clock or the temperature"
-                        .into(),
-                );
-            }
-            if *driver == CorrectionDriver::Motion && *target != CorrectionTarget::Point {
-                return Err("a correction by the motion moves T: its target must be point".into());
-            }
-            if *target == CorrectionTarget::PointSpherical && *driver != CorrectionDriver::Workspace
-            {
-                return Err(
-                    "a correction in the spherical frame is a field over the workspace: its driver must be workspace"
-                        .into(),
-                );
-            }
-            if !matches!(
-                target,
-                CorrectionTarget::Point
-                    | CorrectionTarget::PointSpherical
-                    | CorrectionTarget::InstrumentScale
-            ) && target_index.is_none()
-            {
-                return Err(
-                    "a data-driven correction of a joint or string needs its target_index".into(),
-                );
-            }
+        if let Kind::DataDriven { .. } = &self.kind {
+            check_correction(&self.kind)?;
         }
         if self.coef.len() != self.kind.n_coef() {
             return Err(format!(
@@ -602,4 +509,124 @@ impl EffectModel {
             kind,
         }
     }
+}
+
+/// The rules of a data-driven correction ([`Kind::DataDriven`]; other
+/// kinds pass): knots, period and range well formed, the driver's index
+/// or axis where it needs one, and each target with the drivers it
+/// follows. What is wrong, for a human.
+fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
+    let Kind::DataDriven {
+        target,
+        target_index,
+        driver,
+        driver_index,
+        knots,
+        period,
+        range,
+        axis,
+    } = kind
+    else {
+        return Ok(());
+    };
+    if (*driver == CorrectionDriver::StringDirection) != axis.is_some()
+        || axis.is_some_and(|a| {
+            !(a.iter().all(|c| c.is_finite())
+                && (a.iter().map(|c| c * c).sum::<f64>().sqrt() - 1.0).abs() < 1e-6)
+        })
+    {
+        return Err(
+                "a correction by a string's direction needs its axis (a unit vector), and only it has one"
+                    .into(),
+            );
+    }
+    if range.is_some_and(|[lo, hi]| !(lo.is_finite() && hi.is_finite() && lo <= hi)) {
+        return Err("a data-driven correction's range must be two finite, ordered values".into());
+    }
+    if knots.len() < 2
+        || knots.iter().any(|k| !k.is_finite())
+        || knots.windows(2).any(|w| w[1] <= w[0])
+    {
+        return Err("a data-driven correction needs two or more finite, increasing knots".into());
+    }
+    if let Some(p) = period
+        && !(p.is_finite() && *p > 0.0 && knots[0] >= 0.0 && knots[knots.len() - 1] < *p)
+    {
+        return Err(
+            "a periodic correction needs a finite, positive period and its knots within one period"
+                .into(),
+        );
+    }
+    if *driver == CorrectionDriver::Workspace
+        && driver_index.is_none_or(|d| d >= WORKSPACE_COORDINATES)
+    {
+        return Err(format!(
+            "a correction over the workspace needs a driver_index from 0 to {}",
+            WORKSPACE_COORDINATES - 1
+        ));
+    }
+    if *driver == CorrectionDriver::JointMove && *target != CorrectionTarget::JointAngle {
+        return Err(
+                "a correction by a joint's last move corrects a joint's angle: its target must be joint_angle"
+                    .into(),
+            );
+    }
+    if *driver == CorrectionDriver::StringMove
+        && (*target != CorrectionTarget::StringReading || driver_index != target_index)
+    {
+        return Err(
+                "a correction by a string's last change corrects that string's reading: its target must be string_reading with target_index equal to driver_index"
+                    .into(),
+            );
+    }
+    if *driver == CorrectionDriver::GravityTorque && *target != CorrectionTarget::JointAngle {
+        return Err(
+                "a correction by a joint's gravity torque corrects a joint's angle: its target must be joint_angle"
+                    .into(),
+            );
+    }
+    if *target == CorrectionTarget::InstrumentScale
+        && (target_index.is_some()
+            || !matches!(
+                driver,
+                CorrectionDriver::Time | CorrectionDriver::Temperature
+            ))
+    {
+        return Err(
+                "a correction of the instrument's scale has no target_index and follows the clock or the temperature"
+                    .into(),
+            );
+    }
+    if *driver == CorrectionDriver::Motion && *target != CorrectionTarget::Point {
+        return Err("a correction by the motion moves T: its target must be point".into());
+    }
+    if *target == CorrectionTarget::PointSpherical && *driver != CorrectionDriver::Workspace {
+        return Err(
+                "a correction in the spherical frame is a field over the workspace: its driver must be workspace"
+                    .into(),
+            );
+    }
+    if *target == CorrectionTarget::ToolPoint
+        && (target_index.is_some()
+            || !matches!(
+                driver,
+                CorrectionDriver::Time | CorrectionDriver::Temperature
+            ))
+    {
+        return Err(
+                "a correction of the tool point has no target_index and follows the clock or the temperature"
+                    .into(),
+            );
+    }
+    if !matches!(
+        target,
+        CorrectionTarget::Point
+            | CorrectionTarget::PointSpherical
+            | CorrectionTarget::InstrumentScale
+            | CorrectionTarget::ToolPoint
+    ) && target_index.is_none()
+    {
+        return Err("a data-driven correction of a joint or string needs its target_index".into());
+    }
+    Ok(())
 }

@@ -75,3 +75,36 @@ fn a_string_frame_growing_with_the_temperature_is_not_the_arm_expanding() {
     let (target, _, _, _) = common::correction_slot(&report);
     assert_eq!(target, CorrectionTarget::InstrumentScale);
 }
+
+#[test]
+fn a_probe_growing_with_the_process_heat_is_a_tool_point_correction_in_time() {
+    let (report, robot, _) = common::unnamed_near_the_twin(
+        "xcheck6_tool_thermal_std4",
+        |p| p.driver == "time" && p.joint.is_none(),
+        1.6,
+    );
+    // The tool point in the flange frame by the clock, not T relative to
+    // the rig (which does not turn with the flange) nor a joint's zero.
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::ToolPoint,
+            None,
+            CorrectionDriver::Time,
+            None
+        )
+    );
+    let f = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .unwrap();
+    assert!(
+        f.evidence
+            .contains("the tool point changed with this session's clock"),
+        "{}",
+        f.evidence
+    );
+    // It describes this session: compensation leaves it out.
+    assert!(drawcal::physics::JointEffects::new(&report.findings, &robot).is_none());
+}

@@ -318,6 +318,11 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         ("time", _, None) => {
             out.push(slots.clocked(CorrectionTarget::Point, None));
             out.push(slots.clocked(CorrectionTarget::InstrumentScale, None));
+            // Or the tool point in the flange frame (a probe growing with
+            // the process's heat, a tool slipping in its holder): T moves
+            // as the flange turns, which no function of the clock moving T
+            // relative to the rig follows.
+            out.push(slots.clocked(CorrectionTarget::ToolPoint, None));
             // Or one joint's zero (a re-homing, a lost encoder count, a
             // motor warming): T moves as that joint turns, which no
             // function of the clock alone moving T can follow.
@@ -346,14 +351,20 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
                 &CLOCK_KNOTS,
             ));
             // Or the instrument's scale: a string frame growing with the
-            // temperature, a tracker's range with the air's.
-            out.push(family(
+            // temperature, a tracker's range with the air's; or the tool
+            // point in the flange frame.
+            for target in [
                 CorrectionTarget::InstrumentScale,
-                None,
-                CorrectionDriver::Temperature,
-                None,
-                &CLOCK_KNOTS,
-            ));
+                CorrectionTarget::ToolPoint,
+            ] {
+                out.push(family(
+                    target,
+                    None,
+                    CorrectionDriver::Temperature,
+                    None,
+                    &CLOCK_KNOTS,
+                ));
+            }
         }
         ("time", _, Some(s)) if s <= m => {
             out.push(slots.clocked(CorrectionTarget::StringReading, Some(s - 1)))
@@ -584,6 +595,19 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
     } = kind
     {
         "compensation does not need it: it corrects the measuring instrument's scale, not where the robot went; the rig's frame (or a tracker's range, with the air) changed with this session's conditions: hold the instrument's temperature steady, give a tracker the air's temperature and pressure, or measure the rig again at the temperature it is used at".into()
+    } else if let Kind::DataDriven {
+        target: CorrectionTarget::ToolPoint,
+        ..
+    } = kind
+    {
+        format!(
+            "compensation cannot use it: the tool point changed with this session's {} (a probe growing with the heat of the process it carries, a tool slipping in its holder or re-seated), which a future target does not carry; check the tool's mounting and its temperature, then measure the tool point again (or re-calibrate) under the conditions it works in",
+            if *driver == CorrectionDriver::Temperature {
+                "temperature"
+            } else {
+                "clock"
+            }
+        )
     } else if *driver == CorrectionDriver::GravityTorque {
         "compensation does not apply it: it follows the joint's gravity load at the target (its angles and the payload), which compensation does not yet evaluate for a data-driven correction; the joint's error is not in proportion to its load as an elastic joint's is: check it for play that gravity takes up or a stiffness that changes with the load".into()
     } else if *driver == CorrectionDriver::JointMove {
@@ -868,6 +892,7 @@ pub(super) fn try_place(
     }) else {
         return false;
     };
+    let (p_new, eff_new, fit) = refined(inputs, (p_new, eff_new, fit));
     let Inputs { obs, ctx, .. } = inputs;
     let cand = Candidate {
         kind: kind.clone(),
@@ -949,6 +974,15 @@ pub(super) fn linear_refit(
     inputs: &Inputs,
     state: &State,
 ) -> Option<(Vec<f64>, Vec<EffectModel>, FitInfo)> {
+    linear_refit_at(inputs, &state.p, &state.accepted)
+}
+
+/// [`linear_refit`] from the geometry `p` with `accepted`.
+fn linear_refit_at(
+    inputs: &Inputs,
+    p: &[f64],
+    accepted: &[EffectModel],
+) -> Option<(Vec<f64>, Vec<EffectModel>, FitInfo)> {
     let Inputs {
         obs,
         ctx,
@@ -959,9 +993,9 @@ pub(super) fn linear_refit(
         obs,
         ctx,
         obs.train.clone(),
-        &state.p,
+        p,
         free.clone(),
-        state.accepted.clone(),
+        accepted.to_vec(),
     );
     let x0 = problem.x0();
     let nm = normals(&problem, &x0, fold_of);
@@ -969,7 +1003,7 @@ pub(super) fn linear_refit(
     let base: Vec<usize> = (0..free.len()).collect();
     let mut cols: Vec<usize> = Vec::new();
     let mut at = free.len();
-    for e in &state.accepted {
+    for e in accepted {
         let mut fixed = base.clone();
         fixed.extend(&cols);
         cols.extend(own_columns(&a, &fixed, &e.kind, at));
@@ -986,6 +1020,41 @@ pub(super) fn linear_refit(
         cv: f64::NAN,
         cv0: f64::NAN,
     })
+}
+
+/// The fit `(p, effects, info)` of one linearised step, stepped once more
+/// from where it ended when that lowers the train readings' residual: a
+/// correction that frees a shape the geometry held (the tool point moving
+/// with the clock lets the wrist's offsets trade with it) can move angles
+/// far enough that the first step, linearised before it, mispredicts.
+fn refined(
+    inputs: &Inputs,
+    fit: (Vec<f64>, Vec<EffectModel>, FitInfo),
+) -> (Vec<f64>, Vec<EffectModel>, FitInfo) {
+    let Some(again) = linear_refit_at(inputs, &fit.0, &fit.1) else {
+        return fit;
+    };
+    if train_sse(inputs, &again.0, &again.1) < train_sse(inputs, &fit.0, &fit.1) {
+        again
+    } else {
+        fit
+    }
+}
+
+/// The train readings' sum of squared residuals of the model `(p,
+/// effects)`, evaluated in full (not linearised).
+fn train_sse(inputs: &Inputs, p: &[f64], effects: &[EffectModel]) -> f64 {
+    let problem = EffectProblem::of_observations(
+        inputs.obs,
+        &inputs.ctx,
+        inputs.obs.train.clone(),
+        p,
+        vec![],
+        effects.to_vec(),
+    );
+    let mut sse = 0.0;
+    problem.residuals(&problem.x0(), |_, r| sse += r * r);
+    sse
 }
 
 /// One Gauss-Newton step on the base and the candidate's columns from the

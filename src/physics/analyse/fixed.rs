@@ -394,6 +394,31 @@ mod tests {
                 axis: None,
             },
         ];
+        // The tool point in the flange frame, the instrument's scale and a
+        // joint's zero by the clock; a joint's angle by its gravity torque.
+        let by_clock = |target, target_index| Kind::DataDriven {
+            target,
+            target_index,
+            driver: CorrectionDriver::Time,
+            driver_index: None,
+            knots: vec![0.0, 60.0, 300.0, 900.0],
+            period: None,
+            range: None,
+            axis: None,
+        };
+        kinds.push(by_clock(CorrectionTarget::ToolPoint, None));
+        kinds.push(by_clock(CorrectionTarget::InstrumentScale, None));
+        kinds.push(by_clock(CorrectionTarget::JointAngle, Some(1)));
+        kinds.push(Kind::DataDriven {
+            target: CorrectionTarget::JointAngle,
+            target_index: Some(1),
+            driver: CorrectionDriver::GravityTorque,
+            driver_index: Some(1),
+            knots: vec![-0.5, -1e-9, 1e-9, 0.5],
+            period: None,
+            range: None,
+            axis: None,
+        });
         if m > 0 {
             kinds.push(Kind::DataDriven {
                 target: CorrectionTarget::StringReading,
@@ -413,6 +438,17 @@ mod tests {
                 knots: vec![0.0, 10.0, 20.0, 30.0, 40.0, 50.0],
                 period: Some(60.0),
                 range: Some([100.0, 1500.0]),
+                axis: None,
+            });
+            // By its last change of length, jumping at zero.
+            kinds.push(Kind::DataDriven {
+                target: CorrectionTarget::StringReading,
+                target_index: Some(0),
+                driver: CorrectionDriver::StringMove,
+                driver_index: Some(0),
+                knots: vec![-200.0, -1e-6, 1e-6, 200.0],
+                period: None,
+                range: None,
                 axis: None,
             });
             // By the string's direction: its angle from an axis.

@@ -336,7 +336,8 @@ fn fixed_unit(kind: &Kind) -> &'static str {
             ..
         } => "deg (RMS of the correction over the train poses)",
         Kind::DataDriven {
-            target: CorrectionTarget::Point | CorrectionTarget::PointSpherical,
+            target:
+                CorrectionTarget::Point | CorrectionTarget::PointSpherical | CorrectionTarget::ToolPoint,
             ..
         } => "mm (RMS displacement of T over the train poses)",
         Kind::DataDriven {

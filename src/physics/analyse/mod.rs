@@ -238,7 +238,16 @@ pub fn effect_context(obs: &Observations, p: &Params) -> Context {
             },
         })
         .collect();
-    Context::new(obs.robot, obs.anchors.clone(), obs.rig.r_mm, &rb, &inputs)
+    Context::new(obs.robot, obs.anchors.clone(), obs.rig.r_mm, &rb, &inputs).with_flange_of(|i| {
+        obs.chain
+            .point(
+                &p.values,
+                &obs.data.poses[i].q_rad,
+                crate::kinematics::chain::OutputFrame::Rig,
+            )
+            .0
+            .r
+    })
 }
 
 /// Errors (model minus measured T, robot base frame, mm) at poses `idx` of
