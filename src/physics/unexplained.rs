@@ -91,6 +91,10 @@ pub(super) fn unexplained(
     // of the axis, so raw residuals of neighbours in that angle need not
     // agree while these components do.
     let along = joint_components(obs, ctx, p, &res, rpp);
+    // And in time along the flange's axes: the tool point changing during
+    // the session (a probe warming, a tool slipping in its holder) moves T
+    // as the flange turns.
+    let flange = flange_components(obs, ctx, &res, rpp);
     let with_temp = has_temperature(obs);
     let extra = string_tests(obs, ctx, &res, rpp);
     let nb = neighbours(
@@ -99,6 +103,7 @@ pub(super) fn unexplained(
         obs.anchors.is_empty(),
         &pairings,
         along.as_deref(),
+        flange.as_deref(),
         &extra,
         &res,
         rpp,
@@ -624,6 +629,10 @@ enum Along {
     /// displacement of T turns with the pose, so raw residuals of poses
     /// neighbouring in time need not agree while these components do.
     JointInTime(usize),
+    /// For the clock's ordering, their components along the flange's axis
+    /// `.0` (0 = x, 1 = y, 2 = z): the tool point changing during the
+    /// session, whose displacement of T turns with the flange.
+    FlangeInTime(usize),
 }
 
 /// What the neighbour test found over every ordering (see [`neighbours`]).
@@ -656,6 +665,7 @@ fn neighbours(
     point_data: bool,
     pairings: &[(String, Vec<(usize, usize)>)],
     along: Option<&[Vec<f64>]>,
+    flange: Option<&[Vec<f64>]>,
     extra: &[ScalarTest],
     res: &[f64],
     rpp: usize,
@@ -668,7 +678,11 @@ fn neighbours(
     // growing towards the workspace's edge) the signs are stronger. Both
     // are sums of terms uncorrelated under independent symmetric noise,
     // also where pairs share a pose.
-    let n_tests = 2 * (n_plain + along.as_ref().map_or(0, |_| 3 * n) + extra.len());
+    let n_tests = 2
+        * (n_plain
+            + along.as_ref().map_or(0, |_| 3 * n)
+            + flange.as_ref().map_or(0, |f| f.len())
+            + extra.len());
     let alpha = 1e-3 / n_tests as f64;
     let zcrit = normal_quantile(1.0 - alpha);
     let z_of = |pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64| {
@@ -716,6 +730,14 @@ fn neighbours(
                 ));
             }
         }
+        if let (Some(f), true) = (flange, pk == n) {
+            for (c, fc) in f.iter().enumerate() {
+                tries.push((
+                    z_of(pairs, &|i: usize, k: usize| fc[i] * fc[k]),
+                    Along::FlangeInTime(c),
+                ));
+            }
+        }
         let (driver, joint) = driver_of(pk, n, with_temp);
         let mut strongest: Option<Place> = None;
         for (z, on) in tries {
@@ -743,6 +765,9 @@ fn neighbours(
                     }
                     Along::JointInTime(b) => {
                         format!("{name}, along the direction joint {} moves T", b + 1)
+                    }
+                    Along::FlangeInTime(c) => {
+                        format!("{name}, along the flange's {} axis", AXES[c])
                     }
                 };
                 best = Some((z, label));
@@ -892,6 +917,13 @@ fn located(
             format!(
                 "along the direction joint {j} moves T, the residuals of poses neighbouring in time agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch behaves like an error of joint {j}'s angle that changes during the session (its zero re-set, an encoder count lost, a drive warming), in a form no catalogue effect has",
                 j = b + 1
+            ),
+        ),
+        (Some((z, _)), _, Some((pk, Along::FlangeInTime(c)))) => (
+            pk,
+            format!(
+                "along the flange's {} axis, the residuals of poses neighbouring in time agree more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): the mismatch behaves like the tool point moving in the flange frame during the session (a probe warming with the process, a tool slipping in its holder or re-seated), in a form no catalogue effect has",
+                AXES[c]
             ),
         ),
         (Some((z, _)), _, Some((pk, Along::Others))) => (
@@ -1260,22 +1292,12 @@ fn joint_components(
     res: &[f64],
     rpp: usize,
 ) -> Option<Vec<Vec<f64>>> {
-    let m = obs.anchors.len();
-    if m > 0 && (m < 3 || rpp != m) {
-        return None;
-    }
+    let disps = displacements(obs, ctx, res, rpp)?;
     let n = ctx.n_joints;
     let l = obs.chain.layout;
     let mut jac = obs.chain.new_jacobian();
     let mut out = vec![Vec::with_capacity(obs.train.len()); n];
-    for (pos, &i) in obs.train.iter().enumerate() {
-        let r = &res[pos * rpp..(pos + 1) * rpp];
-        let disp = if m == 0 {
-            Vector3::new(r[0], r[1], r[2])
-        } else {
-            common_displacement(&obs.anchors, &ctx.poses[i].point_rig, r)
-                .map_or(Vector3::zeros(), |(d, _)| d)
-        };
+    for (&i, disp) in obs.train.iter().zip(&disps) {
         obs.chain.point_jacobian(
             p,
             &ctx.poses[i].q_rad,
@@ -1293,6 +1315,63 @@ fn joint_components(
         }
     }
     Some(out)
+}
+
+/// Names of the flange's axes, for a sentence.
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+/// Per train pose (position in `obs.train`), its residual as a
+/// displacement of T in the rig frame (mm): a point residual is one;
+/// string residuals give it by least squares through the anchors' unit
+/// vectors (their robot-side part). `None` with fewer than three strings.
+fn displacements(
+    obs: &Observations,
+    ctx: &Context,
+    res: &[f64],
+    rpp: usize,
+) -> Option<Vec<Vector3<f64>>> {
+    let m = obs.anchors.len();
+    if m > 0 && (m < 3 || rpp != m) {
+        return None;
+    }
+    Some(
+        obs.train
+            .iter()
+            .enumerate()
+            .map(|(pos, &i)| {
+                let r = &res[pos * rpp..(pos + 1) * rpp];
+                if m == 0 {
+                    Vector3::new(r[0], r[1], r[2])
+                } else {
+                    common_displacement(&obs.anchors, &ctx.poses[i].point_rig, r)
+                        .map_or(Vector3::zeros(), |(d, _)| d)
+                }
+            })
+            .collect(),
+    )
+}
+
+/// Per axis of the flange (x, y, z) and train pose, the component of the
+/// pose's residual, as a displacement of T ([`displacements`]), along
+/// that axis in the rig frame (mm).
+fn flange_components(
+    obs: &Observations,
+    ctx: &Context,
+    res: &[f64],
+    rpp: usize,
+) -> Option<Vec<Vec<f64>>> {
+    let disps = displacements(obs, ctx, res, rpp)?;
+    Some(
+        (0..3)
+            .map(|c| {
+                obs.train
+                    .iter()
+                    .zip(&disps)
+                    .map(|(&i, d)| d.dot(&ctx.poses[i].flange_axes_rig[c]))
+                    .collect()
+            })
+            .collect(),
+    )
 }
 
 /// Each train pose (position in `train`) paired with its nearest other

@@ -1,8 +1,9 @@
 //! Structure in time or temperature that no named effect explains: a
 //! joint's zero that jumps, a rig knocked that springs back, a string frame
-//! that grows with the temperature. Each is located in time (at the joint,
-//! for the joint's zero) and modelled without a name; the rig moves or the
-//! arm's expansion a forward selection first fits to it are not reported.
+//! that grows with the temperature, a probe that grows with the process's
+//! heat. Each is located in time (at the joint, for the joint's zero) and
+//! modelled without a name; the rig moves or the arm's expansion a forward
+//! selection first fits to it are not reported.
 
 use crate::common;
 use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
@@ -107,4 +108,27 @@ fn a_probe_growing_with_the_process_heat_is_a_tool_point_correction_in_time() {
     );
     // It describes this session: compensation leaves it out.
     assert!(drawcal::physics::JointEffects::new(&report.findings, &robot).is_none());
+}
+
+#[test]
+fn a_probe_growing_in_time_is_located_along_the_flange_axis_on_three_strings() {
+    let (report, _, _) = common::unnamed_near_the_twin(
+        "xcheck6_tool_thermal_s3tilt",
+        |p| p.driver == "time" && p.joint.is_none(),
+        1.5,
+    );
+    // The clock's test along the flange's z axis (the probe's), where the
+    // raw residuals of neighbours in time agree less.
+    assert!(
+        report
+            .findings
+            .iter()
+            .any(|f| f.effect == "unexplained" && f.evidence.contains("along the flange's z axis")),
+        "{:#?}",
+        report.findings
+    );
+    assert_eq!(
+        common::correction_slot(&report).0,
+        CorrectionTarget::ToolPoint
+    );
 }

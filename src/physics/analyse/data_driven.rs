@@ -825,7 +825,8 @@ fn linearise<'a>(
     );
     let nm = fixed.with(inputs, kind);
     let (a, b, rr) = nm.total();
-    let base: Vec<usize> = (0..fixed.n_base).collect();
+    let held = inputs.held_columns(state.accepted.iter().map(|e| &e.kind).chain([kind]));
+    let base: Vec<usize> = (0..fixed.n_base).filter(|c| !held.contains(c)).collect();
     let cols = own_columns(&a, &base, kind, fixed.n_base);
     if cols.is_empty() {
         return None;
@@ -1000,7 +1001,8 @@ fn linear_refit_at(
     let x0 = problem.x0();
     let nm = normals(&problem, &x0, fold_of);
     let (a, b, rr) = nm.total();
-    let base: Vec<usize> = (0..free.len()).collect();
+    let held = inputs.held_columns(accepted.iter().map(|e| &e.kind));
+    let base: Vec<usize> = (0..free.len()).filter(|c| !held.contains(c)).collect();
     let mut cols: Vec<usize> = Vec::new();
     let mut at = free.len();
     for e in accepted {

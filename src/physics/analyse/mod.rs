@@ -50,7 +50,7 @@ mod trial;
 
 use nalgebra::Vector3;
 
-use super::effects::{Context, EffectModel, Kind, PoseInput};
+use super::effects::{Context, CorrectionTarget, EffectModel, Kind, PoseInput};
 use super::problem::EffectProblem;
 use super::unexplained::robot_side_share;
 use crate::error::Result;
@@ -136,6 +136,31 @@ impl<'a> Inputs<'a> {
             free: geo.selection.free.clone(),
             fold_of,
         }
+    }
+
+    /// The geometry's columns (positions in `free`) a linearised fit with
+    /// `effects` holds where it is: the tool point's, when a correction of
+    /// the tool point is among them. The correction's constant part is the
+    /// tool point; with both free, the knots but one sum to nearly the tool
+    /// point's columns, and a fit cancels the two in large opposite amounts
+    /// that the geometry, moving on, no longer cancels.
+    fn held_columns<'k>(&self, effects: impl IntoIterator<Item = &'k Kind>) -> Vec<usize> {
+        let tool_point = effects.into_iter().any(|k| {
+            matches!(
+                k,
+                Kind::DataDriven {
+                    target: CorrectionTarget::ToolPoint,
+                    ..
+                }
+            )
+        });
+        if !tool_point {
+            return Vec::new();
+        }
+        let t = self.obs.chain.layout.tool();
+        (0..self.free.len())
+            .filter(|&c| (t..t + 3).contains(&self.free[c]))
+            .collect()
     }
 }
 

@@ -199,9 +199,13 @@ fn without_all(
     let x0 = problem.x0();
     let nm = normals(&problem, &x0, fold_of);
     let (a, b, _) = nm.total();
-    let cols: Vec<usize> = (0..x0.len()).collect();
+    let held = inputs.held_columns(problem.effects.iter().map(|e| &e.kind));
+    let cols: Vec<usize> = (0..x0.len()).filter(|c| !held.contains(c)).collect();
     let (_, delta) = solve_subset(&a, &b, &cols)?;
-    let x: Vec<f64> = x0.iter().zip(&delta).map(|(x, d)| x + d).collect();
+    let mut x = x0;
+    for (&c, d) in cols.iter().zip(&delta) {
+        x[c] += d;
+    }
     Some(problem.unpack(&x))
 }
 
