@@ -115,3 +115,41 @@ fn a_post_bending_with_the_pull_is_not_an_anchor_step() {
         )
     );
 }
+
+/// One string whose exit walks along its drum as it pays out reads off by
+/// a field over the workspace (its length times its direction along the
+/// drum's axis): with four strings its error moves the located point too,
+/// so which string it is shows only in whose reading the field fits. The
+/// workspace place takes that string, and nothing is named.
+#[test]
+fn a_string_whose_exit_walks_along_its_drum_is_placed_on_that_string_over_the_workspace() {
+    let (robot, rig, data) = common::load("xcheck6_drum_exit_walk_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| p.driver == "workspace" && p.sensor == Some(1));
+    let (target, index, driver, _) = common::correction_slot(&report);
+    assert_eq!(
+        (target, index, driver),
+        (
+            CorrectionTarget::StringReading,
+            Some(0),
+            CorrectionDriver::Workspace
+        )
+    );
+    let f = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .unwrap();
+    assert!(
+        f.test_rms_after_mm < 0.9 * f.test_rms_before_mm,
+        "{} -> {}",
+        f.test_rms_before_mm,
+        f.test_rms_after_mm
+    );
+    assert!(
+        f.evidence.contains("compensation does not need it"),
+        "{}",
+        f.evidence
+    );
+}

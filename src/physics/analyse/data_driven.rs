@@ -382,6 +382,22 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
                     &JOINT_KNOTS,
                 ));
             }
+            // Or one string's reading as a function of where T is (its
+            // exit walking along its drum as the string pays out, its
+            // eyelet's friction by where the string points): with four
+            // strings one string's error moves the located point too, so
+            // the string is known only by whose reading the field fits.
+            for s in 0..m {
+                for c in 0..3 {
+                    out.push(family(
+                        CorrectionTarget::StringReading,
+                        Some(s),
+                        CorrectionDriver::Workspace,
+                        Some(c),
+                        &JOINT_KNOTS,
+                    ));
+                }
+            }
             // With point data the rig's origin is the instrument's: its
             // angle and range errors as functions of its own angles and
             // distance, in the directions that turn with them.
@@ -550,7 +566,14 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
         .fitted_range()
         .unwrap_or((knots[0], knots[knots.len() - 1]));
     let beyond = kind.beyond_range();
-    if *driver == CorrectionDriver::Workspace {
+    let reading = matches!(
+        kind,
+        Kind::DataDriven {
+            target: CorrectionTarget::StringReading,
+            ..
+        }
+    );
+    if *driver == CorrectionDriver::Workspace && !reading {
         let (lo, hi, unit) = match kind {
             Kind::DataDriven {
                 driver_index: Some(3 | 4),
@@ -568,7 +591,7 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
         format!(
             "compensation applies it (a function of where T is), inside the region the poses covered ({lo:.1} to {hi:.1} {unit}; beyond it {beyond}, and compensation warns){caveat}"
         )
-    } else if driver.usable_for_compensation() {
+    } else if driver.usable_for_compensation() && !reading {
         format!(
             "compensation applies it (a function of joint angles), inside the range the poses covered ({:.1} to {:.1} deg; beyond it {beyond}, and compensation warns)",
             lo.to_degrees(),

@@ -185,6 +185,25 @@ fn placed_by_correction(finding: &mut Finding, kept: &[crate::physics::effects::
     let Some(FindingModel::Unexplained(u)) = &mut finding.parameters else {
         return;
     };
+    // One string's reading as a field over the workspace says whose: the
+    // workspace place takes the string.
+    if let Some(s) = kept.iter().find_map(|k| match k {
+        Kind::DataDriven {
+            target: CorrectionTarget::StringReading,
+            target_index: Some(s),
+            driver: CorrectionDriver::Workspace,
+            ..
+        } => Some(*s),
+        _ => None,
+    }) {
+        for p in u
+            .places
+            .iter_mut()
+            .filter(|p| p.driver == "workspace" && p.sensor.is_none())
+        {
+            p.sensor = Some(s + 1);
+        }
+    }
     // The first such correction kept says where (one joint per place).
     let Some(t) = kept.iter().find_map(|k| match k {
         Kind::DataDriven {
