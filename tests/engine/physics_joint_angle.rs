@@ -158,3 +158,38 @@ fn a_play_gravity_takes_up_is_not_a_compliance() {
         )
     );
 }
+
+/// A counterbalance spring's torque is a function of joint 2's angle of no
+/// catalogue shape: two periodic terms of the joint together fit it, which
+/// is no one physical effect, so they are not named; the data-driven
+/// correction of the joint's angle by its angle replaces them, fitted beside
+/// the compliance the recording also holds (the simulator took the spring's
+/// projection onto the gravity torque out), which stays.
+#[test]
+fn a_counterbalance_spring_is_no_series_of_periodic_terms() {
+    let (robot, rig, data) = common::load("xcheck6_counterbalance_mdh_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    let named: Vec<(&str, Option<usize>)> = report
+        .findings
+        .iter()
+        .filter(|f| !matches!(f.effect.as_str(), "unexplained" | "data_driven"))
+        .map(|f| (f.effect.as_str(), f.joint))
+        .collect();
+    assert_eq!(named, [("joint_compliance", Some(2))], "{:#?}", report.findings);
+    common::place_where(&report, |p| p.driver == "joint" && p.joint == Some(2));
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::JointAngle,
+            Some(1),
+            CorrectionDriver::JointAngle,
+            Some(1)
+        )
+    );
+    let (robot, rig, twin) = common::load("xcheck6_counterbalance_mdh_std4/twin");
+    common::near_the_twin(
+        &report,
+        &common::identify_default(&robot, &rig, &twin),
+        1.1,
+    );
+}

@@ -89,7 +89,9 @@ pub(super) fn finish(
             (&stays.p, &stays.accepted),
             (&state.p, &state.accepted),
         );
-        if corrected && z > naming::series_threshold(&series) {
+        // A series is condemned by its shape: what replaced it need only
+        // not be clearly worse.
+        if corrected && z > -super::HELD_OUT_Z {
             naming::say_why(&mut state, &series, z);
         } else {
             state = located.unwrap_or_else(|| {

@@ -9,7 +9,7 @@
 
 pub(super) use super::gates::held_out_gain_z;
 use super::normals::{normals, solve_subset};
-use super::{Inputs, PAIR_MEMBER_Z, State};
+use super::{Inputs, State};
 use crate::physics::effects::EffectModel;
 use crate::physics::problem::EffectProblem;
 use crate::report::FindingModel;
@@ -516,11 +516,6 @@ pub(super) struct Series {
     names: Vec<String>,
     /// What makes the shape unphysical.
     why: &'static str,
-    /// True when the shape alone condemns them (three or more terms of a
-    /// joint, terms that cancel, several moves): the data-driven
-    /// correction need only not be clearly worse. Otherwise (two shape
-    /// terms of one joint) it must be better.
-    strong: bool,
 }
 
 /// The named effects of `state` whose shape is no one physical effect:
@@ -537,31 +532,33 @@ pub(super) fn series(state: &State) -> Vec<Series> {
         .max()
         .map_or(0, |j| j + 1);
     for j in 0..n_joints {
-        let members: Vec<usize> = (0..acc.len())
+        let terms: Vec<usize> = (0..acc.len())
             .filter(|&k| !acc[k].kind.is_data_driven() && acc[k].kind.joint() == Some(j))
             .collect();
-        if members.len() < 2 {
-            continue;
-        }
-        let shape_only = members.iter().all(|&k| {
+        let is_shape = |k: &usize| {
             matches!(
-                acc[k].kind,
+                acc[*k].kind,
                 Kind::JointPeriodic { .. } | Kind::JointScale { .. }
             )
-        });
-        let strong = members.len() >= 3;
-        if !strong && !shape_only {
+        };
+        let shapes: Vec<usize> = terms.iter().copied().filter(is_shape).collect();
+        // Two shape terms are the series on their own: a compliance or a
+        // backlash beside them stays, fitted with what replaces them.
+        let members = if shapes.len() >= 2 {
+            shapes
+        } else if terms.len() >= 3 {
+            terms
+        } else {
             continue;
-        }
+        };
         out.push(Series {
-            names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
-            members,
-            why: if strong {
+            why: if !members.iter().all(is_shape) {
                 "three or more terms of one joint together fit one error of its angle, which is no one physical effect"
             } else {
-                "two shape terms of one joint together fit one error of its angle, which is no one physical effect"
+                "several shape terms of one joint together fit one error of its angle, which is no one physical effect"
             },
-            strong,
+            names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
+            members,
         });
     }
     let rig: Vec<usize> = (0..acc.len())
@@ -572,7 +569,6 @@ pub(super) fn series(state: &State) -> Vec<Series> {
             names: rig.iter().map(|&k| described(&acc[k].kind)).collect(),
             members: rig,
             why: "several moves of the rig in one session fit one motion of another shape, which is no one physical effect",
-            strong: true,
         });
     }
     let strings = acc
@@ -594,8 +590,7 @@ pub(super) fn series(state: &State) -> Vec<Series> {
                 names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
                 members,
                 why: "several steps or creeps of one string in one session fit one change of another shape, which is no one physical effect",
-                strong: true,
-            });
+                });
         }
     }
     out
@@ -661,20 +656,7 @@ pub(super) fn left_in_their_driver(state: &State, located: &State) -> Vec<Series
         names: members.iter().map(|&k| described(&acc[k].kind)).collect(),
         members,
         why: "the remainder still followed the driver they act through after them, so they did not explain the structure they were found on",
-        strong: true,
     }]
-}
-
-/// The paired z the model without the series (with what replaced it)
-/// must pass against the model with it: -[`HELD_OUT_Z`](super::HELD_OUT_Z)
-/// (not clearly worse) when every series is condemned by its shape, else
-/// +[`PAIR_MEMBER_Z`] (better).
-pub(super) fn series_threshold(series: &[Series]) -> f64 {
-    if series.iter().all(|s| s.strong) {
-        -super::HELD_OUT_Z
-    } else {
-        PAIR_MEMBER_Z
-    }
 }
 
 /// Take every series' effects out of the model (findings and effects),
