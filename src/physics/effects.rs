@@ -145,6 +145,7 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
             "the position of T in the spherical frame about the rig's origin (azimuth, elevation, distance)".into()
         }
         CorrectionTarget::StringReading => format!("string {at}'s reading"),
+        CorrectionTarget::StringZeroScale => format!("string {at}'s zero and scale"),
         CorrectionTarget::LinkLength => format!("the length {}", length_name(index)),
         CorrectionTarget::InstrumentScale => {
             "the measuring instrument's scale (the anchors about their centroid, or a tracker's points about its origin)".into()
@@ -825,6 +826,15 @@ impl Context {
                         }
                         CorrectionTarget::StringReading => {
                             out.dl[k * m + target_index.unwrap_or(0)] += w;
+                        }
+                        CorrectionTarget::StringZeroScale => {
+                            let s = target_index.unwrap_or(0);
+                            let l_m = self
+                                .anchors
+                                .get(s)
+                                .map_or(0.0, |a| (pc.point_rig - a).norm() * 1e-3);
+                            out.dl[2 * k * m + s] += w;
+                            out.dl[(2 * k + 1) * m + s] += w * l_m;
                         }
                         CorrectionTarget::LinkLength => {
                             for r in 0..3 {

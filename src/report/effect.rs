@@ -58,6 +58,13 @@ pub enum CorrectionTarget {
     /// turn. A probe that grows with the process's heat, a tool that slips
     /// in its holder or is re-seated is such a correction in the clock.
     ToolPoint,
+    /// One string's zero (mm) and scale (mm per metre of its length), two
+    /// coefficients per knot: the string reads `a + b · l / 1000` more at
+    /// length `l` (mm). A scale that varies with where the string points
+    /// (its exit walking along its drum's axis as it pays out, a guide
+    /// that bends it more in some directions) is such a correction by the
+    /// string's direction.
+    StringZeroScale,
 }
 
 /// What drives a data-driven correction.
@@ -311,7 +318,7 @@ impl Kind {
             | Kind::SensorDrift { sensor_index }
             | Kind::AnchorStep { sensor_index, .. } => Some(*sensor_index),
             Kind::DataDriven {
-                target: CorrectionTarget::StringReading,
+                target: CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale,
                 target_index,
                 ..
             } => *target_index,
@@ -414,6 +421,11 @@ impl Kind {
                 knots,
                 ..
             } => 3 * knots.len(),
+            Kind::DataDriven {
+                target: CorrectionTarget::StringZeroScale,
+                knots,
+                ..
+            } => 2 * knots.len(),
             Kind::DataDriven { knots, .. } => knots.len(),
             _ => 1,
         }
@@ -576,6 +588,14 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
     {
         return Err(
                 "a correction by a string's last change corrects that string's reading: its target must be string_reading with target_index equal to driver_index"
+                    .into(),
+            );
+    }
+    if *target == CorrectionTarget::StringZeroScale
+        && (*driver != CorrectionDriver::StringDirection || driver_index != target_index)
+    {
+        return Err(
+                "a correction of a string's zero and scale follows that string's direction: its driver must be string_direction with driver_index equal to target_index"
                     .into(),
             );
     }

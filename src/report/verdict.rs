@@ -306,7 +306,11 @@ fn compensation(r: &Report) -> Option<(Level, String)> {
         };
         let used = match &model.kind {
             Kind::DataDriven { target, driver, .. } => {
-                driver.usable_for_compensation() && *target != CorrectionTarget::StringReading
+                driver.usable_for_compensation()
+                    && !matches!(
+                        target,
+                        CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale
+                    )
             }
             k => k.robot_side() && k.change_time_s().is_none() && *k != Kind::RigDrift,
         };

@@ -175,7 +175,12 @@ fn a_counterbalance_spring_is_no_series_of_periodic_terms() {
         .filter(|f| !matches!(f.effect.as_str(), "unexplained" | "data_driven"))
         .map(|f| (f.effect.as_str(), f.joint))
         .collect();
-    assert_eq!(named, [("joint_compliance", Some(2))], "{:#?}", report.findings);
+    assert_eq!(
+        named,
+        [("joint_compliance", Some(2))],
+        "{:#?}",
+        report.findings
+    );
     common::place_where(&report, |p| p.driver == "joint" && p.joint == Some(2));
     assert_eq!(
         common::correction_slot(&report),
@@ -187,9 +192,5 @@ fn a_counterbalance_spring_is_no_series_of_periodic_terms() {
         )
     );
     let (robot, rig, twin) = common::load("xcheck6_counterbalance_mdh_std4/twin");
-    common::near_the_twin(
-        &report,
-        &common::identify_default(&robot, &rig, &twin),
-        1.1,
-    );
+    common::near_the_twin(&report, &common::identify_default(&robot, &rig, &twin), 1.1);
 }

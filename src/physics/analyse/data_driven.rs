@@ -54,6 +54,10 @@ const CLOCK_KNOTS: [usize; 14] = [3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 1
 /// columns are left out instead, the only part a geometry holds (a constant
 /// shift: the base's translation, a joint's zero offset).
 const ALIAS_CHECK_MAX_COLUMNS: usize = 48;
+/// Knot counts tried for a string's zero and scale by its direction (two
+/// coefficients per knot; the scale of a string varies slowly with where
+/// it points).
+const ZERO_SCALE_KNOTS: [usize; 5] = [2, 3, 4, 6, 8];
 /// Fewest train poses per knot (each knot's coefficient needs its poses).
 const POSES_PER_KNOT: usize = 8;
 /// At most this many corrections (one per located driver, strongest
@@ -269,6 +273,90 @@ impl Slots<'_> {
             .filter(|f| !f.is_empty())
             .collect()
     }
+
+    /// String `s`'s (0-based) zero and scale as functions of its angle
+    /// from `axis`, at every knot count of [`ZERO_SCALE_KNOTS`] the train
+    /// poses allow.
+    fn zero_scale_about(&self, s: usize, axis: [f64; 3]) -> Vec<Kind> {
+        self.knotted_about(
+            (CorrectionTarget::StringZeroScale, Some(s)),
+            (CorrectionDriver::StringDirection, Some(s)),
+            Some(axis),
+            &ZERO_SCALE_KNOTS,
+        )
+    }
+}
+
+/// The family of string `s`'s (0-based) zero and scale by its direction
+/// before it is aimed: one placeholder, which [`try_place`] replaces by
+/// [`aimed`]'s candidates (the axis comes from the residual).
+fn to_aim(s: usize) -> Vec<Kind> {
+    vec![Kind::DataDriven {
+        target: CorrectionTarget::StringZeroScale,
+        target_index: Some(s),
+        driver: CorrectionDriver::StringDirection,
+        driver_index: Some(s),
+        knots: vec![0.0, std::f64::consts::PI],
+        period: None,
+        range: None,
+        axis: Some([0.0, 0.0, 1.0]),
+    }]
+}
+
+/// The candidates of a [`to_aim`] family: the axis is the direction along
+/// which the string's scale changes most, the least-squares gradient of
+/// its reading's residual (the model so far held fixed) over `l · u` (`l`
+/// its length, `u` its direction), fitted beside `u`, a constant and `l`.
+/// A scale that varies with where the string points is, to first order,
+/// such a gradient; the correction then follows it as a smooth function
+/// of the angle from it.
+fn aimed(inputs: &Inputs, fixed: &FixedBase, placeholder: &Kind) -> Vec<Kind> {
+    let Some(s) = placeholder.sensor() else {
+        return vec![];
+    };
+    let Inputs { obs, ctx, .. } = inputs;
+    let probe = Kind::DataDriven {
+        target: CorrectionTarget::StringReading,
+        target_index: Some(s),
+        driver: CorrectionDriver::StringLength,
+        driver_index: Some(s),
+        knots: vec![0.0, 1.0],
+        period: None,
+        range: None,
+        axis: None,
+    };
+    let patterns = fixed.pose_patterns(inputs, &probe);
+    let mut a = DMatrix::<f64>::zeros(8, 8);
+    let mut g = nalgebra::DVector::<f64>::zeros(8);
+    for (pos, &(vr, vv)) in patterns.iter().enumerate() {
+        let v = ctx.poses[obs.train[pos]].point_rig - ctx.anchors[s];
+        let l_m = v.norm() * 1e-3;
+        let Some(u) = v.try_normalize(0.0) else {
+            continue;
+        };
+        let x = [l_m * u.x, l_m * u.y, l_m * u.z, u.x, u.y, u.z, 1.0, l_m];
+        for i in 0..8 {
+            g[i] += x[i] * vr;
+            for j in 0..8 {
+                a[(i, j)] += x[i] * x[j] * vv;
+            }
+        }
+    }
+    for i in 0..8 {
+        a[(i, i)] += 1e-9 * a[(i, i)].max(1e-300);
+    }
+    let Some(beta) = a.cholesky().map(|c| c.solve(&g)) else {
+        return vec![];
+    };
+    let Some(axis) = Vector3::new(beta[0], beta[1], beta[2]).try_normalize(1e-12) else {
+        return vec![];
+    };
+    let slots = Slots {
+        ctx,
+        train: &obs.train,
+        jumps_s: &[],
+    };
+    slots.zero_scale_about(s, axis.into())
 }
 
 /// The candidate families at a place: per family one slot (what is
@@ -397,6 +485,9 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
                         &JOINT_KNOTS,
                     ));
                 }
+                // Or its zero and scale by where it points (its exit
+                // walking along its drum as it pays out).
+                out.push(to_aim(s));
             }
             // With point data the rig's origin is the instrument's: its
             // angle and range errors as functions of its own angles and
@@ -416,7 +507,13 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         // A string's reading by its direction from its anchor (wrap or
         // friction at its exit, eyelet or pulley): by the angle from its
         // mean direction over the train poses.
-        ("workspace", _, Some(s)) if s <= m => out.extend(slots.by_direction(s - 1)),
+        // Or any string's zero and scale by where it points: with four
+        // strings one string's error moves the located point too, so the
+        // string the place names may be another's.
+        ("workspace", _, Some(s)) if s <= m => {
+            out.extend(slots.by_direction(s - 1));
+            out.extend((0..m).map(to_aim));
+        }
         // One string's last change of length: its reading off by the way
         // it last moved (friction in its drum, stretch of its cable).
         ("motion", _, Some(s)) if s <= m => out.push(slots.signed(
@@ -898,12 +995,24 @@ pub(super) fn try_place(
             })
         )
     };
+    let is_aim = |f: &Vec<Kind>| {
+        matches!(
+            f.first(),
+            Some(Kind::DataDriven {
+                target: CorrectionTarget::StringZeroScale,
+                ..
+            })
+        )
+    };
     let mut candidates: Vec<Kind> = families
         .iter()
-        .filter(|f| !is_scan(f))
+        .filter(|f| !is_scan(f) && !is_aim(f))
         .flatten()
         .cloned()
         .collect();
+    for f in families.iter().filter(|f| is_aim(f)) {
+        candidates.extend(f.first().map_or(vec![], |k| aimed(inputs, &fixed, k)));
+    }
     for f in families.iter().filter(|f| is_scan(f)) {
         candidates.extend(screened(inputs, &fixed, f));
     }

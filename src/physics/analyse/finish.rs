@@ -206,6 +206,34 @@ fn placed_by_correction(finding: &mut Finding, kept: &[crate::physics::effects::
             p.sensor = Some(s + 1);
         }
     }
+    // One string's zero and scale by where it points says whose, whichever
+    // string the place's own test pointed at (one string's error moves
+    // the located point, so every string's residual follows it).
+    if let Some(s) = kept.iter().find_map(|k| match k {
+        Kind::DataDriven {
+            target: CorrectionTarget::StringZeroScale,
+            target_index: Some(s),
+            ..
+        } => Some(*s),
+        _ => None,
+    }) {
+        let mut moved = false;
+        for p in u
+            .places
+            .iter_mut()
+            .filter(|p| p.driver == "workspace" && p.sensor != Some(s + 1))
+        {
+            moved |= p.sensor.is_some();
+            p.sensor = Some(s + 1);
+        }
+        if moved {
+            finding.evidence = format!(
+                "{}; it is string {}'s: a correction of that string's zero and scale by its direction predicted the train poses best (cross-validated against every other string's)",
+                finding.evidence,
+                s + 1
+            );
+        }
+    }
     // The first such correction kept says where (one joint per place).
     let Some(t) = kept.iter().find_map(|k| match k {
         Kind::DataDriven {

@@ -462,6 +462,18 @@ mod tests {
                 range: None,
                 axis: Some([0.0, 0.6, 0.8]),
             });
+            // Its zero and scale by its direction (two coefficients per
+            // knot).
+            kinds.push(Kind::DataDriven {
+                target: CorrectionTarget::StringZeroScale,
+                target_index: Some(0),
+                driver: CorrectionDriver::StringDirection,
+                driver_index: Some(0),
+                knots: vec![0.0, 0.3, 0.6, 1.2],
+                period: None,
+                range: None,
+                axis: Some([0.6, 0.0, 0.8]),
+            });
         }
         kinds
     }

@@ -160,7 +160,7 @@ fn data_driven_size(
                         }
                     }
                     Kind::DataDriven {
-                        target: CorrectionTarget::StringReading,
+                        target: CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale,
                         target_index,
                         ..
                     } => {
@@ -255,7 +255,7 @@ fn data_driven_spread(ctx: &Context, kind: &Kind, coef: &[f64], poses: &[usize])
                     ..
                 } => vec![sum(&buf.dq, n, target_index.unwrap_or(0))],
                 Kind::DataDriven {
-                    target: CorrectionTarget::StringReading,
+                    target: CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale,
                     target_index,
                     ..
                 } => vec![sum(&buf.dl, m, target_index.unwrap_or(0))],

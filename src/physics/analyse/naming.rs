@@ -83,7 +83,9 @@ fn overlapping(state: &State) -> Vec<usize> {
                     _,
                 ) => false,
                 (CorrectionTarget::JointAngle, _, other) => other.joint() == *target_index,
-                (CorrectionTarget::StringReading, _, other) => other.sensor() == *target_index,
+                (CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale, _, other) => {
+                    other.sensor() == *target_index
+                }
                 (CorrectionTarget::Point, CorrectionDriver::Time, other) => matches!(
                     other,
                     Kind::RigStep { .. }
