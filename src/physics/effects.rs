@@ -151,6 +151,9 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
             "the measuring instrument's scale (the anchors about their centroid, or a tracker's points about its origin)".into()
         }
         CorrectionTarget::ToolPoint => "the tool point in the flange frame".into(),
+        CorrectionTarget::ReadingScale => {
+            "every string's scale (each reads its length times it more)".into()
+        }
     }
 }
 
@@ -839,6 +842,11 @@ impl Context {
                         CorrectionTarget::LinkLength => {
                             for r in 0..3 {
                                 out.dp[k * 3 + r] += w * by_length[r];
+                            }
+                        }
+                        CorrectionTarget::ReadingScale => {
+                            for (s, a) in self.anchors.iter().enumerate() {
+                                out.dl[k * m + s] += w * (pc.point_rig - a).norm();
                             }
                         }
                         CorrectionTarget::InstrumentScale if m == 0 => {

@@ -65,6 +65,13 @@ pub enum CorrectionTarget {
     /// that bends it more in some directions) is such a correction by the
     /// string's direction.
     StringZeroScale,
+    /// Every string's scale at once (dimensionless, one coefficient per
+    /// knot): each string reads its length times it more. Potentiometers
+    /// sharing one excitation reference, encoders sharing one clock, read
+    /// every length off in proportion when that reference drifts; the
+    /// anchors spreading about their centroid
+    /// ([`InstrumentScale`](Self::InstrumentScale)) is another geometry.
+    ReadingScale,
 }
 
 /// What drives a data-driven correction.
@@ -605,12 +612,14 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
                     .into(),
             );
     }
-    if *target == CorrectionTarget::InstrumentScale
-        && (target_index.is_some()
-            || !matches!(
-                driver,
-                CorrectionDriver::Time | CorrectionDriver::Temperature
-            ))
+    if matches!(
+        target,
+        CorrectionTarget::InstrumentScale | CorrectionTarget::ReadingScale
+    ) && (target_index.is_some()
+        || !matches!(
+            driver,
+            CorrectionDriver::Time | CorrectionDriver::Temperature
+        ))
     {
         return Err(
                 "a correction of the instrument's scale has no target_index and follows the clock or the temperature"
@@ -643,6 +652,7 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
         CorrectionTarget::Point
             | CorrectionTarget::PointSpherical
             | CorrectionTarget::InstrumentScale
+            | CorrectionTarget::ReadingScale
             | CorrectionTarget::ToolPoint
     ) && target_index.is_none()
     {

@@ -77,6 +77,25 @@ fn a_string_frame_growing_with_the_temperature_is_not_the_arm_expanding() {
     assert_eq!(target, CorrectionTarget::InstrumentScale);
 }
 
+/// Sensors sharing one reference that drifts read every length off in
+/// proportion: every string's scale by the clock, not the arm growing (a
+/// thermal expansion by the clock, which the strings' agreement first
+/// suggests) nor the anchors spreading about their centroid.
+#[test]
+fn strings_sharing_a_drifting_reference_are_one_reading_scale_in_time() {
+    let (report, _, _) =
+        common::unnamed_near_the_twin("xcheck6_shared_reference_s5np", |p| p.driver == "time", 1.1);
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::ReadingScale,
+            None,
+            CorrectionDriver::Time,
+            None
+        )
+    );
+}
+
 #[test]
 fn a_probe_growing_with_the_process_heat_is_a_tool_point_correction_in_time() {
     let (report, robot, _) = common::unnamed_near_the_twin(

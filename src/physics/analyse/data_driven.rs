@@ -406,6 +406,11 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         ("time", _, None) => {
             out.push(slots.clocked(CorrectionTarget::Point, None));
             out.push(slots.clocked(CorrectionTarget::InstrumentScale, None));
+            // Or every string's scale at once (sensors sharing one
+            // reference that drifts).
+            if m > 0 {
+                out.push(slots.clocked(CorrectionTarget::ReadingScale, None));
+            }
             // Or the tool point in the flange frame (a probe growing with
             // the process's heat, a tool slipping in its holder): T moves
             // as the flange turns, which no function of the clock moving T
@@ -441,10 +446,14 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
             // Or the instrument's scale: a string frame growing with the
             // temperature, a tracker's range with the air's; or the tool
             // point in the flange frame.
+            let readings = (m > 0).then_some(CorrectionTarget::ReadingScale);
             for target in [
                 CorrectionTarget::InstrumentScale,
                 CorrectionTarget::ToolPoint,
-            ] {
+            ]
+            .into_iter()
+            .chain(readings)
+            {
                 out.push(family(
                     target,
                     None,
@@ -715,6 +724,12 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
     } = kind
     {
         "compensation does not need it: it corrects the measuring instrument's scale, not where the robot went; the rig's frame (or a tracker's range, with the air) changed with this session's conditions: hold the instrument's temperature steady, give a tracker the air's temperature and pressure, or measure the rig again at the temperature it is used at".into()
+    } else if let Kind::DataDriven {
+        target: CorrectionTarget::ReadingScale,
+        ..
+    } = kind
+    {
+        "compensation does not need it: it corrects what every string read, not where the robot went; all the strings' readings drifted in proportion with this session's conditions, as sensors sharing one reference do (a potentiometers' excitation voltage warming up or wandering, a counter's clock): check the sensors' common supply or reference, let it warm up before measuring, or log it".into()
     } else if let Kind::DataDriven {
         target: CorrectionTarget::ToolPoint,
         ..

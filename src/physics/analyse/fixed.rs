@@ -462,6 +462,17 @@ mod tests {
                 range: None,
                 axis: Some([0.0, 0.6, 0.8]),
             });
+            // Every string's scale by the clock.
+            kinds.push(Kind::DataDriven {
+                target: CorrectionTarget::ReadingScale,
+                target_index: None,
+                driver: CorrectionDriver::Time,
+                driver_index: None,
+                knots: vec![0.0, 60.0, 300.0, 900.0],
+                period: None,
+                range: None,
+                axis: None,
+            });
             // Its zero and scale by its direction (two coefficients per
             // knot).
             kinds.push(Kind::DataDriven {

@@ -104,7 +104,7 @@ fn size_of<'a>(
             let train = obs.train.clone();
             let scale = match target {
                 CorrectionTarget::JointAngle => deg,
-                CorrectionTarget::InstrumentScale => 1e6,
+                CorrectionTarget::InstrumentScale | CorrectionTarget::ReadingScale => 1e6,
                 _ => 1.0,
             };
             Box::new(move |c: &[f64]| data_driven_spread(ctx, &kind, c, &train) * scale)
@@ -130,7 +130,7 @@ fn data_driven_size(
             ..
         } => 180.0 / std::f64::consts::PI,
         Kind::DataDriven {
-            target: CorrectionTarget::InstrumentScale,
+            target: CorrectionTarget::InstrumentScale | CorrectionTarget::ReadingScale,
             ..
         } => 1e6,
         _ => 1.0,
@@ -170,7 +170,10 @@ fn data_driven_size(
                         }
                     }
                     Kind::DataDriven {
-                        target: CorrectionTarget::LinkLength | CorrectionTarget::InstrumentScale,
+                        target:
+                            CorrectionTarget::LinkLength
+                            | CorrectionTarget::InstrumentScale
+                            | CorrectionTarget::ReadingScale,
                         ..
                     } => {
                         let w: f64 = ctx
@@ -260,7 +263,10 @@ fn data_driven_spread(ctx: &Context, kind: &Kind, coef: &[f64], poses: &[usize])
                     ..
                 } => vec![sum(&buf.dl, m, target_index.unwrap_or(0))],
                 Kind::DataDriven {
-                    target: CorrectionTarget::LinkLength | CorrectionTarget::InstrumentScale,
+                    target:
+                        CorrectionTarget::LinkLength
+                        | CorrectionTarget::InstrumentScale
+                        | CorrectionTarget::ReadingScale,
                     ..
                 } => vec![
                     ctx.knot_weights(kind, i)
@@ -348,6 +354,10 @@ fn fixed_unit(kind: &Kind) -> &'static str {
             target: CorrectionTarget::InstrumentScale,
             ..
         } => "ppm (RMS change of the instrument's scale over the train poses)",
+        Kind::DataDriven {
+            target: CorrectionTarget::ReadingScale,
+            ..
+        } => "ppm (RMS change of every string's scale over the train poses)",
         Kind::DataDriven { .. } => "mm (RMS change of the reading over the train poses)",
     }
 }
