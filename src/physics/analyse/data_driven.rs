@@ -22,8 +22,10 @@
 //! function of the clock (or the temperature, for the scale), a string's
 //! reading by its last change of length, a joint's angle by its gravity
 //! torque (the last two smooth or jumping where the driver changes sign),
-//! and, where the naming gate took named steps out, a function of the
-//! clock jumping there.
+//! a string's zero and scale by its direction about an axis fitted from
+//! the residual ([`aimed`]), every string's scale by the clock or the
+//! temperature, and, where the naming gate took named steps out, a
+//! function of the clock jumping there.
 
 use nalgebra::{DMatrix, Vector3};
 
