@@ -155,7 +155,8 @@ fn locate_and_correct(inputs: &Inputs, state: &mut State) -> bool {
         &state.p,
         &state.accepted,
         inputs.free.len(),
-    ) else {
+    )
+    .or_else(|| wrong_way_place(inputs, state)) else {
         return false;
     };
     let places = f
@@ -176,6 +177,39 @@ fn locate_and_correct(inputs: &Inputs, state: &mut State) -> bool {
     placed_by_correction(&mut state.findings[at], &kept);
     pruned_and_restated(inputs, state);
     true
+}
+
+/// Where the neighbour tests locate nothing but a joint's compliance was
+/// fitted against its gravity load and still predicted the held-out
+/// readings better (`State::wrong_way`): structure at that joint which
+/// the catalogue's shape does not explain, reported `unexplained` at the
+/// first such joint.
+fn wrong_way_place(inputs: &Inputs, state: &State) -> Option<Finding> {
+    let &(j, z) = state.wrong_way.first()?;
+    let place = crate::report::Place {
+        driver: "joint".into(),
+        joint: Some(j + 1),
+        sensor: None,
+        side: "robot".into(),
+        z,
+        threshold: super::HELD_OUT_Z,
+        range: None,
+    };
+    let why = format!(
+        "joint_compliance on joint {} fitted negative (the joint moving against its gravity load, which an elastic joint never does) yet predicted the held-out readings better: a structure of another shape follows that joint's load or angle (a counterbalance, a play gravity takes up)",
+        j + 1
+    );
+    Some(crate::physics::unexplained::unexplained_at(
+        inputs.obs,
+        &inputs.ctx,
+        (&state.p, &state.accepted),
+        place,
+        format!(
+            "no neighbour test located it, but a compliance of joint {} fitted the wrong way round predicted the held-out readings better (paired z = {z:.1})",
+            j + 1
+        ),
+        vec![why],
+    ))
 }
 
 /// A correction of one joint's angle by the clock, kept where the

@@ -511,6 +511,7 @@ mod tests {
                 rejected: vec![],
                 final_fit: None,
                 jumps_s: vec![],
+                wrong_way: vec![],
             };
             let fixed = FixedBase::new(&inputs, &state);
             f(&inputs, &state, &fixed);

@@ -181,6 +181,11 @@ struct State {
     /// Instants (the clock's units) where a named step was taken out of
     /// the model: a data-driven correction in time may jump there.
     jumps_s: Vec<f64>,
+    /// Joints whose compliance was fitted against the gravity load and
+    /// still predicted the held-out readings better (0-based), with the
+    /// paired z of that gain: where to look when the neighbour tests
+    /// locate nothing.
+    wrong_way: Vec<(usize, f64)>,
 }
 
 /// Run the analysis after `geometric()`.
@@ -194,6 +199,7 @@ pub fn analyse(obs: &Observations, geo: &Geometric, progress: &dyn Progress) -> 
         rejected: Vec::new(),
         final_fit: None,
         jumps_s: Vec::new(),
+        wrong_way: Vec::new(),
     };
     // Where the residual lives: robot side versus sensor side.
     let share = robot_side_share(obs, &state.p);

@@ -8,7 +8,7 @@ use super::proposals::{self, Proposal};
 use super::refit::FitInfo;
 use super::scoring::Scores;
 use super::{Inputs, State, findings};
-use crate::physics::effects::EffectModel;
+use crate::physics::effects::{EffectModel, Kind};
 
 /// Proposals (single effects or pairs) tried per round.
 const TRIES: usize = 4;
@@ -83,7 +83,23 @@ fn try_one(
             state.final_fit = Some(kept.fit);
             true
         }
-        Err(Turned { note, reject }) => {
+        Err(Turned {
+            note,
+            reject,
+            wrong_way,
+        }) => {
+            // A compliance fitted against the gravity load that predicted
+            // the held-out readings better: structure at that joint.
+            if let (Some(z), [c]) = (wrong_way, cs.as_slice())
+                && let Kind::JointCompliance {
+                    joint_index,
+                    regressors,
+                } = &c.kind
+                && regressors.is_empty()
+                && !state.wrong_way.iter().any(|w| w.0 == *joint_index)
+            {
+                state.wrong_way.push((*joint_index, z));
+            }
             state.notes.extend(note);
             if reject && cs.len() == 1 {
                 state.rejected.push(grid);
@@ -109,7 +125,10 @@ fn through_gates(
     trial.extend(cs.iter().map(|c| EffectModel::zero(c.kind.clone())));
     let (p_new, eff_new, fit) = gates::refitted(inputs, state, &trial)?;
     let held = gates::held_out(inputs, before, cs, &p_new, &eff_new)?;
-    gates::magnitudes(inputs, state, cs, &eff_new, &fit)?;
+    gates::magnitudes(inputs, state, cs, &eff_new, &fit).map_err(|t| Turned {
+        wrong_way: t.wrong_way.map(|_| held.gain_z),
+        ..t
+    })?;
     let stages = gates::pair_members(inputs, state, before, cs, &trial, &held)?;
     Ok(Kept {
         p_new,
