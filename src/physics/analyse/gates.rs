@@ -285,13 +285,16 @@ pub(super) fn held_out(
 /// A finding states a magnitude: one that cannot be told from zero is no
 /// finding, whatever its nuisance coefficients (the free offset of a
 /// backlash before the joint's first move) absorbed. Every member's
-/// magnitude in the refit (`eff_new`, `fit`) must pass.
+/// magnitude in the refit (`eff_new`, `fit`) must pass, and go the way
+/// its physics can (refused otherwise with `gain_z`, the held-out gain's
+/// paired z, as [`Turned::wrong_way`]).
 pub(super) fn magnitudes(
     inputs: &Inputs,
     state: &State,
     cs: &[Candidate],
     eff_new: &[EffectModel],
     fit: &FitInfo,
+    gain_z: f64,
 ) -> Result<(), Turned> {
     let Inputs { obs, ctx, .. } = inputs;
     let accepted = &state.accepted;
@@ -315,7 +318,7 @@ pub(super) fn magnitudes(
     });
     match wrong_way {
         Some(w) => Err(Turned {
-            wrong_way: Some(f64::NAN),
+            wrong_way: Some(gain_z),
             ..Turned::rejected(Some(format!(
                 "{w}; it improved the held-out error by fitting a structure of another physics: not kept"
             )))

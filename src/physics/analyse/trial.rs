@@ -125,10 +125,7 @@ fn through_gates(
     trial.extend(cs.iter().map(|c| EffectModel::zero(c.kind.clone())));
     let (p_new, eff_new, fit) = gates::refitted(inputs, state, &trial)?;
     let held = gates::held_out(inputs, before, cs, &p_new, &eff_new)?;
-    gates::magnitudes(inputs, state, cs, &eff_new, &fit).map_err(|t| Turned {
-        wrong_way: t.wrong_way.map(|_| held.gain_z),
-        ..t
-    })?;
+    gates::magnitudes(inputs, state, cs, &eff_new, &fit, held.gain_z)?;
     let stages = gates::pair_members(inputs, state, before, cs, &trial, &held)?;
     Ok(Kept {
         p_new,
