@@ -198,7 +198,7 @@ fn a_counterbalance_spring_is_no_series_of_periodic_terms() {
 /// A compliance fitted against the gravity load is not named, but when it
 /// predicted the held-out readings better it says where structure is:
 /// with nothing located by the neighbour tests, the joint is reported
-/// `unexplained`, and why.
+/// `unexplained`, and why, and corrected there.
 #[test]
 fn a_compliance_fitted_the_wrong_way_still_places_the_joint() {
     let (robot, rig, data) = common::load("xcheck6_counterbalance_points");
@@ -222,5 +222,27 @@ fn a_compliance_fitted_the_wrong_way_still_places_the_joint() {
         f.evidence.contains("fitted the wrong way round"),
         "{}",
         f.evidence
+    );
+    // Corrected there by the joint's gravity load, which its angle alone
+    // does not give, and the held-out error falls by more than half.
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::JointAngle,
+            Some(1),
+            CorrectionDriver::GravityTorque,
+            Some(1)
+        )
+    );
+    let d = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .unwrap();
+    assert!(
+        d.test_rms_after_mm < 0.5 * d.test_rms_before_mm,
+        "{} -> {}",
+        d.test_rms_before_mm,
+        d.test_rms_after_mm
     );
 }

@@ -400,6 +400,9 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
                 CorrectionDriver::JointAngle,
                 Some(j - 1),
             ));
+            // Or its gravity load (a counterbalance, a play gravity takes
+            // up): not a function of its angle alone.
+            out.extend(load_families(inputs, j - 1));
         }
         // The clock: T relative to the rig, or one string's zero (a
         // string's error in time moves the located point too, so every
