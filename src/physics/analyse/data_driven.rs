@@ -987,25 +987,10 @@ fn linearise<'a>(
     })
 }
 
-/// The best candidate of `families` by cross-validated SSE, through the
-/// held-out gate; kept: its finding written and `state` moved to it.
-pub(super) fn try_place(
-    inputs: &Inputs,
-    state: &mut State,
-    families: &[Vec<Kind>],
-    place: &Place,
-) -> bool {
-    // Ranked by cross-validation; only the scores are kept (the normal
-    // equations of a long session's many-knot candidates are large), and
-    // the best that also solves in full is linearised again.
-    let fixed = FixedBase::new(inputs, state);
-    let score = |kinds: &mut dyn Iterator<Item = &Kind>| -> Vec<(Kind, f64)> {
-        kinds
-            .filter_map(|k| linearise(inputs, &fixed, state, k).map(|l| (k.clone(), l.cv, l.cv0)))
-            .filter(|(_, cv, cv0)| cv.is_finite() && cv < cv0)
-            .map(|(k, cv, _)| (k, cv))
-            .collect()
-    };
+/// The candidates `families` stand for: each family's own, then the
+/// aimed ones of each [`to_aim`] placeholder ([`aimed`]), then the periods
+/// each periodic scan keeps ([`screened`]), in that order.
+fn expanded(inputs: &Inputs, fixed: &FixedBase, families: &[Vec<Kind>]) -> Vec<Kind> {
     let is_scan = |f: &Vec<Kind>| {
         matches!(
             f.first(),
@@ -1031,11 +1016,34 @@ pub(super) fn try_place(
         .cloned()
         .collect();
     for f in families.iter().filter(|f| is_aim(f)) {
-        candidates.extend(f.first().map_or(vec![], |k| aimed(inputs, &fixed, k)));
+        candidates.extend(f.first().map_or(vec![], |k| aimed(inputs, fixed, k)));
     }
     for f in families.iter().filter(|f| is_scan(f)) {
-        candidates.extend(screened(inputs, &fixed, f));
+        candidates.extend(screened(inputs, fixed, f));
     }
+    candidates
+}
+
+/// The best candidate of `families` by cross-validated SSE, through the
+/// held-out gate; kept: its finding written and `state` moved to it.
+pub(super) fn try_place(
+    inputs: &Inputs,
+    state: &mut State,
+    families: &[Vec<Kind>],
+    place: &Place,
+) -> bool {
+    // Ranked by cross-validation; only the scores are kept (the normal
+    // equations of a long session's many-knot candidates are large), and
+    // the best that also solves in full is linearised again.
+    let fixed = FixedBase::new(inputs, state);
+    let score = |kinds: &mut dyn Iterator<Item = &Kind>| -> Vec<(Kind, f64)> {
+        kinds
+            .filter_map(|k| linearise(inputs, &fixed, state, k).map(|l| (k.clone(), l.cv, l.cv0)))
+            .filter(|(_, cv, cv0)| cv.is_finite() && cv < cv0)
+            .map(|(k, cv, _)| (k, cv))
+            .collect()
+    };
+    let candidates = expanded(inputs, &fixed, families);
     let mut ranked = score(&mut candidates.iter());
     ranked.sort_by(|x, y| x.1.total_cmp(&y.1));
     let Some((kind, lin, (p_new, eff_new, fit))) = ranked.into_iter().find_map(|(k, _)| {
