@@ -72,6 +72,43 @@ impl KeyCache {
     }
 }
 
+/// Robots' sites, as read once: a robot's site is set when it is created and
+/// no route changes it, so an entry never goes stale, and a key limited to
+/// sites is checked without a query on every request (`POST /compensate`
+/// from a floor client's site key, above all).
+#[derive(Debug, Default)]
+pub struct SiteCache {
+    entries: std::sync::RwLock<HashMap<i64, Option<String>>>,
+}
+
+impl SiteCache {
+    /// The site of the robot `robot_id` (`None`: at no site); not found if
+    /// there is no such robot. Only robots that exist are kept, so the map
+    /// grows with the fleet, never with what clients ask.
+    /// `read` reads it from the store when it is not kept yet.
+    pub async fn site<F, Fut>(&self, robot_id: i64, read: F) -> Result<Option<String>, ApiError>
+    where
+        F: FnOnce() -> Fut,
+        Fut: std::future::Future<Output = Result<Option<String>, ApiError>>,
+    {
+        let known = self
+            .entries
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&robot_id)
+            .cloned();
+        if let Some(site) = known {
+            return Ok(site);
+        }
+        let site = read().await?;
+        self.entries
+            .write()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(robot_id, site.clone());
+        Ok(site)
+    }
+}
+
 /// What a key may do; each role holds the ones before it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Role {
@@ -156,14 +193,16 @@ impl Caller {
         )))
     }
 
-    /// Refused (403) unless the key reaches the robot `robot_id` (read
-    /// only for a key limited to sites); an unknown robot is 404.
+    /// Refused (403) unless the key reaches the robot `robot_id` (its site
+    /// looked up only for a key limited to sites, from [`SiteCache`]); an
+    /// unknown robot is 404.
     pub async fn check_robot(&self, app: &AppState, robot_id: i64) -> Result<(), ApiError> {
         if self.sites.is_empty() {
             return Ok(());
         }
-        let robot = app.store.get_robot(robot_id).await?;
-        self.check_site(&format!("robot {robot_id}"), robot.site.as_deref())
+        let read = || async { Ok(app.store.get_robot(robot_id).await?.site) };
+        let site = app.robot_sites.site(robot_id, read).await?;
+        self.check_site(&format!("robot {robot_id}"), site.as_deref())
     }
 
     /// The site filter of a list for this key: the one asked if the key
@@ -362,6 +401,29 @@ mod tests {
         assert_eq!(r(Method::DELETE, "/keys/{id}"), Some(Role::Admin));
         assert_eq!(r(Method::GET, "/audit"), Some(Role::Admin));
         assert!(Role::Reader < Role::Operator && Role::Engineer < Role::Admin);
+    }
+
+    #[tokio::test]
+    async fn a_robots_site_is_read_once() {
+        let cache = SiteCache::default();
+        let reads = std::sync::atomic::AtomicUsize::new(0);
+        let read = |site: Option<&str>| {
+            reads.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            let site = site.map(String::from);
+            async move { Ok(site) }
+        };
+        for _ in 0..3 {
+            let s = cache.site(7, || read(Some("plant-a"))).await.unwrap();
+            assert_eq!(s.as_deref(), Some("plant-a"));
+            assert_eq!(cache.site(8, || read(None)).await.unwrap(), None);
+        }
+        assert_eq!(reads.load(std::sync::atomic::Ordering::SeqCst), 2);
+        // A robot that does not exist is not kept: asked again, read again.
+        let missing = || async { Err(ApiError::NotFound("robot 9".into())) };
+        assert!(cache.site(9, missing).await.is_err());
+        assert!(cache.site(9, missing).await.is_err());
+        assert!(cache.site(9, || read(Some("plant-b"))).await.is_ok());
+        assert_eq!(reads.load(std::sync::atomic::Ordering::SeqCst), 3);
     }
 
     #[test]

@@ -135,6 +135,8 @@ pub struct App {
     pub browser: Arc<guard::BrowserPolicy>,
     /// API keys as last read ([`auth::KEY_CACHE_TTL`]).
     pub keys: auth::KeyCache,
+    /// Robots' sites, for keys limited to sites.
+    pub robot_sites: auth::SiteCache,
     /// Per-key rates and the job queue's bound.
     pub limits: limits::Limits,
     /// The largest corrections an activated calibration may make.
@@ -534,6 +536,7 @@ impl Service {
             compute: compute::ComputePool::new(compute_threads()),
             insecure_no_auth: cfg.insecure_no_auth,
             keys: auth::KeyCache::default(),
+            robot_sites: auth::SiteCache::default(),
             limits: limits::Limits::new(cfg.limits),
             activation_bounds: cfg.activation_bounds,
             browser: Arc::new(guard::BrowserPolicy::new(

@@ -15,7 +15,8 @@
 #      joint target per request, 64 connections, at a fixed arrival rate
 #      RATE (default 20000/s; open loop, latency corrected for coordinated
 #      omission): latency at a given load rather than at saturation.
-# INSECURE=1 serves with --insecure-no-auth (the key check left out, to
+# SITE_KEY=1 sends the single targets with an operator key limited to the
+# robot's site; INSECURE=1 serves with --insecure-no-auth (the key check left out, to
 # measure what it costs); PARTS selects (default "single batch identify");
 # DUR the wrk duration;
 # LOG_LEVEL the server's RUST_LOG (default warn), LOG_FORMAT its log format.
@@ -52,7 +53,7 @@ wait_job() {
 setup() { # dataset serial -> session id
   local D=tests/data/$1
   local M=$(j -X POST $BASE/models --data-binary @$D/robot.json | id)
-  local R=$(j -X POST $BASE/robots -d "{\"serial_number\": \"$2\", \"model_id\": $M}" | id)
+  local R=$(j -X POST $BASE/robots -d "{\"serial_number\": \"$2\", \"model_id\": $M, \"site\": \"bench-site\"}" | id)
   local G=$(j -X POST $BASE/rigs --data-binary @$D/rig.json | id)
   local S=$(j -X POST $BASE/sessions -d "{\"robot_id\": $R, \"rig_id\": $G}" | id)
   echo "$R $S"
@@ -63,6 +64,13 @@ k --fail-with-body -X POST $BASE/sessions/$SESSION/poses -H 'content-type: text/
 JOB=$(j -X POST $BASE/sessions/$SESSION/jobs -d '{}' | id)
 CAL=$(wait_job $JOB)
 j -X POST $BASE/robots/$ROBOT/activate -d "{\"calibration_id\": $CAL, \"reason\": \"load test\"}" >/dev/null
+# SITE_KEY=1: the single targets are sent with an operator key limited to
+# the robot's site, as a floor client's would be (the site checked on every
+# request), instead of the admin key.
+if [[ -n "${SITE_KEY:-}" ]]; then
+  OPERATOR=$(j -X POST $BASE/keys -d '{"name": "floor", "role": "operator", "sites": ["bench-site"]}' |
+    python3 -c 'import json,sys; print(json.load(sys.stdin)["secret"])')
+fi
 
 python3 - "$ROBOT" "$WORK" <<'PY'
 import json, random, sys
@@ -73,13 +81,25 @@ def q():  # nominal joint targets inside the ER3A's limits
 json.dump({"robot_id": robot, "target": {"target": "t1", "q_deg": [10, -20, 30, 0, 40, 0]}}, open(f"{work}/one.json", "w"))
 json.dump({"robot_id": robot, "targets": [{"target": f"t{i}", "q_deg": q()} for i in range(10000)]}, open(f"{work}/batch.json", "w"))
 PY
+# The server's CPU time (user + system, clock ticks) so far.
+ticks() { awk '{print $14 + $15}' /proc/$SERVER/stat; }
+# wrk with its output, then the server's CPU time per request it answered:
+# what a request costs the server, whatever the generator beside it costs.
+measured() {
+  local t0 out
+  t0=$(ticks)
+  out=$("$@")
+  echo "$out"
+  echo "$out" | awk -v dt=$(( $(ticks) - t0 )) -v hz=$(getconf CLK_TCK) \
+    '/requests in/ {printf "server CPU: %.1f us a request (%d requests)\n", dt / hz * 1e6 / $1, $1}'
+}
 if has health; then
   echo "### GET /health, 64 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
-  ${WRK_CPUS:+taskset -c $WRK_CPUS} wrk -t$WRK_THREADS -c64 -d$DUR --latency $BASE/health
+  measured ${WRK_CPUS:+taskset -c $WRK_CPUS} wrk -t$WRK_THREADS -c64 -d$DUR --latency $BASE/health
 fi
 if has single; then
   echo "### single target, 64 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
-  BODY=$WORK/one.json ${WRK_CPUS:+taskset -c $WRK_CPUS} wrk -t$WRK_THREADS -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
+  BODY=$WORK/one.json KEY=${OPERATOR:-$KEY} measured ${WRK_CPUS:+taskset -c $WRK_CPUS} wrk -t$WRK_THREADS -c64 -d$DUR --latency -s tests/api/load/post.lua $BASE/compensate
 fi
 if has batch; then
   echo "### batch of 10,000 targets, 2 connections (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
