@@ -91,8 +91,21 @@ pub(super) fn finish(
         );
         // A series is condemned by its shape: what replaced it need only
         // not be clearly worse.
+        // Nothing took their place but the structure is located without
+        // them: they stay only if they predict the held-out readings
+        // clearly better than the model without them.
+        let placed = state.findings.iter().any(|f| f.unexplained().is_some());
+        let named_gain = (!corrected && placed).then(|| {
+            naming::held_out_gain_z(
+                &inputs,
+                (&state.p, &state.accepted),
+                (&stays.p, &stays.accepted),
+            )
+        });
         if corrected && z > -super::HELD_OUT_Z {
             naming::say_why(&mut state, &series, z);
+        } else if let Some(g) = named_gain.filter(|&g| g < super::HELD_OUT_Z) {
+            naming::say_why_unnamed(&mut state, &series, g);
         } else {
             state = located.unwrap_or_else(|| {
                 let mut s = named;

@@ -648,6 +648,13 @@ pub(super) fn left_in_their_driver(state: &State, located: &State) -> Vec<Series
             Kind::SensorScale { sensor_index } | Kind::SensorOffset { sensor_index } => places
                 .iter()
                 .any(|p| p.driver == "string" && p.sensor == Some(sensor_index + 1)),
+            // A joint's angle error by its angle or its load, where the
+            // remainder still follows that joint's angle.
+            Kind::JointCompliance { joint_index, .. }
+            | Kind::JointPeriodic { joint_index, .. }
+            | Kind::JointScale { joint_index } => places
+                .iter()
+                .any(|p| p.driver == "joint" && p.joint == Some(joint_index + 1)),
             _ => false,
         })
         .collect();
@@ -689,6 +696,36 @@ pub(super) fn say_why(state: &mut State, series: &[Series], z: f64) {
             if s.names.len() > 1 { "were" } else { "was" },
             s.why,
             if z >= 0.0 { "better" } else { "about as well" },
+            if s.names.len() > 1 {
+                "they are"
+            } else {
+                "it is"
+            }
+        );
+        for f in state.findings.iter_mut() {
+            if let Some(FindingModel::Unexplained(u)) = &mut f.parameters {
+                u.resembles.push(why.clone());
+            }
+        }
+        state.notes.push(why);
+    }
+}
+
+/// Say in the `unexplained` finding (and the notes) which named terms the
+/// structure was first fitted with, and that without them, no correction
+/// in their place, the held-out readings are predicted about as well
+/// (paired z of the named model's gain `z`, below [`HELD_OUT_Z`]).
+///
+/// [`HELD_OUT_Z`]: super::HELD_OUT_Z
+pub(super) fn say_why_unnamed(state: &mut State, series: &[Series], z: f64) {
+    for s in series {
+        let why = format!(
+            "{} {} first fitted to this structure, but {}; without {} the held-out readings are predicted about as well (the named model's gain: paired z = {z:.1}, needs {}), so {} not reported as physics",
+            s.names.join(", "),
+            if s.names.len() > 1 { "were" } else { "was" },
+            s.why,
+            if s.names.len() > 1 { "them" } else { "it" },
+            super::HELD_OUT_Z,
             if s.names.len() > 1 {
                 "they are"
             } else {
