@@ -1086,3 +1086,40 @@ fn readme_plan_walkthrough() {
     drawcal::model::urdf::Urdf::parse(&urdf).unwrap();
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// When the remainder was corrected without a name, the summary's held-out
+/// line still gives the geometric model's figure beside the final one (the
+/// `unexplained` finding that leads the findings starts from it).
+#[test]
+fn the_held_out_line_gives_the_geometric_figure_beside_a_correction() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/xcheck3_coupling_points");
+    let out = bin()
+        .args(["identify", "--robot"])
+        .arg(dir.join("robot.json"))
+        .arg("--rig")
+        .arg(dir.join("rig.json"))
+        .arg("--poses")
+        .arg(dir.join("poses.csv"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("held out: "))
+        .expect("the summary's held-out line");
+    let geometric: f64 = line
+        .split_once("; ")
+        .and_then(|(_, rest)| rest.split(' ').next())
+        .unwrap_or_else(|| panic!("no geometric figure: {line}"))
+        .parse()
+        .unwrap();
+    let after: f64 = line
+        .split(" -> ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(geometric > 2.0 * after, "{line}");
+}
