@@ -185,6 +185,7 @@ pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, 
             format!("{v:.1} mm")
         }
         CorrectionDriver::GravityTorque => format!("{v:.1} N*m"),
+        CorrectionDriver::LineOfSight => format!("{v:.3}"),
     }
 }
 
@@ -203,6 +204,10 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
             format!("string {at}'s angle from its axis (its mean direction, or the vertical)")
         }
         CorrectionDriver::Motion => "the length of the move that led to the pose".into(),
+        CorrectionDriver::LineOfSight => format!(
+            "the line of sight's component along the flange's {} axis (the direction from the instrument to T, in the flange frame)",
+            ["x", "y", "z"].get(at.saturating_sub(1)).unwrap_or(&"?")
+        ),
         CorrectionDriver::Workspace => format!(
             "T's {} in the rig's frame",
             [
@@ -921,6 +926,10 @@ impl Context {
             CorrectionDriver::Time => pc.time_s,
             CorrectionDriver::Temperature => pc.temp_c.or(self.temp_ref_c).unwrap_or(0.0),
             CorrectionDriver::Workspace => workspace_coordinate(&pc.point_rig, i),
+            CorrectionDriver::LineOfSight => pc
+                .flange_axes_rig
+                .get(i)
+                .map_or(0.0, |a| pc.point_rig.normalize().dot(a)),
             CorrectionDriver::StringLength => self
                 .anchors
                 .get(i)

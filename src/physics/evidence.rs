@@ -141,6 +141,7 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
                     d(words, "deg")
                 }
                 CorrectionDriver::Workspace => d(words, "mm"),
+                CorrectionDriver::LineOfSight => d(words, "1"),
             }
         }
         // A moved rig: the session's clock (the row order without one).

@@ -96,7 +96,8 @@ pub(super) fn unexplained(
     // as the flange turns.
     let flange = flange_components(obs, ctx, &res, rpp);
     let with_temp = has_temperature(obs);
-    let extra = string_tests(obs, ctx, &res, rpp);
+    let mut extra = string_tests(obs, ctx, &res, rpp);
+    extra.extend(line_of_sight_test(obs, ctx, &res, rpp));
     let nb = neighbours(
         ctx.n_joints,
         with_temp,
@@ -480,7 +481,10 @@ fn driver_of(pk: usize, n: usize, with_temp: bool) -> (&'static str, Option<usiz
 /// length or the clock.
 struct ScalarTest {
     name: String,
-    sensor: usize,
+    /// The string (1-based) whose part it tests, if a string's.
+    sensor: Option<usize>,
+    /// The joint (1-based) it locates, if a joint's.
+    joint: Option<usize>,
     driver: &'static str,
     /// The side the place is on: "sensor" (the string's own part) or
     /// "strings" (three strings: either side).
@@ -538,10 +542,12 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
     let by_time = sorted_pairs(&|a| ctx.poses[obs.train[a]].time_s);
     let mut out = Vec::new();
     for (k, values) in own.into_iter().enumerate() {
+        let sensor = Some(k + 1);
         let length = |a: usize| (ctx.poses[obs.train[a]].point_rig - obs.anchors[k]).norm();
         out.push(ScalarTest {
             name: format!("string {}'s length ({part})", k + 1),
-            sensor: k + 1,
+            sensor,
+            joint: None,
             driver: "string",
             side,
             test: ScalarTestKind::Neighbours(sorted_pairs(&length)),
@@ -556,7 +562,8 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
                     "string {}'s length, periodically (period near {period:.1} mm; {part})",
                     k + 1
                 ),
-                sensor: k + 1,
+                sensor,
+                joint: None,
                 driver: "string",
                 side,
                 test: ScalarTestKind::Periodic(Some(-normal_quantile(p.clamp(1e-300, 0.5)))),
@@ -569,7 +576,8 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         let dir = |a: usize| (ctx.poses[obs.train[a]].point_rig - obs.anchors[k]).normalize();
         out.push(ScalarTest {
             name: format!("string {}'s direction ({part})", k + 1),
-            sensor: k + 1,
+            sensor,
+            joint: None,
             driver: "workspace",
             side,
             test: ScalarTestKind::Neighbours(nearest_pairs(
@@ -593,7 +601,8 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         };
         out.push(ScalarTest {
             name: format!("string {}'s last change of length ({part})", k + 1),
-            sensor: k + 1,
+            sensor,
+            joint: None,
             driver: "motion",
             side,
             test: ScalarTestKind::Neighbours(sorted_pairs(&change)),
@@ -601,7 +610,8 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         });
         out.push(ScalarTest {
             name: format!("time (string {}'s {})", k + 1, &part[4..]),
-            sensor: k + 1,
+            sensor,
+            joint: None,
             driver: "time",
             side,
             test: ScalarTestKind::Neighbours(by_time.clone()),
@@ -609,6 +619,53 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         });
     }
     out
+}
+
+/// Point data: each train pose's residual along the instrument's line of
+/// sight (its range error), with the poses paired by the line of sight's
+/// direction in the flange frame (nearest pose): a target read off its
+/// centre by an amount that turns with the target (a reflector's vertex
+/// off its sphere's centre, a photogrammetric target's centroid shifting
+/// with the angle it is seen at) makes the range error a function of that
+/// direction, which neither the joint angles' nor T's neighbours share.
+fn line_of_sight_test(
+    obs: &Observations,
+    ctx: &Context,
+    res: &[f64],
+    rpp: usize,
+) -> Option<ScalarTest> {
+    if !obs.anchors.is_empty() || rpp != 3 {
+        return None;
+    }
+    let sight = |a: usize| {
+        let pc = &ctx.poses[obs.train[a]];
+        let b = pc.point_rig.normalize();
+        Vector3::new(
+            b.dot(&pc.flange_axes_rig[0]),
+            b.dot(&pc.flange_axes_rig[1]),
+            b.dot(&pc.flange_axes_rig[2]),
+        )
+    };
+    let values = (0..obs.train.len())
+        .map(|a| {
+            let r = Vector3::new(res[a * 3], res[a * 3 + 1], res[a * 3 + 2]);
+            r.dot(&ctx.poses[obs.train[a]].point_rig.normalize())
+        })
+        .collect();
+    Some(ScalarTest {
+        name: "the line of sight in the flange frame (nearest pose; the residual along it)".into(),
+        sensor: None,
+        joint: None,
+        driver: "configuration",
+        side: "point",
+        test: ScalarTestKind::Neighbours(nearest_pairs(
+            obs.train.len(),
+            3,
+            |a, c| sight(a)[c],
+            |a, b| (sight(a) - sight(b)).norm_squared(),
+        )),
+        values,
+    })
 }
 
 /// What a neighbour test of an ordering compared between neighbours.
@@ -789,10 +846,10 @@ fn neighbours(
             // One place per string and driver: its strongest test.
             match places
                 .iter_mut()
-                .find(|p| p.driver == t.driver && p.sensor == Some(t.sensor))
+                .find(|p| p.driver == t.driver && p.sensor == t.sensor && p.joint == t.joint)
             {
                 Some(p) => p.z = p.z.max(z),
-                None => places.push(place(t.driver, None, Some(t.sensor), t.side, z)),
+                None => places.push(place(t.driver, t.joint, t.sensor, t.side, z)),
             }
             if best.as_ref().is_none_or(|b| z > b.0) {
                 best = Some((z, t.name.clone()));
@@ -858,7 +915,12 @@ fn located(
         (Some((z, name)), _, Some((pk, Along::Raw))) if pk >= pairings.len() => {
             let t = &extra[pk - pairings.len()];
             let three = t.side == "strings";
-            let (whose, reads) = if three {
+            let (whose, reads) = if t.sensor.is_none() {
+                (
+                    "the residual along the instrument's line of sight",
+                    "the range is read wrong",
+                )
+            } else if three {
                 (
                     "one string's residuals",
                     "that string reads wrong, or T is displaced along it,",

@@ -121,6 +121,15 @@ pub enum CorrectionDriver {
     /// the load changes sign, a stiffness that hardens) is a function of
     /// it.
     GravityTorque,
+    /// Point data: the instrument's line of sight to T (the direction from
+    /// the rig frame's origin, which is the instrument's) in the flange
+    /// frame: `driver_index` 0, 1, 2 = its component along the flange's x,
+    /// y, z axis (a cosine, -1 to 1). A target read off its centre by an
+    /// amount that turns with the target (a reflector's vertex off its
+    /// sphere's centre; a photogrammetric target's centroid shifting with
+    /// the angle it is seen at) reads the range, or the point, off by a
+    /// function of it. An error of the measurement, not of the robot.
+    LineOfSight,
 }
 
 /// Number of workspace coordinates a [`CorrectionDriver::Workspace`]
@@ -629,9 +638,22 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
     if *driver == CorrectionDriver::Motion && *target != CorrectionTarget::Point {
         return Err("a correction by the motion moves T: its target must be point".into());
     }
-    if *target == CorrectionTarget::PointSpherical && *driver != CorrectionDriver::Workspace {
+    if *target == CorrectionTarget::PointSpherical
+        && !matches!(
+            driver,
+            CorrectionDriver::Workspace | CorrectionDriver::LineOfSight
+        )
+    {
         return Err(
-                "a correction in the spherical frame is a field over the workspace: its driver must be workspace"
+                "a correction in the spherical frame is a field over the workspace or a function of the line of sight: its driver must be workspace or line_of_sight"
+                    .into(),
+            );
+    }
+    if *driver == CorrectionDriver::LineOfSight
+        && (*target != CorrectionTarget::PointSpherical || driver_index.is_none_or(|d| d > 2))
+    {
+        return Err(
+                "a correction by the line of sight corrects the point in the instrument's spherical frame (target point_spherical) by one of its components in the flange frame (driver_index 0, 1 or 2)"
                     .into(),
             );
     }

@@ -304,3 +304,50 @@ fn a_field_growing_towards_the_workspaces_edges_is_located_there() {
     // Measured 1.15x (4.3x before).
     common::near_the_twin(&report, &calibrate(&robot, &rig, &twin), 1.25);
 }
+
+/// A reflector read off its centre by an amount that turns with it (an
+/// SMR whose vertex is off its sphere's centre, from the seventh blind
+/// cross-check): the range error is a function of the line of sight in the
+/// flange frame. The analysis must locate it there, name nothing, correct
+/// the point by that line of sight in the instrument's own frame (more than
+/// halving the held-out RMS) and say compensation does not need it.
+#[test]
+fn a_target_read_off_its_centre_is_placed_by_the_line_of_sight() {
+    let (robot, rig, data) = common::load("xcheck7_smr_vertex_points");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    let place = common::place_where(&report, |p| p.driver == "configuration");
+    assert!(place.z > place.threshold, "{place:?}");
+    let u = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "unexplained")
+        .unwrap();
+    assert!(u.evidence.contains("line of sight"), "{}", u.evidence);
+    let Kind::DataDriven { target, driver, .. } = common::data_driven_correction(&report) else {
+        unreachable!()
+    };
+    assert_eq!(
+        (target, driver),
+        (
+            CorrectionTarget::PointSpherical,
+            CorrectionDriver::LineOfSight
+        )
+    );
+    let d = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .unwrap();
+    assert!(
+        d.test_rms_after_mm < 0.5 * d.test_rms_before_mm,
+        "{} -> {}",
+        d.test_rms_before_mm,
+        d.test_rms_after_mm
+    );
+    assert!(
+        d.evidence.contains("compensation does not need it"),
+        "{}",
+        d.evidence
+    );
+}

@@ -80,7 +80,8 @@ pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
     // hundreds of coefficients, and every later candidate's fit would carry
     // them too (its normal equations grow with the cube).
     let rank = |p: &Place| match (p.driver.as_str(), p.sensor) {
-        ("time" | "temperature", _) => 2,
+        ("time" | "temperature", _) => 3,
+        ("configuration", None) => 2,
         ("workspace", None) => 1,
         _ => 0,
     };
@@ -543,6 +544,20 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
             None,
             &JOINT_KNOTS,
         )),
+        // Point data, placed by the line of sight in the flange frame: the
+        // point off in the instrument's own directions (its range above
+        // all) by one component of that line of sight.
+        ("configuration", None, None) if m == 0 => {
+            for c in 0..3 {
+                out.push(family(
+                    CorrectionTarget::PointSpherical,
+                    None,
+                    CorrectionDriver::LineOfSight,
+                    Some(c),
+                    &JOINT_KNOTS,
+                ));
+            }
+        }
         ("string", _, Some(s)) if s <= m => {
             out.push(family(
                 CorrectionTarget::StringReading,
@@ -748,6 +763,8 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
                 "clock"
             }
         )
+    } else if *driver == CorrectionDriver::LineOfSight {
+        "compensation does not need it: it corrects where the instrument read the target, which depends on how the target faces the instrument, not where the robot went; the target is read off its centre by an amount that turns with it: check the target (a reflector whose vertex is off its sphere's centre, a nest or an adapter that does not seat it on the tool point, a photogrammetric target seen at steep angles), replace or characterise it, or keep it facing the instrument".into()
     } else if *driver == CorrectionDriver::GravityTorque {
         "compensation does not apply it: it follows the joint's gravity load at the target (its angles and the payload), which compensation does not yet evaluate for a data-driven correction; the joint's error is not in proportion to its load as an elastic joint's is: check it for play that gravity takes up or a stiffness that changes with the load".into()
     } else if *driver == CorrectionDriver::JointMove {

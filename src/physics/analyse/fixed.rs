@@ -381,6 +381,17 @@ mod tests {
                 range: None,
                 axis: None,
             },
+            // The same by the line of sight's component along the flange's z.
+            Kind::DataDriven {
+                target: CorrectionTarget::PointSpherical,
+                target_index: None,
+                driver: CorrectionDriver::LineOfSight,
+                driver_index: Some(2),
+                knots: vec![-1.0, -0.3, 0.4, 1.0],
+                period: None,
+                range: None,
+                axis: None,
+            },
             // Periodic: the driver taken modulo the period, the last knot
             // joined to the first.
             Kind::DataDriven {
