@@ -365,221 +365,245 @@ fn aimed(inputs: &Inputs, fixed: &FixedBase, placeholder: &Kind) -> Vec<Kind> {
 /// The candidate families at a place: per family one slot (what is
 /// corrected, what drives it) at every knot count the train poses allow.
 fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
-    let Inputs { obs, ctx, .. } = inputs;
-    let n = ctx.n_joints;
-    let m = ctx.anchors.len();
     let slots = Slots {
-        ctx,
-        train: &obs.train,
+        ctx: &inputs.ctx,
+        train: &inputs.obs.train,
         jumps_s,
     };
-    let family = |target, target_index, driver, driver_index, counts: &[usize]| {
-        slots.knotted(target, target_index, driver, driver_index, counts)
-    };
-    let periodic_family = |target, target_index, driver, driver_index| {
-        slots.periodic_scan(target, target_index, driver, driver_index)
-    };
-    let mut out = Vec::new();
-    match (place.driver.as_str(), place.joint, place.sensor) {
-        // A joint's angle drives it: an error of any joint's angle (its
-        // own, or another's it is coupled to).
+    let m = inputs.ctx.anchors.len();
+    let mut out = match (place.driver.as_str(), place.joint, place.sensor) {
         ("joint", Some(j), _) => {
-            for t in 0..n {
-                out.push(family(
-                    CorrectionTarget::JointAngle,
-                    Some(t),
-                    CorrectionDriver::JointAngle,
-                    Some(j - 1),
-                    &JOINT_KNOTS,
-                ));
-            }
-            // Its own angle periodically (a gear stage turning a
-            // non-integer number of times per joint revolution).
-            out.push(periodic_family(
-                CorrectionTarget::JointAngle,
-                Some(j - 1),
-                CorrectionDriver::JointAngle,
-                Some(j - 1),
-            ));
+            let mut out = slots.at_joint(j - 1);
             // Or its gravity load (a counterbalance, a play gravity takes
             // up): not a function of its angle alone.
             out.extend(load_families(inputs, j - 1));
+            out
         }
-        // The clock: T relative to the rig, or one string's zero (a
-        // string's error in time moves the located point too, so every
-        // string's residual follows the clock; cross-validation tells one
-        // string's reading, a third of the columns, from a displacement).
-        ("time", _, None) => {
-            out.push(slots.clocked(CorrectionTarget::Point, None));
-            out.push(slots.clocked(CorrectionTarget::InstrumentScale, None));
-            // Or every string's scale at once (sensors sharing one
-            // reference that drifts).
-            if m > 0 {
-                out.push(slots.clocked(CorrectionTarget::ReadingScale, None));
-            }
-            // Or the tool point in the flange frame (a probe growing with
-            // the process's heat, a tool slipping in its holder): T moves
-            // as the flange turns, which no function of the clock moving T
-            // relative to the rig follows.
-            out.push(slots.clocked(CorrectionTarget::ToolPoint, None));
-            // Or one joint's zero (a re-homing, a lost encoder count, a
-            // motor warming): T moves as that joint turns, which no
-            // function of the clock alone moving T can follow.
-            for t in 0..n {
-                out.push(slots.clocked(CorrectionTarget::JointAngle, Some(t)));
-            }
-            for s in 0..m {
-                out.push(slots.clocked(CorrectionTarget::StringReading, Some(s)));
-                // Or a cycle (a sensor's electronics or spool following
-                // the cell's heating cycle; a zero that creeps and resets):
-                // several cycles need more knots than the poses hold.
-                out.push(periodic_family(
-                    CorrectionTarget::StringReading,
-                    Some(s),
-                    CorrectionDriver::Time,
-                    None,
-                ));
-            }
+        ("time", _, None) => slots.in_time(),
+        ("time", _, Some(s)) if s <= m => {
+            vec![slots.clocked(CorrectionTarget::StringReading, Some(s - 1))]
         }
-        ("temperature", _, _) => {
-            out.push(family(
-                CorrectionTarget::Point,
+        ("temperature", _, _) => slots.at_temperature(),
+        ("workspace", None, None) => slots.over_workspace(),
+        ("workspace", _, Some(s)) if s <= m => slots.by_string_direction(s - 1),
+        // One string's last change of length: its reading off by the way
+        // it last moved (friction in its drum, stretch of its cable).
+        ("motion", _, Some(s)) if s <= m => vec![slots.signed(
+            (CorrectionTarget::StringReading, Some(s - 1)),
+            (CorrectionDriver::StringMove, Some(s - 1)),
+        )],
+        // The move that led to each pose: T off along it by a function of
+        // its length (overshoot or lag of an arm not settled at the dwell).
+        ("motion", _, _) => vec![slots.knotted(
+            CorrectionTarget::Point,
+            None,
+            CorrectionDriver::Motion,
+            None,
+            &JOINT_KNOTS,
+        )],
+        ("configuration", None, None) if m == 0 => slots.by_line_of_sight(),
+        ("string", _, Some(s)) if s <= m => slots.by_string_length(s - 1),
+        _ => Vec::new(),
+    };
+    out.retain(|f| !f.is_empty());
+    out
+}
+
+/// The candidate families at each kind of place ([`families`]).
+impl Slots<'_> {
+    /// At joint `j`'s angle (0-based): an error of any joint's angle (its
+    /// own, or another's it is coupled to) as a function of it, and its
+    /// own angle periodically (a gear stage turning a non-integer number of
+    /// times per joint revolution).
+    fn at_joint(&self, j: usize) -> Vec<Vec<Kind>> {
+        let mut out: Vec<Vec<Kind>> = (0..self.ctx.n_joints)
+            .map(|t| {
+                self.knotted(
+                    CorrectionTarget::JointAngle,
+                    Some(t),
+                    CorrectionDriver::JointAngle,
+                    Some(j),
+                    &JOINT_KNOTS,
+                )
+            })
+            .collect();
+        out.push(self.periodic_scan(
+            CorrectionTarget::JointAngle,
+            Some(j),
+            CorrectionDriver::JointAngle,
+            Some(j),
+        ));
+        out
+    }
+
+    /// At the clock: T relative to the rig, or one string's zero (a
+    /// string's error in time moves the located point too, so every
+    /// string's residual follows the clock; cross-validation tells one
+    /// string's reading, a third of the columns, from a displacement).
+    fn in_time(&self) -> Vec<Vec<Kind>> {
+        let m = self.ctx.anchors.len();
+        let mut out = vec![
+            self.clocked(CorrectionTarget::Point, None),
+            self.clocked(CorrectionTarget::InstrumentScale, None),
+        ];
+        // Or every string's scale at once (sensors sharing one reference
+        // that drifts).
+        if m > 0 {
+            out.push(self.clocked(CorrectionTarget::ReadingScale, None));
+        }
+        // Or the tool point in the flange frame (a probe growing with the
+        // process's heat, a tool slipping in its holder): T moves as the
+        // flange turns, which no function of the clock moving T relative
+        // to the rig follows.
+        out.push(self.clocked(CorrectionTarget::ToolPoint, None));
+        // Or one joint's zero (a re-homing, a lost encoder count, a motor
+        // warming): T moves as that joint turns, which no function of the
+        // clock alone moving T can follow.
+        for t in 0..self.ctx.n_joints {
+            out.push(self.clocked(CorrectionTarget::JointAngle, Some(t)));
+        }
+        for s in 0..m {
+            out.push(self.clocked(CorrectionTarget::StringReading, Some(s)));
+            // Or a cycle (a sensor's electronics or spool following the
+            // cell's heating cycle; a zero that creeps and resets): several
+            // cycles need more knots than the poses hold.
+            out.push(self.periodic_scan(
+                CorrectionTarget::StringReading,
+                Some(s),
+                CorrectionDriver::Time,
+                None,
+            ));
+        }
+        out
+    }
+
+    /// At the temperature: T relative to the rig; or the instrument's scale
+    /// (a string frame growing with the temperature, a tracker's range with
+    /// the air's), the tool point in the flange frame, or every string's
+    /// scale.
+    fn at_temperature(&self) -> Vec<Vec<Kind>> {
+        let readings = (!self.ctx.anchors.is_empty()).then_some(CorrectionTarget::ReadingScale);
+        [
+            CorrectionTarget::Point,
+            CorrectionTarget::InstrumentScale,
+            CorrectionTarget::ToolPoint,
+        ]
+        .into_iter()
+        .chain(readings)
+        .map(|target| {
+            self.knotted(
+                target,
                 None,
                 CorrectionDriver::Temperature,
                 None,
                 &CLOCK_KNOTS,
-            ));
-            // Or the instrument's scale: a string frame growing with the
-            // temperature, a tracker's range with the air's; or the tool
-            // point in the flange frame.
-            let readings = (m > 0).then_some(CorrectionTarget::ReadingScale);
-            for target in [
-                CorrectionTarget::InstrumentScale,
-                CorrectionTarget::ToolPoint,
-            ]
-            .into_iter()
-            .chain(readings)
-            {
-                out.push(family(
-                    target,
+            )
+        })
+        .collect()
+    }
+
+    /// Over the workspace: T's displacement as a function of one
+    /// coordinate of where T is, Cartesian or, for an instrument at the
+    /// rig's origin, its own angles and distance.
+    fn over_workspace(&self) -> Vec<Vec<Kind>> {
+        let m = self.ctx.anchors.len();
+        let mut out: Vec<Vec<Kind>> = (0..WORKSPACE_COORDINATES)
+            .map(|c| {
+                self.knotted(
+                    CorrectionTarget::Point,
                     None,
-                    CorrectionDriver::Temperature,
-                    None,
-                    &CLOCK_KNOTS,
+                    CorrectionDriver::Workspace,
+                    Some(c),
+                    &JOINT_KNOTS,
+                )
+            })
+            .collect();
+        // Or one string's reading as a function of where T is (its exit
+        // walking along its drum as the string pays out, its eyelet's
+        // friction by where the string points): with four strings one
+        // string's error moves the located point too, so the string is
+        // known only by whose reading the field fits.
+        for s in 0..m {
+            for c in 0..3 {
+                out.push(self.knotted(
+                    CorrectionTarget::StringReading,
+                    Some(s),
+                    CorrectionDriver::Workspace,
+                    Some(c),
+                    &JOINT_KNOTS,
                 ));
             }
+            // Or its zero and scale by where it points (its exit walking
+            // along its drum as it pays out).
+            out.push(to_aim(s));
         }
-        ("time", _, Some(s)) if s <= m => {
-            out.push(slots.clocked(CorrectionTarget::StringReading, Some(s - 1)))
-        }
-        // A field over the workspace: T's displacement as a function of
-        // one coordinate of where T is, Cartesian or, for an instrument at
-        // the rig's origin, its own angles and distance.
-        ("workspace", None, None) => {
-            for c in 0..WORKSPACE_COORDINATES {
-                out.push(family(
-                    CorrectionTarget::Point,
+        // With point data the rig's origin is the instrument's: its angle
+        // and range errors as functions of its own angles and distance, in
+        // the directions that turn with them.
+        if m == 0 {
+            for c in 3..WORKSPACE_COORDINATES {
+                out.push(self.knotted(
+                    CorrectionTarget::PointSpherical,
                     None,
                     CorrectionDriver::Workspace,
                     Some(c),
                     &JOINT_KNOTS,
                 ));
             }
-            // Or one string's reading as a function of where T is (its
-            // exit walking along its drum as the string pays out, its
-            // eyelet's friction by where the string points): with four
-            // strings one string's error moves the located point too, so
-            // the string is known only by whose reading the field fits.
-            for s in 0..m {
-                for c in 0..3 {
-                    out.push(family(
-                        CorrectionTarget::StringReading,
-                        Some(s),
-                        CorrectionDriver::Workspace,
-                        Some(c),
-                        &JOINT_KNOTS,
-                    ));
-                }
-                // Or its zero and scale by where it points (its exit
-                // walking along its drum as it pays out).
-                out.push(to_aim(s));
-            }
-            // With point data the rig's origin is the instrument's: its
-            // angle and range errors as functions of its own angles and
-            // distance, in the directions that turn with them.
-            if m == 0 {
-                for c in 3..WORKSPACE_COORDINATES {
-                    out.push(family(
-                        CorrectionTarget::PointSpherical,
-                        None,
-                        CorrectionDriver::Workspace,
-                        Some(c),
-                        &JOINT_KNOTS,
-                    ));
-                }
-            }
         }
-        // A string's reading by its direction from its anchor (wrap or
-        // friction at its exit, eyelet or pulley): by the angle from its
-        // mean direction over the train poses.
-        // Or any string's zero and scale by where it points: with four
-        // strings one string's error moves the located point too, so the
-        // string the place names may be another's.
-        ("workspace", _, Some(s)) if s <= m => {
-            out.extend(slots.by_direction(s - 1));
-            out.extend((0..m).map(to_aim));
-        }
-        // One string's last change of length: its reading off by the way
-        // it last moved (friction in its drum, stretch of its cable).
-        ("motion", _, Some(s)) if s <= m => out.push(slots.signed(
-            (CorrectionTarget::StringReading, Some(s - 1)),
-            (CorrectionDriver::StringMove, Some(s - 1)),
-        )),
-        // The move that led to each pose: T off along it by a function of
-        // its length (overshoot or lag of an arm not settled at the dwell).
-        ("motion", _, _) => out.push(family(
-            CorrectionTarget::Point,
-            None,
-            CorrectionDriver::Motion,
-            None,
-            &JOINT_KNOTS,
-        )),
-        // Point data, placed by the line of sight in the flange frame: the
-        // point off in the instrument's own directions (its range above
-        // all) by one component of that line of sight.
-        ("configuration", None, None) if m == 0 => {
-            for c in 0..3 {
-                out.push(family(
+        out
+    }
+
+    /// At string `s`'s direction (0-based): its reading by its direction
+    /// from its anchor (wrap or friction at its exit, eyelet or pulley),
+    /// by the angle from its mean direction over the train poses; or any
+    /// string's zero and scale by where it points (with four strings one
+    /// string's error moves the located point too, so the string the place
+    /// names may be another's).
+    fn by_string_direction(&self, s: usize) -> Vec<Vec<Kind>> {
+        let mut out = self.by_direction(s);
+        out.extend((0..self.ctx.anchors.len()).map(to_aim));
+        out
+    }
+
+    /// Point data, placed by the line of sight in the flange frame: the
+    /// point off in the instrument's own directions (its range above all)
+    /// by one component of that line of sight.
+    fn by_line_of_sight(&self) -> Vec<Vec<Kind>> {
+        (0..3)
+            .map(|c| {
+                self.knotted(
                     CorrectionTarget::PointSpherical,
                     None,
                     CorrectionDriver::LineOfSight,
                     Some(c),
                     &JOINT_KNOTS,
-                ));
-            }
-        }
-        ("string", _, Some(s)) if s <= m => {
-            out.push(family(
-                CorrectionTarget::StringReading,
-                Some(s - 1),
-                CorrectionDriver::StringLength,
-                Some(s - 1),
-                &JOINT_KNOTS,
-            ));
-            // Or periodic in the length (a drum's winding pitch, a spool's
-            // eccentricity): many cycles over the range would need more
-            // knots than the poses hold.
-            out.push(periodic_family(
-                CorrectionTarget::StringReading,
-                Some(s - 1),
-                CorrectionDriver::StringLength,
-                Some(s - 1),
-            ));
-        }
-        _ => {}
+                )
+            })
+            .collect()
     }
-    out.retain(|f| !f.is_empty());
-    out
+
+    /// At string `s`'s length (0-based): its reading as a function of it,
+    /// smooth or periodic (a drum's winding pitch, a spool's eccentricity:
+    /// many cycles over the range would need more knots than the poses
+    /// hold).
+    fn by_string_length(&self, s: usize) -> Vec<Vec<Kind>> {
+        vec![
+            self.knotted(
+                CorrectionTarget::StringReading,
+                Some(s),
+                CorrectionDriver::StringLength,
+                Some(s),
+                &JOINT_KNOTS,
+            ),
+            self.periodic_scan(
+                CorrectionTarget::StringReading,
+                Some(s),
+                CorrectionDriver::StringLength,
+                Some(s),
+            ),
+        ]
+    }
 }
 
 /// Knot counts of one length's growth in the thermal driver: linear (two
