@@ -27,6 +27,34 @@ pub(super) fn finish(
     share: (Option<f64>, Option<f64>),
     progress: &dyn Progress,
 ) -> Analysis {
+    restated_and_shape_tested(&inputs, &mut state);
+    condemn_unexplaining_names(&inputs, &mut state);
+    drop_backlash_beside_motion(&inputs, &mut state);
+    progress.update("physics analysis", 1.0);
+    let Inputs { obs, ctx, .. } = inputs;
+    let test_errors = errors_with_effects(obs, &ctx, &state.p, &state.accepted, &obs.test);
+    Analysis {
+        findings: state.findings,
+        final_params: Params {
+            layout: obs.chain.layout,
+            values: state.p,
+        },
+        effects: state.accepted,
+        context: ctx,
+        test_errors,
+        robot_side_share: share.0,
+        robot_side_share_noise: share.1,
+        notes: state.notes,
+        final_sigmas: state.final_fit.map(|f| f.sigma_free),
+    }
+}
+
+/// Every finding restated from the final model, terms of one joint that
+/// cancel doubted, and the shape tests of named effects (thermal expansion
+/// even over the lengths, backlash not graded, a compliance in proportion
+/// to the load, an anchor step not a steady function of direction): an
+/// effect that fails its own shape is replaced by the physics it shows.
+fn restated_and_shape_tested(inputs: &Inputs, state: &mut State) {
     if let Some(fit) = &state.final_fit {
         restate(
             inputs.obs,
@@ -45,80 +73,90 @@ pub(super) fn finish(
     );
     // The catalogue's thermal expansion grows every length in proportion;
     // one link growing alone is another physics.
-    if naming::uneven_thermal(&inputs, &mut state) {
-        pruned_and_restated(&inputs, &mut state);
+    if naming::uneven_thermal(inputs, state) {
+        pruned_and_restated(inputs, state);
     }
     // Backlash is a fixed amount by the side a joint arrived from; an
     // error graded with the move's size is another physics.
-    if naming::graded_backlash(&inputs, &mut state) {
-        pruned_and_restated(&inputs, &mut state);
+    if naming::graded_backlash(inputs, state) {
+        pruned_and_restated(inputs, state);
     }
     // A compliance is in proportion to the gravity load; an error that
     // follows the load otherwise is another physics.
-    if naming::uneven_load(&inputs, &mut state) {
-        pruned_and_restated(&inputs, &mut state);
+    if naming::uneven_load(inputs, state) {
+        pruned_and_restated(inputs, state);
     }
     // An anchor step is one move at one instant; an error that follows
     // where the string points is another physics.
-    if naming::steady_anchor(&inputs, &mut state) {
-        pruned_and_restated(&inputs, &mut state);
+    if naming::steady_anchor(inputs, state) {
+        pruned_and_restated(inputs, state);
     }
-    // Named terms whose shape is no one physical effect (a series of terms
-    // of one joint, several moves of the rig or of one anchor) are taken
-    // out and the structure they fitted is located and modelled without a
-    // name, unless they predict the held-out poses clearly better.
-    // So are named effects after which the remainder still follows the
-    // driver they act through.
-    let mut series = naming::series(&state);
+}
+
+/// Named terms whose shape is no one physical effect (a series of terms
+/// of one joint, several moves of the rig or of one anchor) are taken out
+/// and the structure they fitted is located and modelled without a name,
+/// unless they predict the held-out poses clearly better; so are named
+/// effects after which the remainder still follows the driver they act
+/// through. Without such terms, the remainder is located (and corrected)
+/// all the same.
+fn condemn_unexplaining_names(inputs: &Inputs, state: &mut State) {
+    let mut series = naming::series(state);
     let mut located = None;
     if series.is_empty() {
         let mut with_remainder = state.clone();
-        locate_and_correct(&inputs, &mut with_remainder);
-        series = naming::left_in_their_driver(&state, &with_remainder);
+        locate_and_correct(inputs, &mut with_remainder);
+        series = naming::left_in_their_driver(state, &with_remainder);
         located = Some(with_remainder);
     }
     if !series.is_empty() {
         let named = state.clone();
-        naming::take_out(&inputs, &mut state, &series);
-        let corrected = locate_and_correct(&inputs, &mut state);
+        naming::take_out(inputs, state, &series);
+        let corrected = locate_and_correct(inputs, state);
         // Against what stays otherwise: the named model, with its
         // remainder's correction when that is what stays.
         let stays = located.as_ref().unwrap_or(&named);
         let z = naming::held_out_gain_z(
-            &inputs,
+            inputs,
             (&stays.p, &stays.accepted),
             (&state.p, &state.accepted),
         );
-        // A series is condemned by its shape: what replaced it need only
-        // not be clearly worse.
         // Nothing took their place but the structure is located without
         // them: they stay only if they predict the held-out readings
         // clearly better than the model without them.
         let placed = state.findings.iter().any(|f| f.unexplained().is_some());
         let named_gain = (!corrected && placed).then(|| {
             naming::held_out_gain_z(
-                &inputs,
+                inputs,
                 (&state.p, &state.accepted),
                 (&stays.p, &stays.accepted),
             )
         });
+        // A series is condemned by its shape: what replaced it need only
+        // not be clearly worse.
         if corrected && z > -super::HELD_OUT_Z {
-            naming::say_why(&mut state, &series, z);
+            naming::say_why(state, &series, z);
         } else if let Some(g) = named_gain.filter(|&g| g < super::HELD_OUT_Z) {
-            naming::say_why_unnamed(&mut state, &series, g);
+            naming::say_why_unnamed(state, &series, g);
         } else {
-            state = located.unwrap_or_else(|| {
+            *state = located.unwrap_or_else(|| {
                 let mut s = named;
-                locate_and_correct(&inputs, &mut s);
+                locate_and_correct(inputs, &mut s);
                 s
             });
         }
     } else if let Some(with_remainder) = located {
-        state = with_remainder;
+        *state = with_remainder;
     }
-    let dropped = naming::drop_backlash_beside_motion(&inputs, &mut state);
+}
+
+/// Backlash kept beside a remainder that follows the move that led to each
+/// pose fitted part of a motion-driven error: it is dropped, the remainder
+/// located again, and every `unexplained` finding says why.
+fn drop_backlash_beside_motion(inputs: &Inputs, state: &mut State) {
+    let dropped = naming::drop_backlash_beside_motion(inputs, state);
     if !dropped.is_empty() {
-        locate_and_correct(&inputs, &mut state);
+        locate_and_correct(inputs, state);
         let why = format!(
             "{} {} kept, but the remainder still followed the move that led to each pose, of which backlash sees only the side each joint arrived from: {} fitted part of a motion-driven error, not a dead band, so {} not reported as physics",
             dropped.join(", "),
@@ -136,23 +174,6 @@ pub(super) fn finish(
             }
         }
         state.notes.push(why);
-    }
-    progress.update("physics analysis", 1.0);
-    let Inputs { obs, ctx, .. } = inputs;
-    let test_errors = errors_with_effects(obs, &ctx, &state.p, &state.accepted, &obs.test);
-    Analysis {
-        findings: state.findings,
-        final_params: Params {
-            layout: obs.chain.layout,
-            values: state.p,
-        },
-        effects: state.accepted,
-        context: ctx,
-        test_errors,
-        robot_side_share: share.0,
-        robot_side_share_noise: share.1,
-        notes: state.notes,
-        final_sigmas: state.final_fit.map(|f| f.sigma_free),
     }
 }
 
