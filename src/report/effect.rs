@@ -557,7 +557,21 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
     else {
         return Ok(());
     };
-    if (*driver == CorrectionDriver::StringDirection) != axis.is_some()
+    check_knots(*driver, knots, *period, *range, axis.as_ref())?;
+    check_driver(*target, *target_index, *driver, *driver_index)?;
+    check_target(*target, *target_index, *driver, *driver_index)
+}
+
+/// A correction's function: its knots, period, range and (a string's
+/// direction only) axis.
+fn check_knots(
+    driver: CorrectionDriver,
+    knots: &[f64],
+    period: Option<f64>,
+    range: Option<[f64; 2]>,
+    axis: Option<&[f64; 3]>,
+) -> std::result::Result<(), String> {
+    if (driver == CorrectionDriver::StringDirection) != axis.is_some()
         || axis.is_some_and(|a| {
             !(a.iter().all(|c| c.is_finite())
                 && (a.iter().map(|c| c * c).sum::<f64>().sqrt() - 1.0).abs() < 1e-6)
@@ -578,14 +592,24 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
         return Err("a data-driven correction needs two or more finite, increasing knots".into());
     }
     if let Some(p) = period
-        && !(p.is_finite() && *p > 0.0 && knots[0] >= 0.0 && knots[knots.len() - 1] < *p)
+        && !(p.is_finite() && p > 0.0 && knots[0] >= 0.0 && knots[knots.len() - 1] < p)
     {
         return Err(
             "a periodic correction needs a finite, positive period and its knots within one period"
                 .into(),
         );
     }
-    if *driver == CorrectionDriver::Workspace
+    Ok(())
+}
+
+/// What each driver may correct, and which of its values it needs.
+fn check_driver(
+    target: CorrectionTarget,
+    target_index: Option<usize>,
+    driver: CorrectionDriver,
+    driver_index: Option<usize>,
+) -> std::result::Result<(), String> {
+    if driver == CorrectionDriver::Workspace
         && driver_index.is_none_or(|d| d >= WORKSPACE_COORDINATES)
     {
         return Err(format!(
@@ -593,31 +617,52 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
             WORKSPACE_COORDINATES - 1
         ));
     }
-    if *driver == CorrectionDriver::JointMove && *target != CorrectionTarget::JointAngle {
+    if driver == CorrectionDriver::JointMove && target != CorrectionTarget::JointAngle {
         return Err(
                 "a correction by a joint's last move corrects a joint's angle: its target must be joint_angle"
                     .into(),
             );
     }
-    if *driver == CorrectionDriver::StringMove
-        && (*target != CorrectionTarget::StringReading || driver_index != target_index)
+    if driver == CorrectionDriver::StringMove
+        && (target != CorrectionTarget::StringReading || driver_index != target_index)
     {
         return Err(
                 "a correction by a string's last change corrects that string's reading: its target must be string_reading with target_index equal to driver_index"
                     .into(),
             );
     }
-    if *target == CorrectionTarget::StringZeroScale
-        && (*driver != CorrectionDriver::StringDirection || driver_index != target_index)
-    {
+    if driver == CorrectionDriver::GravityTorque && target != CorrectionTarget::JointAngle {
         return Err(
-                "a correction of a string's zero and scale follows that string's direction: its driver must be string_direction with driver_index equal to target_index"
+                "a correction by a joint's gravity torque corrects a joint's angle: its target must be joint_angle"
                     .into(),
             );
     }
-    if *driver == CorrectionDriver::GravityTorque && *target != CorrectionTarget::JointAngle {
+    if driver == CorrectionDriver::Motion && target != CorrectionTarget::Point {
+        return Err("a correction by the motion moves T: its target must be point".into());
+    }
+    if driver == CorrectionDriver::LineOfSight
+        && (target != CorrectionTarget::PointSpherical || driver_index.is_none_or(|d| d > 2))
+    {
         return Err(
-                "a correction by a joint's gravity torque corrects a joint's angle: its target must be joint_angle"
+                "a correction by the line of sight corrects the point in the instrument's spherical frame (target point_spherical) by one of its components in the flange frame (driver_index 0, 1 or 2)"
+                    .into(),
+            );
+    }
+    Ok(())
+}
+
+/// What drives each target, and which targets name a joint or a string.
+fn check_target(
+    target: CorrectionTarget,
+    target_index: Option<usize>,
+    driver: CorrectionDriver,
+    driver_index: Option<usize>,
+) -> std::result::Result<(), String> {
+    if target == CorrectionTarget::StringZeroScale
+        && (driver != CorrectionDriver::StringDirection || driver_index != target_index)
+    {
+        return Err(
+                "a correction of a string's zero and scale follows that string's direction: its driver must be string_direction with driver_index equal to target_index"
                     .into(),
             );
     }
@@ -635,10 +680,7 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
                     .into(),
             );
     }
-    if *driver == CorrectionDriver::Motion && *target != CorrectionTarget::Point {
-        return Err("a correction by the motion moves T: its target must be point".into());
-    }
-    if *target == CorrectionTarget::PointSpherical
+    if target == CorrectionTarget::PointSpherical
         && !matches!(
             driver,
             CorrectionDriver::Workspace | CorrectionDriver::LineOfSight
@@ -649,15 +691,7 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
                     .into(),
             );
     }
-    if *driver == CorrectionDriver::LineOfSight
-        && (*target != CorrectionTarget::PointSpherical || driver_index.is_none_or(|d| d > 2))
-    {
-        return Err(
-                "a correction by the line of sight corrects the point in the instrument's spherical frame (target point_spherical) by one of its components in the flange frame (driver_index 0, 1 or 2)"
-                    .into(),
-            );
-    }
-    if *target == CorrectionTarget::ToolPoint
+    if target == CorrectionTarget::ToolPoint
         && (target_index.is_some()
             || !matches!(
                 driver,
