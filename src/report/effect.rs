@@ -716,3 +716,78 @@ fn check_target(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn correction(
+        target: CorrectionTarget,
+        driver: CorrectionDriver,
+        driver_index: Option<usize>,
+        knots: Vec<f64>,
+    ) -> Kind {
+        Kind::DataDriven {
+            target,
+            target_index: None,
+            driver,
+            driver_index,
+            knots,
+            period: None,
+            range: None,
+            axis: None,
+        }
+    }
+
+    #[test]
+    fn a_correction_by_the_line_of_sight_corrects_the_point_in_the_instruments_frame() {
+        let ok = |k: &Kind| check_correction(k);
+        let sight = |target, index| {
+            correction(
+                target,
+                CorrectionDriver::LineOfSight,
+                index,
+                vec![-1.0, 0.0, 1.0],
+            )
+        };
+        assert_eq!(
+            ok(&sight(CorrectionTarget::PointSpherical, Some(2))),
+            Ok(())
+        );
+        // Its components are the flange's x, y and z.
+        assert!(ok(&sight(CorrectionTarget::PointSpherical, Some(3))).is_err());
+        assert!(ok(&sight(CorrectionTarget::PointSpherical, None)).is_err());
+        // Only the point in the instrument's directions.
+        assert!(ok(&sight(CorrectionTarget::Point, Some(0))).is_err());
+        // And the spherical frame takes the workspace or the line of sight.
+        let by_time = correction(
+            CorrectionTarget::PointSpherical,
+            CorrectionDriver::Time,
+            None,
+            vec![0.0, 10.0],
+        );
+        assert!(ok(&by_time).unwrap_err().contains("line_of_sight"));
+        // Knots increase.
+        let flat = correction(
+            CorrectionTarget::PointSpherical,
+            CorrectionDriver::LineOfSight,
+            Some(0),
+            vec![0.5, 0.5],
+        );
+        assert!(ok(&flat).unwrap_err().contains("increasing knots"));
+    }
+
+    #[test]
+    fn compensation_uses_a_correction_only_where_a_target_knows_its_driver() {
+        assert!(CorrectionDriver::JointAngle.usable_for_compensation());
+        assert!(CorrectionDriver::Workspace.usable_for_compensation());
+        for d in [
+            CorrectionDriver::Time,
+            CorrectionDriver::Temperature,
+            CorrectionDriver::LineOfSight,
+            CorrectionDriver::JointMove,
+        ] {
+            assert!(!d.usable_for_compensation(), "{d:?}");
+        }
+    }
+}
