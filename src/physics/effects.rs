@@ -796,90 +796,99 @@ impl Context {
                     *d = *t;
                 }
             }
-            Kind::DataDriven {
-                target,
-                target_index,
-                driver,
-                driver_index,
-                knots,
-                period,
-                axis,
-                ..
-            } => {
-                let x = self.driver_value(pc, *driver, *driver_index, axis.as_ref());
-                // Along the move that led to the pose (none for the first).
-                let along = pc.move_rig.try_normalize(0.0).unwrap_or_default();
-                // How T moves with the corrected length (none for a length
-                // the model does not have).
-                let by_length = match target {
-                    CorrectionTarget::LinkLength => self
-                        .lengths
-                        .iter()
-                        .position(|&(k, _)| Some(k) == *target_index)
-                        .map_or(Vector3::zeros(), |l| pc.d_lengths[l]),
-                    _ => Vector3::zeros(),
-                };
-                for (k, w) in hat_weights(knots, *period, x) {
-                    if w == 0.0 {
-                        continue;
+            Kind::DataDriven { .. } => self.correction_basis(kind, pc, out),
+        }
+    }
+
+    /// [`Self::basis`] of a data-driven correction at the pose `pc`: each
+    /// knot's hat weight times how its target moves T, a joint's angle or
+    /// a string's reading.
+    fn correction_basis(&self, kind: &Kind, pc: &PoseContext, out: &mut Basis) {
+        let Kind::DataDriven {
+            target,
+            target_index,
+            driver,
+            driver_index,
+            knots,
+            period,
+            axis,
+            ..
+        } = kind
+        else {
+            return;
+        };
+        let (n, m) = (self.n_joints, self.anchors.len());
+        let x = self.driver_value(pc, *driver, *driver_index, axis.as_ref());
+        // Along the move that led to the pose (none for the first).
+        let along = pc.move_rig.try_normalize(0.0).unwrap_or_default();
+        // How T moves with the corrected length (none for a length
+        // the model does not have).
+        let by_length = match target {
+            CorrectionTarget::LinkLength => self
+                .lengths
+                .iter()
+                .position(|&(k, _)| Some(k) == *target_index)
+                .map_or(Vector3::zeros(), |l| pc.d_lengths[l]),
+            _ => Vector3::zeros(),
+        };
+        for (k, w) in hat_weights(knots, *period, x) {
+            if w == 0.0 {
+                continue;
+            }
+            match target {
+                CorrectionTarget::Point if *driver == CorrectionDriver::Motion => {
+                    for r in 0..3 {
+                        out.dp[k * 3 + r] += w * along[r];
                     }
-                    match target {
-                        CorrectionTarget::Point if *driver == CorrectionDriver::Motion => {
-                            for r in 0..3 {
-                                out.dp[k * 3 + r] += w * along[r];
-                            }
+                }
+                CorrectionTarget::JointAngle => {
+                    out.dq[k * n + target_index.unwrap_or(0)] += w;
+                }
+                CorrectionTarget::StringReading => {
+                    out.dl[k * m + target_index.unwrap_or(0)] += w;
+                }
+                CorrectionTarget::StringZeroScale => {
+                    let s = target_index.unwrap_or(0);
+                    let l_m = self
+                        .anchors
+                        .get(s)
+                        .map_or(0.0, |a| (pc.point_rig - a).norm() * 1e-3);
+                    out.dl[2 * k * m + s] += w;
+                    out.dl[(2 * k + 1) * m + s] += w * l_m;
+                }
+                CorrectionTarget::LinkLength => {
+                    for r in 0..3 {
+                        out.dp[k * 3 + r] += w * by_length[r];
+                    }
+                }
+                CorrectionTarget::ReadingScale => {
+                    for (s, a) in self.anchors.iter().enumerate() {
+                        out.dl[k * m + s] += w * (pc.point_rig - a).norm();
+                    }
+                }
+                CorrectionTarget::InstrumentScale if m == 0 => {
+                    for r in 0..3 {
+                        out.dp[k * 3 + r] += w * pc.point_rig[r];
+                    }
+                }
+                CorrectionTarget::InstrumentScale => {
+                    let centroid = self.anchors.iter().sum::<Vector3<f64>>() / m as f64;
+                    for (s, a) in self.anchors.iter().enumerate() {
+                        out.dl[k * m + s] += w * reading_per_scale(&pc.point_rig, a, &centroid);
+                    }
+                }
+                CorrectionTarget::ToolPoint => {
+                    for (c, dir) in pc.flange_axes_rig.iter().enumerate() {
+                        for r in 0..3 {
+                            out.dp[(3 * k + c) * 3 + r] += w * dir[r];
                         }
-                        CorrectionTarget::JointAngle => {
-                            out.dq[k * n + target_index.unwrap_or(0)] += w;
-                        }
-                        CorrectionTarget::StringReading => {
-                            out.dl[k * m + target_index.unwrap_or(0)] += w;
-                        }
-                        CorrectionTarget::StringZeroScale => {
-                            let s = target_index.unwrap_or(0);
-                            let l_m = self
-                                .anchors
-                                .get(s)
-                                .map_or(0.0, |a| (pc.point_rig - a).norm() * 1e-3);
-                            out.dl[2 * k * m + s] += w;
-                            out.dl[(2 * k + 1) * m + s] += w * l_m;
-                        }
-                        CorrectionTarget::LinkLength => {
-                            for r in 0..3 {
-                                out.dp[k * 3 + r] += w * by_length[r];
-                            }
-                        }
-                        CorrectionTarget::ReadingScale => {
-                            for (s, a) in self.anchors.iter().enumerate() {
-                                out.dl[k * m + s] += w * (pc.point_rig - a).norm();
-                            }
-                        }
-                        CorrectionTarget::InstrumentScale if m == 0 => {
-                            for r in 0..3 {
-                                out.dp[k * 3 + r] += w * pc.point_rig[r];
-                            }
-                        }
-                        CorrectionTarget::InstrumentScale => {
-                            let centroid = self.anchors.iter().sum::<Vector3<f64>>() / m as f64;
-                            for (s, a) in self.anchors.iter().enumerate() {
-                                out.dl[k * m + s] +=
-                                    w * reading_per_scale(&pc.point_rig, a, &centroid);
-                            }
-                        }
-                        CorrectionTarget::ToolPoint => {
-                            for (c, dir) in pc.flange_axes_rig.iter().enumerate() {
-                                for r in 0..3 {
-                                    out.dp[(3 * k + c) * 3 + r] += w * dir[r];
-                                }
-                            }
-                        }
-                        CorrectionTarget::Point | CorrectionTarget::PointSpherical => {
-                            let frame = point_frame(*target, &pc.point_rig);
-                            for (c, dir) in frame.iter().enumerate() {
-                                for r in 0..3 {
-                                    out.dp[(3 * k + c) * 3 + r] += w * dir[r];
-                                }
-                            }
+                    }
+                }
+                CorrectionTarget::Point | CorrectionTarget::PointSpherical => {
+                    let frame = point_frame(*target, &pc.point_rig);
+                    for (c, dir) in frame.iter().enumerate() {
+                        for r in 0..3 {
+                            out.dp[(3 * k + c) * 3 + r] += w * dir[r];
                         }
                     }
                 }
