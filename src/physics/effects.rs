@@ -165,7 +165,7 @@ pub fn length_name(index: Option<usize>) -> String {
 }
 
 /// An amount of a correction's driver (internal units: rad, s, degrees C,
-/// mm) in words with its unit.
+/// mm; a cosine for the line of sight) in words with its unit.
 pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, v: f64) -> String {
     match driver {
         CorrectionDriver::JointAngle
@@ -919,8 +919,8 @@ impl Context {
     }
 
     /// The value of a data-driven correction's driver at pose `pc` (rad,
-    /// s or rows, degrees C, mm); a string's direction is measured from
-    /// `axis`. A pose without a temperature reads the first pose's.
+    /// s or rows, degrees C, mm, N·m; a cosine for the line of sight); a
+    /// string's direction is measured from `axis`. A pose without a temperature reads the first pose's.
     pub fn driver_value(
         &self,
         pc: &PoseContext,

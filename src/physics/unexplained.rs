@@ -366,8 +366,11 @@ fn resemblances(places: &[Place]) -> Vec<String> {
             ("workspace", _, Some(s)) => say(format!(
                 "string {s} by its direction: cable_sag (a function of the string's horizontal span) and sensor_scale were tried; no catalogue effect depends on the angle at which a string leaves its anchor, which friction or wrap at its exit, eyelet or pulley would"
             )),
-            ("workspace" | "configuration", _, _) => say(
+            ("workspace", _, _) => say(
                 "the workspace: no catalogue effect is a field over the workspace; a distortion of the measuring device or a compliance of the stand or base would be".into(),
+            ),
+            ("configuration", _, _) => say(
+                "the configuration: no catalogue effect is a function of the whole pose (where T is and how the flange faces the instrument); a distortion of the measuring device, a compliance of the stand or base, or a target read off its centre by an amount that turns with it would be".into(),
             ),
             _ => {}
         }
@@ -478,16 +481,15 @@ fn driver_of(pk: usize, n: usize, with_temp: bool) -> (&'static str, Option<usiz
 
 /// A neighbour test on one number per train pose rather than the whole
 /// residual: the sensor-side part of one string's residual, along its
-/// length or the clock.
+/// length, its direction or the clock; or, with point data, the residual
+/// along the instrument's line of sight.
 struct ScalarTest {
     name: String,
     /// The string (1-based) whose part it tests, if a string's.
     sensor: Option<usize>,
-    /// The joint (1-based) it locates, if a joint's.
-    joint: Option<usize>,
     driver: &'static str,
-    /// The side the place is on: "sensor" (the string's own part) or
-    /// "strings" (three strings: either side).
+    /// The side the place is on: "sensor" (the string's own part),
+    /// "strings" (three strings: either side) or "point" (point data).
     side: &'static str,
     test: ScalarTestKind,
     values: Vec<f64>,
@@ -547,7 +549,6 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         out.push(ScalarTest {
             name: format!("string {}'s length ({part})", k + 1),
             sensor,
-            joint: None,
             driver: "string",
             side,
             test: ScalarTestKind::Neighbours(sorted_pairs(&length)),
@@ -563,7 +564,6 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
                     k + 1
                 ),
                 sensor,
-                joint: None,
                 driver: "string",
                 side,
                 test: ScalarTestKind::Periodic(Some(-normal_quantile(p.clamp(1e-300, 0.5)))),
@@ -577,7 +577,6 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         out.push(ScalarTest {
             name: format!("string {}'s direction ({part})", k + 1),
             sensor,
-            joint: None,
             driver: "workspace",
             side,
             test: ScalarTestKind::Neighbours(nearest_pairs(
@@ -602,7 +601,6 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         out.push(ScalarTest {
             name: format!("string {}'s last change of length ({part})", k + 1),
             sensor,
-            joint: None,
             driver: "motion",
             side,
             test: ScalarTestKind::Neighbours(sorted_pairs(&change)),
@@ -611,7 +609,6 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         out.push(ScalarTest {
             name: format!("time (string {}'s {})", k + 1, &part[4..]),
             sensor,
-            joint: None,
             driver: "time",
             side,
             test: ScalarTestKind::Neighbours(by_time.clone()),
@@ -655,7 +652,6 @@ fn line_of_sight_test(
     Some(ScalarTest {
         name: "the line of sight in the flange frame (nearest pose; the residual along it)".into(),
         sensor: None,
-        joint: None,
         driver: "configuration",
         side: "point",
         test: ScalarTestKind::Neighbours(nearest_pairs(
@@ -843,13 +839,13 @@ fn neighbours(
             continue;
         };
         if z > zcrit {
-            // One place per string and driver: its strongest test.
+            // One place per string (or none) and driver: its strongest test.
             match places
                 .iter_mut()
-                .find(|p| p.driver == t.driver && p.sensor == t.sensor && p.joint == t.joint)
+                .find(|p| p.driver == t.driver && p.sensor == t.sensor)
             {
                 Some(p) => p.z = p.z.max(z),
-                None => places.push(place(t.driver, t.joint, t.sensor, t.side, z)),
+                None => places.push(place(t.driver, None, t.sensor, t.side, z)),
             }
             if best.as_ref().is_none_or(|b| z > b.0) {
                 best = Some((z, t.name.clone()));
@@ -918,7 +914,7 @@ fn located(
             let (whose, reads) = if t.sensor.is_none() {
                 (
                     "the residual along the instrument's line of sight",
-                    "the range is read wrong",
+                    "the range is read wrong, or T is displaced along the line of sight,",
                 )
             } else if three {
                 (

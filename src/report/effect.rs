@@ -143,7 +143,7 @@ impl CorrectionDriver {
     /// only with the rig mounted. Where T is in the workspace is known for
     /// a target too (the target itself, in the rig's frame); the move that
     /// leads to it, of T or of a joint, depends on the program that visits
-    /// it.
+    /// it; the line of sight is the measuring instrument's.
     pub fn usable_for_compensation(self) -> bool {
         matches!(
             self,

@@ -310,7 +310,7 @@ fn a_field_growing_towards_the_workspaces_edges_is_located_there() {
 /// cross-check): the range error is a function of the line of sight in the
 /// flange frame. The analysis must locate it there, name nothing, correct
 /// the point by that line of sight in the instrument's own frame (more than
-/// halving the held-out RMS) and say compensation does not need it.
+/// halving the held-out RMS) and say compensation does not apply it.
 #[test]
 fn a_target_read_off_its_centre_is_placed_by_the_line_of_sight() {
     let (robot, rig, data) = common::load("xcheck7_smr_vertex_points");
@@ -346,7 +346,7 @@ fn a_target_read_off_its_centre_is_placed_by_the_line_of_sight() {
         d.test_rms_after_mm
     );
     assert!(
-        d.evidence.contains("compensation does not need it"),
+        d.evidence.contains("compensation does not apply it"),
         "{}",
         d.evidence
     );

@@ -75,7 +75,9 @@ pub(super) fn correct(inputs: &Inputs, state: &mut State, places: &[Place]) {
     // A field over the workspace after the joints and strings (a string's
     // direction included): it is the most general shape (it can take up
     // part of what one joint's angle drives), so the specific driver has
-    // the first say. Functions of the
+    // the first say; the line of sight (point data, at the configuration)
+    // after the field, as the point's own error where the field did not
+    // take it. Functions of the
     // clock or the temperature last: over a long session they carry
     // hundreds of coefficients, and every later candidate's fit would carry
     // them too (its normal equations grow with the cube).
@@ -788,7 +790,7 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
             }
         )
     } else if *driver == CorrectionDriver::LineOfSight {
-        "compensation does not need it: it corrects where the instrument read the target, which depends on how the target faces the instrument, not where the robot went; the target is read off its centre by an amount that turns with it: check the target (a reflector whose vertex is off its sphere's centre, a nest or an adapter that does not seat it on the tool point, a photogrammetric target seen at steep angles), replace or characterise it, or keep it facing the instrument".into()
+        "compensation does not apply it: it follows how the target faces the instrument, which a target read off its centre by an amount that turns with it gives (a reflector whose vertex is off its sphere's centre, a photogrammetric target seen at steep angles), and which point data alone cannot tell from an error of the robot's that follows the flange's orientation towards the instrument; check the target (replace or characterise it, keep it facing the instrument) and, if the correction stays, measure with another target".into()
     } else if *driver == CorrectionDriver::GravityTorque {
         "compensation does not apply it: it follows the joint's gravity load at the target (its angles and the payload), which compensation does not yet evaluate for a data-driven correction; the joint's error is not in proportion to its load as an elastic joint's is: check it for play that gravity takes up or a stiffness that changes with the load".into()
     } else if *driver == CorrectionDriver::JointMove {

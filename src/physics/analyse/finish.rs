@@ -112,7 +112,11 @@ fn condemn_unexplaining_names(inputs: &Inputs, state: &mut State) {
     if !series.is_empty() {
         let named = state.clone();
         naming::take_out(inputs, state, &series);
+        let before = state.findings.len();
         let corrected = locate_and_correct(inputs, state);
+        // Without a correction, the remainder located without them (a new
+        // `unexplained` finding, not an earlier shape test's).
+        let placed = !corrected && state.findings.len() > before;
         // Against what stays otherwise: the named model, with its
         // remainder's correction when that is what stays.
         let stays = located.as_ref().unwrap_or(&named);
@@ -121,23 +125,15 @@ fn condemn_unexplaining_names(inputs: &Inputs, state: &mut State) {
             (&stays.p, &stays.accepted),
             (&state.p, &state.accepted),
         );
-        // Nothing took their place but the structure is located without
-        // them: they stay only if they predict the held-out readings
-        // clearly better than the model without them.
-        let placed = state.findings.iter().any(|f| f.unexplained().is_some());
-        let named_gain = (!corrected && placed).then(|| {
-            naming::held_out_gain_z(
-                inputs,
-                (&state.p, &state.accepted),
-                (&stays.p, &stays.accepted),
-            )
-        });
         // A series is condemned by its shape: what replaced it need only
-        // not be clearly worse.
+        // not be clearly worse. Where nothing took their place but the
+        // structure is located without them, the same rule says they stay
+        // only if they predict the held-out readings clearly better (the
+        // named model's gain is -z).
         if corrected && z > -super::HELD_OUT_Z {
             naming::say_why(state, &series, z);
-        } else if let Some(g) = named_gain.filter(|&g| g < super::HELD_OUT_Z) {
-            naming::say_why_unnamed(state, &series, g);
+        } else if placed && z > -super::HELD_OUT_Z {
+            naming::say_why_unnamed(state, &series, -z);
         } else {
             *state = located.unwrap_or_else(|| {
                 let mut s = named;

@@ -603,7 +603,8 @@ pub(super) fn series(state: &State) -> Vec<Series> {
 /// the driver they act through: the clock for a step or a creep of the rig
 /// or of one string (and a thermal expansion driven by the clock), the
 /// temperature for a thermal expansion driven by it, a string's length
-/// for that string's scale or offset. They did not explain the structure
+/// for that string's scale or offset, a joint's angle for that joint's
+/// compliance, periodic term or scale error. They did not explain the structure
 /// they were found on (a knock that springs back, a joint's zero that
 /// jumped, a frame that grows with the temperature, a drum that winds
 /// unevenly), so they are condemned like a series.
@@ -713,18 +714,23 @@ pub(super) fn say_why(state: &mut State, series: &[Series], z: f64) {
 
 /// Say in the `unexplained` finding (and the notes) which named terms the
 /// structure was first fitted with, and that without them, no correction
-/// in their place, the held-out readings are predicted about as well
-/// (paired z of the named model's gain `z`, below [`HELD_OUT_Z`]).
+/// in their place, the held-out readings are predicted about as well or
+/// better (paired z of the named model's gain `z`, below [`HELD_OUT_Z`]).
 ///
 /// [`HELD_OUT_Z`]: super::HELD_OUT_Z
 pub(super) fn say_why_unnamed(state: &mut State, series: &[Series], z: f64) {
     for s in series {
         let why = format!(
-            "{} {} first fitted to this structure, but {}; without {} the held-out readings are predicted about as well (the named model's gain: paired z = {z:.1}, needs {}), so {} not reported as physics",
+            "{} {} first fitted to this structure, but {}; without {} the held-out readings are predicted {} (the named model's gain: paired z = {z:.1}, needs {}), so {} not reported as physics",
             s.names.join(", "),
             if s.names.len() > 1 { "were" } else { "was" },
             s.why,
             if s.names.len() > 1 { "them" } else { "it" },
+            if z > 0.0 {
+                "about as well"
+            } else {
+                "as well or better"
+            },
             super::HELD_OUT_Z,
             if s.names.len() > 1 {
                 "they are"
