@@ -15,7 +15,7 @@
 #      joint target per request, 64 connections, at a fixed arrival rate
 #      RATE (default 20000/s; open loop, latency corrected for coordinated
 #      omission): latency at a given load rather than at saturation.
-# SITE_KEY=1 sends the single targets with an operator key limited to the
+# SITE_KEY=1 sends the single targets (parts single and rate) with an operator key limited to the
 # robot's site; INSECURE=1 serves with --insecure-no-auth (the key check left out, to
 # measure what it costs); PARTS selects (default "single batch identify");
 # DUR the wrk duration;
@@ -110,7 +110,7 @@ fi
 if has rate; then
   echo "### single target, 64 connections, ${RATE:-20000} requests/s offered (load average: $(cut -d' ' -f1-3 /proc/loadavg))"
   ${OHA:-oha} --no-tui -z $DUR -c 64 -q ${RATE:-20000} --latency-correction -m POST \
-    -H 'content-type: application/json' -H "authorization: Bearer $KEY" -D $WORK/one.json $BASE/compensate |
+    -H 'content-type: application/json' -H "authorization: Bearer ${OPERATOR:-$KEY}" -D $WORK/one.json $BASE/compensate |
     grep -E 'Success rate|Requests/sec|Slowest|Average|50.00%|90.00%|99.00%|99.90%|\[[0-9]+\] [0-9]+ responses'
 fi
 has identify || exit 0
