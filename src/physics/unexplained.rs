@@ -10,7 +10,7 @@
 use nalgebra::Vector3;
 
 use super::analyse::{errors_with_effects, reading_errors, rms};
-use super::effects::{Context, EffectModel};
+use super::effects::{Context, CorrectionDriver, EffectModel};
 use super::periodogram;
 use super::problem::EffectProblem;
 use crate::identify::Observations;
@@ -593,7 +593,7 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         let change = |a: usize| {
             ctx.driver_value(
                 &ctx.poses[obs.train[a]],
-                crate::physics::effects::CorrectionDriver::StringMove,
+                CorrectionDriver::StringMove,
                 Some(k),
                 None,
             )
@@ -634,14 +634,11 @@ fn line_of_sight_test(
     if !obs.anchors.is_empty() || rpp != 3 {
         return None;
     }
+    // The correction's own driver, so that the test and the correction
+    // see the same direction.
     let sight = |a: usize| {
         let pc = &ctx.poses[obs.train[a]];
-        let b = pc.point_rig.normalize();
-        Vector3::new(
-            b.dot(&pc.flange_axes_rig[0]),
-            b.dot(&pc.flange_axes_rig[1]),
-            b.dot(&pc.flange_axes_rig[2]),
-        )
+        Vector3::from_fn(|c, _| ctx.driver_value(pc, CorrectionDriver::LineOfSight, Some(c), None))
     };
     let values = (0..obs.train.len())
         .map(|a| {
@@ -662,6 +659,74 @@ fn line_of_sight_test(
         )),
         values,
     })
+}
+
+impl ScalarTest {
+    /// Where it located the remainder, in words: the test `name`, its `z`
+    /// and the threshold `zcrit`.
+    fn sentence(&self, name: &str, z: f64, zcrit: f64) -> String {
+        let three = self.side == "strings";
+        let (whose, reads) = if self.sensor.is_none() {
+            (
+                "the residual along the instrument's line of sight",
+                "the range is read wrong, or T is displaced along the line of sight,",
+            )
+        } else if three {
+            (
+                "one string's residuals",
+                "that string reads wrong, or T is displaced along it,",
+            )
+        } else {
+            (
+                "the part of the string residuals no displacement of T explains",
+                "that string reads wrong",
+            )
+        };
+        let (agree, varies) = match (&self.test, three) {
+            (ScalarTestKind::Neighbours(_), true) => (
+                "agree between neighbouring poses by",
+                "varies smoothly with it",
+            ),
+            (ScalarTestKind::Neighbours(_), false) => (
+                "agrees between neighbouring poses by",
+                "varies smoothly with it",
+            ),
+            (ScalarTestKind::Periodic(_), true) => (
+                "follow a sinusoid in",
+                "is periodic in its length (a drum's winding pitch or a spool's eccentricity would look so)",
+            ),
+            (ScalarTestKind::Periodic(_), false) => (
+                "follows a sinusoid in",
+                "is periodic in its length (a drum's winding pitch or a spool's eccentricity would look so)",
+            ),
+        };
+        let apart = if three {
+            " (three strings cannot tell the two apart)"
+        } else {
+            ""
+        };
+        format!(
+            "{whose} {agree} {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): {reads} by an amount that {varies}, in a form no catalogue effect has{apart}"
+        )
+    }
+}
+
+impl Concentrated {
+    /// Where the mismatch is confined, in words.
+    fn sentence(&self) -> String {
+        format!(
+            "the train poses far off the rest ({ids}: misfit over {FAR_OFF_MEDIANS} times the median) lie with joint {j} between {lo:.0} and {hi:.0} deg, and the {m} held-out poses there confirm it (misfit RMS {a:.3} mm per reading, against {b:.3} elsewhere; Wilcoxon rank-sum p = {p:.1e}, threshold {t:.1e}): the mismatch is confined to that stretch of joint {j}'s range, in a form no catalogue effect has",
+            ids = self.train_poses.join(", "),
+            j = self.joint + 1,
+            lo = self.lo_rad.to_degrees(),
+            hi = self.hi_rad.to_degrees(),
+            m = self.n_test_in,
+            a = self.test_rms_in,
+            b = self.test_rms_out,
+            p = self.p,
+            t = self.alpha,
+        )
+    }
 }
 
 /// What a neighbour test of an ordering compared between neighbours.
@@ -738,19 +803,6 @@ fn neighbours(
             + extra.len());
     let alpha = 1e-3 / n_tests as f64;
     let zcrit = normal_quantile(1.0 - alpha);
-    let z_of = |pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64| {
-        let (mut s, mut v, mut signs, mut n) = (0.0, 0.0, 0.0, 0usize);
-        for &(i, k) in pairs {
-            let x = d(i, k);
-            s += x;
-            v += x * x;
-            if x != 0.0 {
-                signs += x.signum();
-                n += 1;
-            }
-        }
-        (v > 0.0).then(|| (s / v.sqrt()).max(signs / (n as f64).sqrt()))
-    };
     let mut best: Option<(f64, String)> = None;
     let mut zs = vec![f64::NAN; n_plain];
     let mut winner_at: Option<(usize, Along)> = None;
@@ -766,31 +818,7 @@ fn neighbours(
     };
     let whole = if point_data { "point" } else { "strings" };
     for (pk, (name, pairs)) in pairings.iter().enumerate() {
-        let raw = |i: usize, k: usize| (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
-        let mut tries: Vec<(Option<f64>, Along)> = vec![(z_of(pairs, &raw), Along::Raw)];
-        if let (Some(a), true) = (along, pk < n) {
-            let own = |i: usize, k: usize| a[pk][i] * a[pk][k];
-            tries.push((z_of(pairs, &own), Along::Own));
-            let others =
-                |i: usize, k: usize| (0..n).filter(|&b| b != pk).map(|b| a[b][i] * a[b][k]).sum();
-            tries.push((z_of(pairs, &others), Along::Others));
-        }
-        if let (Some(a), true) = (along, pk == n) {
-            for (b, ab) in a.iter().enumerate() {
-                tries.push((
-                    z_of(pairs, &|i: usize, k: usize| ab[i] * ab[k]),
-                    Along::JointInTime(b),
-                ));
-            }
-        }
-        if let (Some(f), true) = (flange, pk == n) {
-            for (c, fc) in f.iter().enumerate() {
-                tries.push((
-                    z_of(pairs, &|i: usize, k: usize| fc[i] * fc[k]),
-                    Along::FlangeInTime(c),
-                ));
-            }
-        }
+        let tries = ordering_tries(pk, n, pairs, along, flange, res, rpp);
         let (driver, joint) = driver_of(pk, n, with_temp);
         let mut strongest: Option<Place> = None;
         for (z, on) in tries {
@@ -810,20 +838,7 @@ fn neighbours(
                 }
             }
             if z > zcrit && best.as_ref().is_none_or(|b| z > b.0) {
-                let label = match on {
-                    Along::Raw => name.clone(),
-                    Along::Own => format!("{name}, along the direction joint {} moves T", pk + 1),
-                    Along::Others => {
-                        format!("{name}, along the directions the other joints move T")
-                    }
-                    Along::JointInTime(b) => {
-                        format!("{name}, along the direction joint {} moves T", b + 1)
-                    }
-                    Along::FlangeInTime(c) => {
-                        format!("{name}, along the flange's {} axis", AXES[c])
-                    }
-                };
-                best = Some((z, label));
+                best = Some((z, on.label(name, pk)));
                 winner_at = Some((pk, on));
             }
         }
@@ -832,7 +847,7 @@ fn neighbours(
     for (k, t) in extra.iter().enumerate() {
         let v = &t.values;
         let z = match &t.test {
-            ScalarTestKind::Neighbours(pairs) => z_of(pairs, &|i, j| v[i] * v[j]),
+            ScalarTestKind::Neighbours(pairs) => agreement_z(pairs, &|i, j| v[i] * v[j]),
             ScalarTestKind::Periodic(z) => *z,
         };
         let Some(z) = z else {
@@ -860,6 +875,76 @@ fn neighbours(
         zs,
         winner_at,
         places,
+    }
+}
+
+/// How much more neighbours agree than independent noise allows: per pair
+/// the product `d` of their residuals, summed over its own scale, or
+/// their signs counted, whichever is the larger z.
+fn agreement_z(pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64) -> Option<f64> {
+    let (mut s, mut v, mut signs, mut n) = (0.0, 0.0, 0.0, 0usize);
+    for &(i, k) in pairs {
+        let x = d(i, k);
+        s += x;
+        v += x * x;
+        if x != 0.0 {
+            signs += x.signum();
+            n += 1;
+        }
+    }
+    (v > 0.0).then(|| (s / v.sqrt()).max(signs / (n as f64).sqrt()))
+}
+
+/// The z of each way ordering `pk`'s neighbour `pairs` are compared: the
+/// raw residuals; for a joint's ordering (`pk < n`) their components along
+/// that joint's and along the other joints' directions (`along`); for the
+/// clock's (`pk == n`) along each joint's direction and the flange's axes.
+fn ordering_tries(
+    pk: usize,
+    n: usize,
+    pairs: &[(usize, usize)],
+    along: Option<&[Vec<f64>]>,
+    flange: Option<&[Vec<f64>]>,
+    res: &[f64],
+    rpp: usize,
+) -> Vec<(Option<f64>, Along)> {
+    let raw = |i: usize, k: usize| (0..rpp).map(|c| res[i * rpp + c] * res[k * rpp + c]).sum();
+    let mut tries = vec![(agreement_z(pairs, &raw), Along::Raw)];
+    if let (Some(a), true) = (along, pk < n) {
+        let own = |i: usize, k: usize| a[pk][i] * a[pk][k];
+        tries.push((agreement_z(pairs, &own), Along::Own));
+        let others =
+            |i: usize, k: usize| (0..n).filter(|&b| b != pk).map(|b| a[b][i] * a[b][k]).sum();
+        tries.push((agreement_z(pairs, &others), Along::Others));
+    }
+    if let (Some(a), true) = (along, pk == n) {
+        for (b, ab) in a.iter().enumerate() {
+            let by_joint = |i: usize, k: usize| ab[i] * ab[k];
+            tries.push((agreement_z(pairs, &by_joint), Along::JointInTime(b)));
+        }
+    }
+    if let (Some(f), true) = (flange, pk == n) {
+        for (c, fc) in f.iter().enumerate() {
+            let by_axis = |i: usize, k: usize| fc[i] * fc[k];
+            tries.push((agreement_z(pairs, &by_axis), Along::FlangeInTime(c)));
+        }
+    }
+    tries
+}
+
+impl Along {
+    /// The test in words: the ordering's `name` (ordering `pk`) and what
+    /// was compared along it.
+    fn label(self, name: &str, pk: usize) -> String {
+        match self {
+            Along::Raw => name.to_string(),
+            Along::Own => format!("{name}, along the direction joint {} moves T", pk + 1),
+            Along::Others => format!("{name}, along the directions the other joints move T"),
+            Along::JointInTime(b) => {
+                format!("{name}, along the direction joint {} moves T", b + 1)
+            }
+            Along::FlangeInTime(c) => format!("{name}, along the flange's {} axis", AXES[c]),
+        }
     }
 }
 
@@ -892,70 +977,10 @@ fn located(
         // elsewhere can agree between neighbours.
         _ if confined.is_some() => {
             let c = confined.expect("checked");
-            (
-                c.joint,
-                format!(
-                    "the train poses far off the rest ({ids}: misfit over {FAR_OFF_MEDIANS} times the median) lie with joint {j} between {lo:.0} and {hi:.0} deg, and the {m} held-out poses there confirm it (misfit RMS {a:.3} mm per reading, against {b:.3} elsewhere; Wilcoxon rank-sum p = {p:.1e}, threshold {t:.1e}): the mismatch is confined to that stretch of joint {j}'s range, in a form no catalogue effect has",
-                    ids = c.train_poses.join(", "),
-                    j = c.joint + 1,
-                    lo = c.lo_rad.to_degrees(),
-                    hi = c.hi_rad.to_degrees(),
-                    m = c.n_test_in,
-                    a = c.test_rms_in,
-                    b = c.test_rms_out,
-                    p = c.p,
-                    t = c.alpha,
-                ),
-            )
+            (c.joint, c.sentence())
         }
         (Some((z, name)), _, Some((pk, Along::Raw))) if pk >= pairings.len() => {
-            let t = &extra[pk - pairings.len()];
-            let three = t.side == "strings";
-            let (whose, reads) = if t.sensor.is_none() {
-                (
-                    "the residual along the instrument's line of sight",
-                    "the range is read wrong, or T is displaced along the line of sight,",
-                )
-            } else if three {
-                (
-                    "one string's residuals",
-                    "that string reads wrong, or T is displaced along it,",
-                )
-            } else {
-                (
-                    "the part of the string residuals no displacement of T explains",
-                    "that string reads wrong",
-                )
-            };
-            let (agree, varies) = match (&t.test, three) {
-                (ScalarTestKind::Neighbours(_), true) => (
-                    "agree between neighbouring poses by",
-                    "varies smoothly with it",
-                ),
-                (ScalarTestKind::Neighbours(_), false) => (
-                    "agrees between neighbouring poses by",
-                    "varies smoothly with it",
-                ),
-                (ScalarTestKind::Periodic(_), true) => (
-                    "follow a sinusoid in",
-                    "is periodic in its length (a drum's winding pitch or a spool's eccentricity would look so)",
-                ),
-                (ScalarTestKind::Periodic(_), false) => (
-                    "follows a sinusoid in",
-                    "is periodic in its length (a drum's winding pitch or a spool's eccentricity would look so)",
-                ),
-            };
-            let apart = if three {
-                " (three strings cannot tell the two apart)"
-            } else {
-                ""
-            };
-            (
-                pk,
-                format!(
-                    "{whose} {agree} {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): {reads} by an amount that {varies}, in a form no catalogue effect has{apart}"
-                ),
-            )
+            (pk, extra[pk - pairings.len()].sentence(name, *z, zcrit))
         }
         (Some((z, name)), _, Some((pk, Along::Raw))) => (
             pk,

@@ -119,7 +119,17 @@ struct Slots<'a> {
     jumps_s: &'a [f64],
 }
 
-impl Slots<'_> {
+impl<'a> Slots<'a> {
+    /// The train poses of `inputs`, jumping (a function of the clock) at
+    /// `jumps_s`.
+    fn of(inputs: &'a Inputs, jumps_s: &'a [f64]) -> Self {
+        Slots {
+            ctx: &inputs.ctx,
+            train: &inputs.obs.train,
+            jumps_s,
+        }
+    }
+
     /// The driver's value at every train pose (a string's direction from
     /// `axis`).
     fn values(
@@ -356,22 +366,13 @@ fn aimed(inputs: &Inputs, fixed: &FixedBase, placeholder: &Kind) -> Vec<Kind> {
     let Some(axis) = Vector3::new(beta[0], beta[1], beta[2]).try_normalize(1e-12) else {
         return vec![];
     };
-    let slots = Slots {
-        ctx,
-        train: &obs.train,
-        jumps_s: &[],
-    };
-    slots.zero_scale_about(s, axis.into())
+    Slots::of(inputs, &[]).zero_scale_about(s, axis.into())
 }
 
 /// The candidate families at a place: per family one slot (what is
 /// corrected, what drives it) at every knot count the train poses allow.
 fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
-    let slots = Slots {
-        ctx: &inputs.ctx,
-        train: &inputs.obs.train,
-        jumps_s,
-    };
+    let slots = Slots::of(inputs, jumps_s);
     let m = inputs.ctx.anchors.len();
     let mut out = match (place.driver.as_str(), place.joint, place.sensor) {
         ("joint", Some(j), _) => {
@@ -618,11 +619,7 @@ const LENGTH_KNOTS: [usize; 3] = [2, 3, 4];
 ///
 /// [`Context::lengths`]: crate::physics::effects::Context::lengths
 pub(super) fn length_families(inputs: &Inputs, driver: CorrectionDriver) -> Vec<Vec<Kind>> {
-    let slots = Slots {
-        ctx: &inputs.ctx,
-        train: &inputs.obs.train,
-        jumps_s: &[],
-    };
+    let slots = Slots::of(inputs, &[]);
     inputs
         .ctx
         .lengths
@@ -647,11 +644,7 @@ pub(super) fn length_families(inputs: &Inputs, driver: CorrectionDriver) -> Vec<
 /// a function of its length (an arm not settled at the dwell, which a
 /// backlash also takes part of), at every knot count the train poses allow.
 pub(super) fn move_families(inputs: &Inputs, j: usize) -> Vec<Vec<Kind>> {
-    let slots = Slots {
-        ctx: &inputs.ctx,
-        train: &inputs.obs.train,
-        jumps_s: &[],
-    };
+    let slots = Slots::of(inputs, &[]);
     vec![
         slots.knotted(
             CorrectionTarget::JointAngle,
@@ -675,11 +668,7 @@ pub(super) fn move_families(inputs: &Inputs, j: usize) -> Vec<Vec<Kind>> {
 /// knot count the train poses allow: what an anchor step is tested
 /// against.
 pub(super) fn direction_families(inputs: &Inputs, s: usize) -> Vec<Vec<Kind>> {
-    let slots = Slots {
-        ctx: &inputs.ctx,
-        train: &inputs.obs.train,
-        jumps_s: &[],
-    };
+    let slots = Slots::of(inputs, &[]);
     slots.by_direction(s)
 }
 
@@ -691,11 +680,7 @@ pub(super) fn load_families(inputs: &Inputs, j: usize) -> Vec<Vec<Kind>> {
     if !inputs.ctx.has_masses {
         return Vec::new();
     }
-    let slots = Slots {
-        ctx: &inputs.ctx,
-        train: &inputs.obs.train,
-        jumps_s: &[],
-    };
+    let slots = Slots::of(inputs, &[]);
     let family = slots.signed(
         (CorrectionTarget::JointAngle, Some(j)),
         (CorrectionDriver::GravityTorque, Some(j)),

@@ -164,12 +164,7 @@ fn drop_backlash_beside_motion(inputs: &Inputs, state: &mut State) {
                 "it is"
             },
         );
-        for f in state.findings.iter_mut() {
-            if let Some(crate::report::FindingModel::Unexplained(u)) = &mut f.parameters {
-                u.resembles.push(why.clone());
-            }
-        }
-        state.notes.push(why);
+        naming::tell(state, why);
     }
 }
 

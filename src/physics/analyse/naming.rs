@@ -157,12 +157,7 @@ fn drop_kinds(state: &mut State, gone: &[crate::physics::effects::Kind], why: &s
     state
         .findings
         .retain(|f| f.effect_model().is_none_or(|m| !gone.contains(&m.kind)));
-    for f in state.findings.iter_mut() {
-        if let Some(FindingModel::Unexplained(u)) = &mut f.parameters {
-            u.resembles.push(why.to_string());
-        }
-    }
-    state.notes.push(why.to_string());
+    tell(state, why.to_string());
 }
 
 /// The model without effect `k`, refit by one linearised step of the
@@ -703,13 +698,19 @@ pub(super) fn say_why(state: &mut State, series: &[Series], z: f64) {
                 "it is"
             }
         );
-        for f in state.findings.iter_mut() {
-            if let Some(FindingModel::Unexplained(u)) = &mut f.parameters {
-                u.resembles.push(why.clone());
-            }
-        }
-        state.notes.push(why);
+        tell(state, why);
     }
+}
+
+/// Why named terms are not reported: in every `unexplained` finding
+/// (what it resembles and why that does not explain it) and in the notes.
+pub(super) fn tell(state: &mut State, why: String) {
+    for f in state.findings.iter_mut() {
+        if let Some(FindingModel::Unexplained(u)) = &mut f.parameters {
+            u.resembles.push(why.clone());
+        }
+    }
+    state.notes.push(why);
 }
 
 /// Say in the `unexplained` finding (and the notes) which named terms the
@@ -738,12 +739,7 @@ pub(super) fn say_why_unnamed(state: &mut State, series: &[Series], z: f64) {
                 "it is"
             }
         );
-        for f in state.findings.iter_mut() {
-            if let Some(FindingModel::Unexplained(u)) = &mut f.parameters {
-                u.resembles.push(why.clone());
-            }
-        }
-        state.notes.push(why);
+        tell(state, why);
     }
 }
 
