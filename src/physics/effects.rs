@@ -170,6 +170,7 @@ pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, 
     match driver {
         CorrectionDriver::JointAngle
         | CorrectionDriver::JointMove
+        | CorrectionDriver::MoveDirection
         | CorrectionDriver::StringDirection => {
             format!("{:.1} deg", v.to_degrees())
         }
@@ -195,6 +196,10 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
     match driver {
         CorrectionDriver::JointAngle => format!("joint {at}'s angle"),
         CorrectionDriver::JointMove => format!("joint {at}'s last move"),
+        CorrectionDriver::MoveDirection => format!(
+            "the direction of the last move of joints {at} and {} (the angle of their two moves)",
+            at + 1
+        ),
         CorrectionDriver::Time => "the session's clock".into(),
         CorrectionDriver::Temperature => "the temperature".into(),
         CorrectionDriver::StringLength => format!("string {at}'s length"),
@@ -932,6 +937,12 @@ impl Context {
         match driver {
             CorrectionDriver::JointAngle => pc.q_rad.get(i).copied().unwrap_or(0.0),
             CorrectionDriver::JointMove => pc.move_q_rad.get(i).copied().unwrap_or(0.0),
+            CorrectionDriver::MoveDirection => {
+                match (pc.move_q_rad.get(i), pc.move_q_rad.get(i + 1)) {
+                    (Some(a), Some(b)) => b.atan2(*a),
+                    _ => 0.0,
+                }
+            }
             CorrectionDriver::Time => pc.time_s,
             CorrectionDriver::Temperature => pc.temp_c.or(self.temp_ref_c).unwrap_or(0.0),
             CorrectionDriver::Workspace => workspace_coordinate(&pc.point_rig, i),

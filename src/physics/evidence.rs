@@ -127,7 +127,9 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
         } => {
             let words = super::effects::correction_driver_words(*driver, *driver_index);
             match driver {
-                CorrectionDriver::JointAngle | CorrectionDriver::JointMove => d(words, "deg"),
+                CorrectionDriver::JointAngle
+                | CorrectionDriver::JointMove
+                | CorrectionDriver::MoveDirection => d(words, "deg"),
                 CorrectionDriver::Time => {
                     let (label, unit) = ctx.time_axis();
                     d(label.into(), unit)
@@ -204,6 +206,7 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
             match driver {
                 CorrectionDriver::JointAngle
                 | CorrectionDriver::JointMove
+                | CorrectionDriver::MoveDirection
                 | CorrectionDriver::StringDirection => v.to_degrees(),
                 CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {
                     v.to_degrees()

@@ -98,6 +98,7 @@ pub(super) fn unexplained(
     let with_temp = has_temperature(obs);
     let mut extra = string_tests(obs, ctx, &res, rpp);
     extra.extend(line_of_sight_test(obs, ctx, &res, rpp));
+    extra.extend(drive_tests(obs, ctx, along.as_deref()));
     let nb = neighbours(
         ctx.n_joints,
         with_temp,
@@ -358,7 +359,7 @@ fn resemblances(places: &[Place]) -> Vec<String> {
                 "string {s}'s last change of length: no catalogue effect depends on the way a string last moved; friction in its drum or stretch of its cable (reading differently pulled out than retracted) would"
             )),
             ("motion", Some(j), _) => say(format!(
-                "joint {j}'s last move: backlash (a fixed amount by the side the joint arrived from) was tried; the error is graded with the move's size, which friction or elastic wind-up in the drive would give"
+                "joint {j}'s last move: backlash (a fixed amount by the side the joint itself arrived from) was tried; the error follows the way the joint last moved in another form: graded with the move's size (friction or elastic wind-up in the drive), or by the side a drive turning two joints last turned (a parallelogram's rod or belt, a coupled wrist)"
             )),
             ("motion", _, _) => say(
                 "the move that led to each pose: no catalogue effect depends on it (backlash depends only on the side a joint arrived from); an arm not settled at the dwell (overshoot or lag), a servo's following error or a tool still swinging would".into(),
@@ -487,6 +488,8 @@ struct ScalarTest {
     name: String,
     /// The string (1-based) whose part it tests, if a string's.
     sensor: Option<usize>,
+    /// The joint (1-based) whose part it tests, if a joint's.
+    joint: Option<usize>,
     driver: &'static str,
     /// The side the place is on: "sensor" (the string's own part),
     /// "strings" (three strings: either side) or "point" (point data).
@@ -549,6 +552,7 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         out.push(ScalarTest {
             name: format!("string {}'s length ({part})", k + 1),
             sensor,
+            joint: None,
             driver: "string",
             side,
             test: ScalarTestKind::Neighbours(sorted_pairs(&length)),
@@ -564,6 +568,7 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
                     k + 1
                 ),
                 sensor,
+                joint: None,
                 driver: "string",
                 side,
                 test: ScalarTestKind::Periodic(Some(-normal_quantile(p.clamp(1e-300, 0.5)))),
@@ -577,6 +582,7 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         out.push(ScalarTest {
             name: format!("string {}'s direction ({part})", k + 1),
             sensor,
+            joint: None,
             driver: "workspace",
             side,
             test: ScalarTestKind::Neighbours(nearest_pairs(
@@ -601,6 +607,7 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         out.push(ScalarTest {
             name: format!("string {}'s last change of length ({part})", k + 1),
             sensor,
+            joint: None,
             driver: "motion",
             side,
             test: ScalarTestKind::Neighbours(sorted_pairs(&change)),
@@ -609,6 +616,7 @@ fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> V
         out.push(ScalarTest {
             name: format!("time (string {}'s {})", k + 1, &part[4..]),
             sensor,
+            joint: None,
             driver: "time",
             side,
             test: ScalarTestKind::Neighbours(by_time.clone()),
@@ -649,6 +657,7 @@ fn line_of_sight_test(
     Some(ScalarTest {
         name: "the line of sight in the flange frame (nearest pose; the residual along it)".into(),
         sensor: None,
+        joint: None,
         driver: "configuration",
         side: "point",
         test: ScalarTestKind::Neighbours(nearest_pairs(
@@ -661,11 +670,70 @@ fn line_of_sight_test(
     })
 }
 
+/// Per pair of neighbouring joints and each of the two: that joint's
+/// component of the residual (along the direction it moves T), with the
+/// train poses ordered round the direction of the two joints' last move
+/// (the angle of `(Δq_i, Δq_(i+1))`, neighbours round the circle). A drive
+/// that turns both joints (a parallelogram's rod or belt driving the elbow
+/// from the turret, a coupled wrist) leaves its play or friction by the
+/// side its motor last turned: the sign of a combination of the two moves,
+/// the same for poses whose moves point alike, whatever the joints' own
+/// signs say. A joint's own backlash, which the catalogue names first, is
+/// such a function too; what stays after it is not.
+fn drive_tests(obs: &Observations, ctx: &Context, along: Option<&[Vec<f64>]>) -> Vec<ScalarTest> {
+    let Some(along) = along else {
+        return vec![];
+    };
+    let n = ctx.n_joints;
+    let mut out = Vec::new();
+    for i in 0..n.saturating_sub(1) {
+        let angle: Vec<f64> = obs
+            .train
+            .iter()
+            .map(|&k| {
+                ctx.driver_value(
+                    &ctx.poses[k],
+                    CorrectionDriver::MoveDirection,
+                    Some(i),
+                    None,
+                )
+            })
+            .collect();
+        let mut order: Vec<usize> = (0..angle.len()).collect();
+        order.sort_by(|a, b| angle[*a].total_cmp(&angle[*b]));
+        let mut pairs: Vec<(usize, usize)> = order.windows(2).map(|w| (w[0], w[1])).collect();
+        if let (Some(&first), Some(&last)) = (order.first(), order.last()) {
+            pairs.push((last, first));
+        }
+        for j in [i, i + 1] {
+            out.push(ScalarTest {
+                name: format!(
+                    "the direction of the last move of joints {} and {}",
+                    i + 1,
+                    i + 2
+                ),
+                sensor: None,
+                joint: Some(j + 1),
+                driver: "motion",
+                side: "robot",
+                test: ScalarTestKind::Neighbours(pairs.clone()),
+                values: along[j].clone(),
+            });
+        }
+    }
+    out
+}
+
 impl ScalarTest {
     /// Where it located the remainder, in words: the test `name`, its `z`
     /// and the threshold `zcrit`.
     fn sentence(&self, name: &str, z: f64, zcrit: f64) -> String {
         let three = self.side == "strings";
+        if let Some(j) = self.joint {
+            return format!(
+                "joint {j}'s part of the residual (along the direction it moves T) agrees between poses neighbouring by {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): joint {j}'s angle is off by an amount that follows the way the joints last moved, not only the side joint {j} itself arrived from (a drive turning both joints with play or friction: a parallelogram's rod or belt, a coupled wrist), in a form no catalogue effect has"
+            );
+        }
         let (whose, reads) = if self.sensor.is_none() {
             (
                 "the residual along the instrument's line of sight",
@@ -854,13 +922,14 @@ fn neighbours(
             continue;
         };
         if z > zcrit {
-            // One place per string (or none) and driver: its strongest test.
+            // One place per string or joint (or none) and driver: its
+            // strongest test.
             match places
                 .iter_mut()
-                .find(|p| p.driver == t.driver && p.sensor == t.sensor)
+                .find(|p| p.driver == t.driver && p.sensor == t.sensor && p.joint == t.joint)
             {
                 Some(p) => p.z = p.z.max(z),
-                None => places.push(place(t.driver, None, t.sensor, t.side, z)),
+                None => places.push(place(t.driver, t.joint, t.sensor, t.side, z)),
             }
             if best.as_ref().is_none_or(|b| z > b.0) {
                 best = Some((z, t.name.clone()));

@@ -109,6 +109,15 @@ pub enum CorrectionDriver {
     /// where backlash is a fixed amount by the side it arrived from, is a
     /// function of it.
     JointMove,
+    /// The direction of the last move of two neighbouring joints,
+    /// `driver_index` and the next: the angle of `(Δq_i, Δq_(i+1))` (knots
+    /// in rad, periodic over a turn; zero for the first pose). A drive that
+    /// turns both joints (a parallelogram's rod or belt driving the elbow
+    /// from the turret, a coupled wrist) has its play or friction by the
+    /// side its own motor last turned, the sign of a combination of the two
+    /// joints' moves, which is a function of this angle; a joint's own
+    /// backlash is one (the sign of its own move) too.
+    MoveDirection,
     /// One string's last change of length: its length less at the pose
     /// recorded before (knots in mm, signed: positive pulled out; zero
     /// for the first pose). A string whose reading depends on the way it
@@ -623,6 +632,15 @@ fn check_driver(
                     .into(),
             );
     }
+    if driver == CorrectionDriver::MoveDirection
+        && (target != CorrectionTarget::JointAngle
+            || !matches!((target_index, driver_index), (Some(t), Some(d)) if t == d || t == d + 1))
+    {
+        return Err(
+                "a correction by the direction of two joints' last move corrects one of them: its target must be joint_angle with target_index equal to driver_index or the next"
+                    .into(),
+            );
+    }
     if driver == CorrectionDriver::StringMove
         && (target != CorrectionTarget::StringReading || driver_index != target_index)
     {
@@ -778,6 +796,28 @@ mod tests {
     }
 
     #[test]
+    fn a_correction_by_two_joints_move_direction_corrects_one_of_them() {
+        let by_moves = |target, target_index, driver_index| Kind::DataDriven {
+            target,
+            target_index,
+            driver: CorrectionDriver::MoveDirection,
+            driver_index,
+            knots: vec![0.0, 1.0, 2.0, 3.0],
+            period: Some(std::f64::consts::TAU),
+            range: None,
+            axis: None,
+        };
+        let joint = CorrectionTarget::JointAngle;
+        assert_eq!(check_correction(&by_moves(joint, Some(1), Some(1))), Ok(()));
+        assert_eq!(check_correction(&by_moves(joint, Some(2), Some(1))), Ok(()));
+        // Not a joint outside the pair, not a string.
+        assert!(check_correction(&by_moves(joint, Some(3), Some(1))).is_err());
+        assert!(check_correction(&by_moves(joint, Some(1), None)).is_err());
+        let string = CorrectionTarget::StringReading;
+        assert!(check_correction(&by_moves(string, Some(1), Some(1))).is_err());
+    }
+
+    #[test]
     fn compensation_uses_a_correction_only_where_a_target_knows_its_driver() {
         assert!(CorrectionDriver::JointAngle.usable_for_compensation());
         assert!(CorrectionDriver::Workspace.usable_for_compensation());
@@ -786,6 +826,7 @@ mod tests {
             CorrectionDriver::Temperature,
             CorrectionDriver::LineOfSight,
             CorrectionDriver::JointMove,
+            CorrectionDriver::MoveDirection,
         ] {
             assert!(!d.usable_for_compensation(), "{d:?}");
         }

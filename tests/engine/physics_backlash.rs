@@ -110,3 +110,45 @@ fn a_stop_short_graded_with_the_move_is_not_backlash() {
         )
     );
 }
+
+/// Play in a drive that turns two joints (the elbow driven from the turret
+/// by a rod or belt, so its play takes the side of q2 + q3's last change)
+/// is no joint's own backlash: nothing is named, the remainder is placed at
+/// joint 3's motion by the direction of joints 2 and 3's last move, and a
+/// correction of joint 3's angle round that direction predicts the held-out
+/// readings better; compensation cannot use it (the move that leads to a
+/// target is the program's).
+#[test]
+fn play_in_a_drive_turning_two_joints_is_placed_at_their_motion_and_corrected() {
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
+    let (robot, rig, data) = common::load("xcheck7_parallelogram_backlash_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    let place = common::place_where(&report, |p| p.driver == "motion" && p.joint == Some(3));
+    assert!(place.z > place.threshold, "{place:?}");
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::JointAngle,
+            Some(2),
+            CorrectionDriver::MoveDirection,
+            Some(1)
+        )
+    );
+    let d = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .unwrap();
+    assert!(
+        d.test_rms_after_mm < 0.75 * d.test_rms_before_mm,
+        "{} -> {}",
+        d.test_rms_before_mm,
+        d.test_rms_after_mm
+    );
+    assert!(
+        d.evidence.contains("compensation cannot use it"),
+        "{}",
+        d.evidence
+    );
+}

@@ -395,6 +395,14 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
             (CorrectionTarget::StringReading, Some(s - 1)),
             (CorrectionDriver::StringMove, Some(s - 1)),
         )],
+        // Joint j's error by the way it last moved: graded with its own
+        // move, or by the direction of its and a neighbour's moves (a
+        // drive turning both).
+        ("motion", Some(j), None) if j >= 1 && j <= inputs.ctx.n_joints => {
+            let mut out = move_families(inputs, j - 1);
+            out.extend(slots.by_move_direction(j - 1));
+            out
+        }
         // The move that led to each pose: T off along it by a function of
         // its length (overshoot or lag of an arm not settled at the dwell).
         ("motion", _, _) => vec![slots.knotted(
@@ -567,6 +575,30 @@ impl Slots<'_> {
         let mut out = self.by_direction(s);
         out.extend((0..self.ctx.anchors.len()).map(to_aim));
         out
+    }
+
+    /// Joint `j`'s (0-based) angle as a periodic function of the direction
+    /// of its and a neighbouring joint's last move (one family per
+    /// neighbour; [`CorrectionDriver::MoveDirection`]): the play of a drive
+    /// that turns both takes the side of a combination of the two moves,
+    /// a step round that circle, which the knot counts the scan screens
+    /// ([`knots_per_period`]) approximate.
+    fn by_move_direction(&self, j: usize) -> Vec<Vec<Kind>> {
+        let n = self.ctx.n_joints;
+        let turn = std::f64::consts::TAU;
+        [j.checked_sub(1), (j + 1 < n).then_some(j)]
+            .into_iter()
+            .flatten()
+            .map(|pair| {
+                vec![periodic(
+                    (CorrectionTarget::JointAngle, Some(j)),
+                    (CorrectionDriver::MoveDirection, Some(pair)),
+                    turn,
+                    [-turn / 2.0, turn / 2.0],
+                    SCAN_KNOTS,
+                )]
+            })
+            .collect()
     }
 
     /// Point data, placed by the line of sight in the flange frame: the
@@ -778,6 +810,8 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
         "compensation does not apply it: it follows how the target faces the instrument, which a target read off its centre by an amount that turns with it gives (a reflector whose vertex is off its sphere's centre, a photogrammetric target seen at steep angles), and which point data alone cannot tell from an error of the robot's that follows the flange's orientation towards the instrument; check the target (replace or characterise it, keep it facing the instrument) and, if the correction stays, measure with another target".into()
     } else if *driver == CorrectionDriver::GravityTorque {
         "compensation does not apply it: it follows the joint's gravity load at the target (its angles and the payload), which compensation does not yet evaluate for a data-driven correction; the joint's error is not in proportion to its load as an elastic joint's is: check it for play that gravity takes up or a stiffness that changes with the load".into()
+    } else if *driver == CorrectionDriver::MoveDirection {
+        "compensation cannot use it: it depends on the moves that lead to a target, which the program that visits it decides, not the target; the joint's error follows the way it and its neighbour last moved together, as the play or friction of a drive that turns both would (a parallelogram's rod or belt, a coupled wrist): check that drive, or approach every target the same way".into()
     } else if *driver == CorrectionDriver::JointMove {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; the joint stops short by an amount that grows with the move: check its drive for friction or elastic wind-up (a brake dragging, a worn or preloaded gear, a soft coupling), or approach every target with the same move".into()
     } else if let Kind::DataDriven {
@@ -809,6 +843,19 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
 const SCAN_KNOTS: usize = 4;
 /// Knots per period tried at the best periods of the scan.
 const PERIODIC_KNOTS: [usize; 3] = [4, 6, 8];
+/// Knots per period tried for a periodic correction by `driver`: a step
+/// round the circle of a move's direction (the side a drive turning two
+/// joints last turned) needs knots close to its edges, which wherever the
+/// edges fall takes more of them than a smooth cycle does.
+fn knots_per_period(driver: CorrectionDriver) -> &'static [usize] {
+    if driver == CorrectionDriver::MoveDirection {
+        &MOVE_DIRECTION_KNOTS
+    } else {
+        &PERIODIC_KNOTS
+    }
+}
+/// Knots per turn of a move's direction ([`knots_per_period`]).
+const MOVE_DIRECTION_KNOTS: [usize; 4] = [4, 8, 12, 16];
 /// How many of the scan's best periods (by [`FixedBase::drop_alone`]) are
 /// fitted and cross-validated at every knot count.
 const SCREENED_PERIODS: usize = 3;
@@ -865,7 +912,7 @@ fn screened(inputs: &Inputs, fixed: &FixedBase, family: &[Kind]) -> Vec<Kind> {
         else {
             continue;
         };
-        for k in PERIODIC_KNOTS {
+        for &k in knots_per_period(*driver) {
             out.push(periodic(
                 (*target, *target_index),
                 (*driver, *driver_index),
@@ -1111,6 +1158,11 @@ pub(super) fn try_place(
     };
     let usable = compensation_words(&e.kind, ctx.anchors.is_empty());
     let shape = match e.kind {
+        Kind::DataDriven {
+            period: Some(_),
+            driver: CorrectionDriver::MoveDirection,
+            ..
+        } => format!("periodic, {} knots round the turn", knots.len()),
         Kind::DataDriven {
             period: Some(p),
             driver_index,
