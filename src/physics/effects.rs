@@ -185,7 +185,9 @@ pub fn correction_driver_amount(driver: CorrectionDriver, index: Option<usize>, 
         | CorrectionDriver::Motion => {
             format!("{v:.1} mm")
         }
-        CorrectionDriver::GravityTorque => format!("{v:.1} N*m"),
+        CorrectionDriver::GravityTorque | CorrectionDriver::GravityTorqueChange => {
+            format!("{v:.1} N*m")
+        }
         CorrectionDriver::LineOfSight => format!("{v:.3}"),
     }
 }
@@ -205,6 +207,9 @@ pub fn correction_driver_words(driver: CorrectionDriver, index: Option<usize>) -
         CorrectionDriver::StringLength => format!("string {at}'s length"),
         CorrectionDriver::StringMove => format!("string {at}'s last change of length"),
         CorrectionDriver::GravityTorque => format!("joint {at}'s gravity torque"),
+        CorrectionDriver::GravityTorqueChange => {
+            format!("the change of joint {at}'s gravity torque over the last move")
+        }
         CorrectionDriver::StringDirection => {
             format!("string {at}'s angle from its axis (its mean direction, or the vertical)")
         }
@@ -338,6 +343,9 @@ pub struct PoseContext {
     /// unit-mass regressors (m) of every link frame origin 0..n, the tool
     /// (n) and the payload (n + 1, the tool's times `payload_kg`).
     torque: Vec<Vec<f64>>,
+    /// Per joint: its gravity torque less the previous pose's (N·m; zero
+    /// for the first pose and without link masses).
+    pub torque_change_nm: Vec<f64>,
     /// Displacement of T in the rig frame (mm) per rad/(N·m) of a base
     /// tilt: the gravity moment of the arm and payload about the base
     /// origin (N·m), as a rotation, applied to T (zero without masses).
@@ -575,7 +583,7 @@ impl Context {
         let dirs = approach_directions(&qs);
         let lengths = nominal_lengths(robot);
         let mut jac = chain.new_jacobian();
-        let ctx_poses = poses
+        let mut ctx_poses: Vec<PoseContext> = poses
             .iter()
             .zip(dirs)
             .enumerate()
@@ -629,6 +637,7 @@ impl Context {
                         _ => p.point_rig - poses[i - 1].point_rig,
                     },
                     torque,
+                    torque_change_nm: vec![0.0; n],
                     tilt,
                     base_moment_nm,
                     d_lengths,
@@ -636,6 +645,14 @@ impl Context {
                 }
             })
             .collect();
+        if masses.is_some() {
+            for i in 1..ctx_poses.len() {
+                let change = (0..n)
+                    .map(|j| ctx_poses[i].torque[j][0] - ctx_poses[i - 1].torque[j][0])
+                    .collect();
+                ctx_poses[i].torque_change_nm = change;
+            }
+        }
         let mut payloads: Vec<f64> = poses.iter().filter_map(|p| p.payload_kg).collect();
         payloads.sort_by(f64::total_cmp);
         let payload_ref_kg = (!payloads.is_empty()).then(|| payloads[payloads.len() / 2]);
@@ -962,6 +979,9 @@ impl Context {
                 .copied()
                 .unwrap_or(0.0),
             CorrectionDriver::GravityTorque => 0.0,
+            CorrectionDriver::GravityTorqueChange => {
+                pc.torque_change_nm.get(i).copied().unwrap_or(0.0)
+            }
             CorrectionDriver::StringMove => self.anchors.get(i).map_or(0.0, |a| {
                 (pc.point_rig - a).norm() - (pc.point_rig - pc.move_rig - a).norm()
             }),

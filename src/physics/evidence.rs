@@ -136,7 +136,9 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
                 }
                 CorrectionDriver::Temperature => d(words, "degrees C"),
                 CorrectionDriver::StringLength | CorrectionDriver::StringMove => d(words, "mm"),
-                CorrectionDriver::GravityTorque => d(words, "N*m"),
+                CorrectionDriver::GravityTorque | CorrectionDriver::GravityTorqueChange => {
+                    d(words, "N*m")
+                }
                 CorrectionDriver::StringDirection => d(words, "deg"),
                 CorrectionDriver::Motion => d(words, "mm"),
                 CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {

@@ -99,6 +99,7 @@ pub(super) fn unexplained(
     let mut extra = string_tests(obs, ctx, &res, rpp);
     extra.extend(line_of_sight_test(obs, ctx, &res, rpp));
     extra.extend(drive_tests(obs, ctx, along.as_deref()));
+    extra.extend(load_change_tests(obs, ctx, along.as_deref()));
     let nb = neighbours(
         ctx.n_joints,
         with_temp,
@@ -359,7 +360,7 @@ fn resemblances(places: &[Place]) -> Vec<String> {
                 "string {s}'s last change of length: no catalogue effect depends on the way a string last moved; friction in its drum or stretch of its cable (reading differently pulled out than retracted) would"
             )),
             ("motion", Some(j), _) => say(format!(
-                "joint {j}'s last move: backlash (a fixed amount by the side the joint itself arrived from) was tried; the error follows the way the joint last moved in another form: graded with the move's size (friction or elastic wind-up in the drive), or by the side a drive turning two joints last turned (a parallelogram's rod or belt, a coupled wrist)"
+                "joint {j}'s last move: backlash (a fixed amount by the side the joint itself arrived from) was tried; the error follows the way the joint last moved in another form: graded with the move's size (friction or elastic wind-up in the drive), by the side a drive turning two joints last turned (a parallelogram's rod or belt, a coupled wrist), or by the change of its gravity load over the move (a drive that creeps or winds up under load: a harmonic drive's flexspline relaxing during the dwell)"
             )),
             ("motion", _, _) => say(
                 "the move that led to each pose: no catalogue effect depends on it (backlash depends only on the side a joint arrived from); an arm not settled at the dwell (overshoot or lag), a servo's following error or a tool still swinging would".into(),
@@ -724,6 +725,52 @@ fn drive_tests(obs: &Observations, ctx: &Context, along: Option<&[Vec<f64>]>) ->
     out
 }
 
+/// With link masses, per joint: its component of the residual with the
+/// train poses ordered by the change of its gravity torque over the last
+/// move. A drive that creeps or winds up under load (a harmonic drive's
+/// flexspline relaxing during the dwell, friction holding part of an
+/// elastic deflection) lags that change, where a compliance, which the
+/// catalogue names first, follows the load itself.
+fn load_change_tests(
+    obs: &Observations,
+    ctx: &Context,
+    along: Option<&[Vec<f64>]>,
+) -> Vec<ScalarTest> {
+    let Some(along) = along.filter(|_| ctx.has_masses) else {
+        return vec![];
+    };
+    (0..ctx.n_joints)
+        .map(|j| {
+            let change: Vec<f64> = obs
+                .train
+                .iter()
+                .map(|&k| {
+                    ctx.driver_value(
+                        &ctx.poses[k],
+                        CorrectionDriver::GravityTorqueChange,
+                        Some(j),
+                        None,
+                    )
+                })
+                .collect();
+            let mut order: Vec<usize> = (0..change.len()).collect();
+            order.sort_by(|a, b| change[*a].total_cmp(&change[*b]));
+            ScalarTest {
+                name: format!(
+                    "the change of joint {}'s gravity torque over the last move",
+                    j + 1
+                ),
+                sensor: None,
+                joint: Some(j + 1),
+                driver: "motion",
+                side: "robot",
+                test: ScalarTestKind::Neighbours(order.windows(2).map(|w| (w[0], w[1])).collect()),
+                values: along[j].clone(),
+            }
+        })
+        .collect()
+}
+
 impl ScalarTest {
     /// Where it located the remainder, in words: the test `name`, its `z`
     /// and the threshold `zcrit`.
@@ -731,7 +778,7 @@ impl ScalarTest {
         let three = self.side == "strings";
         if let Some(j) = self.joint {
             return format!(
-                "joint {j}'s part of the residual (along the direction it moves T) agrees between poses neighbouring by {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): joint {j}'s angle is off by an amount that follows the way the joints last moved, not only the side joint {j} itself arrived from (a drive turning both joints with play or friction: a parallelogram's rod or belt, a coupled wrist), in a form no catalogue effect has"
+                "joint {j}'s part of the residual (along the direction it moves T) agrees between poses neighbouring by {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): joint {j}'s angle is off by an amount that follows the way the joint last moved or was last loaded, not only the side it arrived from (a drive turning two joints with play or friction: a parallelogram's rod or belt, a coupled wrist; or a drive that creeps or winds up under load), in a form no catalogue effect has"
             );
         }
         let (whose, reads) = if self.sensor.is_none() {

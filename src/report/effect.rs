@@ -118,6 +118,13 @@ pub enum CorrectionDriver {
     /// joints' moves, which is a function of this angle; a joint's own
     /// backlash is one (the sign of its own move) too.
     MoveDirection,
+    /// The change of one joint's gravity torque over the last move: its
+    /// torque less the previous pose's (knots in N·m; zero for the first
+    /// pose and without link masses). A drive that creeps or winds up
+    /// under load (a harmonic drive's flexspline relaxing during the
+    /// dwell, friction holding part of an elastic deflection) lags the
+    /// change of its load, where a compliance follows the load itself.
+    GravityTorqueChange,
     /// One string's last change of length: its length less at the pose
     /// recorded before (knots in mm, signed: positive pulled out; zero
     /// for the first pose). A string whose reading depends on the way it
@@ -649,7 +656,11 @@ fn check_driver(
                     .into(),
             );
     }
-    if driver == CorrectionDriver::GravityTorque && target != CorrectionTarget::JointAngle {
+    if matches!(
+        driver,
+        CorrectionDriver::GravityTorque | CorrectionDriver::GravityTorqueChange
+    ) && target != CorrectionTarget::JointAngle
+    {
         return Err(
                 "a correction by a joint's gravity torque corrects a joint's angle: its target must be joint_angle"
                     .into(),
@@ -827,6 +838,7 @@ mod tests {
             CorrectionDriver::LineOfSight,
             CorrectionDriver::JointMove,
             CorrectionDriver::MoveDirection,
+            CorrectionDriver::GravityTorqueChange,
         ] {
             assert!(!d.usable_for_compensation(), "{d:?}");
         }

@@ -1,4 +1,5 @@
-//! Backlash, and an error graded with the move that is not backlash.
+//! Backlash, and errors that follow the last move and are not backlash:
+//! graded with the move, by two joints' moves, by the change of the load.
 //!
 //! Backlash when the recording cannot say how a joint arrived at the first
 //! poses (the robot came from home, which the file does not carry): the
@@ -133,6 +134,47 @@ fn play_in_a_drive_turning_two_joints_is_placed_at_their_motion_and_corrected() 
             Some(2),
             CorrectionDriver::MoveDirection,
             Some(1)
+        )
+    );
+    let d = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .unwrap();
+    assert!(
+        d.test_rms_after_mm < 0.75 * d.test_rms_before_mm,
+        "{} -> {}",
+        d.test_rms_before_mm,
+        d.test_rms_after_mm
+    );
+    assert!(
+        d.evidence.contains("compensation cannot use it"),
+        "{}",
+        d.evidence
+    );
+}
+
+/// A joint whose drive creeps under its load during the dwell (a harmonic
+/// drive's flexspline) lags the change of its gravity torque over the last
+/// move, which a compliance (in proportion to the torque itself) is not:
+/// nothing is named, the remainder is placed at joint 3's motion, and a
+/// correction of joint 3's angle by the change of its torque predicts the
+/// held-out readings better; compensation cannot use it.
+#[test]
+fn a_joint_creeping_under_its_load_is_placed_at_its_motion_and_corrected() {
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
+    let (robot, rig, data) = common::load("xcheck8_dwell_creep_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    let place = common::place_where(&report, |p| p.driver == "motion" && p.joint == Some(3));
+    assert!(place.z > place.threshold, "{place:?}");
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::JointAngle,
+            Some(2),
+            CorrectionDriver::GravityTorqueChange,
+            Some(2)
         )
     );
     let d = report

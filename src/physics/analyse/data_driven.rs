@@ -401,6 +401,7 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         ("motion", Some(j), None) if j >= 1 && j <= inputs.ctx.n_joints => {
             let mut out = move_families(inputs, j - 1);
             out.extend(slots.by_move_direction(j - 1));
+            out.extend(slots.by_load_change(j - 1));
             out
         }
         // The move that led to each pose: T off along it by a function of
@@ -599,6 +600,22 @@ impl Slots<'_> {
                 )]
             })
             .collect()
+    }
+
+    /// Joint `j`'s (0-based) angle as a smooth function of the change of
+    /// its gravity torque over the last move (a drive creeping or winding
+    /// up under load lags that change); none without link masses.
+    fn by_load_change(&self, j: usize) -> Vec<Vec<Kind>> {
+        if !self.ctx.has_masses {
+            return vec![];
+        }
+        vec![self.knotted(
+            CorrectionTarget::JointAngle,
+            Some(j),
+            CorrectionDriver::GravityTorqueChange,
+            Some(j),
+            &MOVE_KNOTS,
+        )]
     }
 
     /// Point data, placed by the line of sight in the flange frame: the
@@ -812,6 +829,8 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
         "compensation does not apply it: it follows the joint's gravity load at the target (its angles and the payload), which compensation does not yet evaluate for a data-driven correction; the joint's error is not in proportion to its load as an elastic joint's is: check it for play that gravity takes up or a stiffness that changes with the load".into()
     } else if *driver == CorrectionDriver::MoveDirection {
         "compensation cannot use it: it depends on the moves that lead to a target, which the program that visits it decides, not the target; the joint's error follows the way it and its neighbour last moved together, as the play or friction of a drive that turns both would (a parallelogram's rod or belt, a coupled wrist): check that drive, or approach every target the same way".into()
+    } else if *driver == CorrectionDriver::GravityTorqueChange {
+        "compensation cannot use it: it depends on the load the joint carried at the pose before a target, which the program that visits it decides, not the target; the joint lags the change of its load as a drive that creeps or winds up under load would (a harmonic drive's flexspline relaxing during the dwell, friction holding part of its deflection): dwell longer before measuring, check the drive, or approach every target from the same load".into()
     } else if *driver == CorrectionDriver::JointMove {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; the joint stops short by an amount that grows with the move: check its drive for friction or elastic wind-up (a brake dragging, a worn or preloaded gear, a soft coupling), or approach every target with the same move".into()
     } else if let Kind::DataDriven {
