@@ -281,3 +281,37 @@ fn a_compliance_that_leaves_its_joint_unexplained_is_not_named() {
         u.resembles
     );
 }
+
+/// Where only the robot side's excess placed the remainder, a correction
+/// of any joint's angle by any joint's is tried: here (a dress pack pulling
+/// joint 1 back near the ends of its travel) it takes the place of three
+/// shape terms of joint 1 that together fitted one error of its angle, and
+/// predicts the held-out readings far better; nothing is named.
+#[test]
+fn a_correction_where_only_the_robot_side_placed_the_remainder_replaces_forced_names() {
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
+    let (robot, rig, data) = common::load("xcheck4_harness_windup_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| p.driver == "robot");
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::JointAngle,
+            Some(0),
+            CorrectionDriver::JointAngle,
+            Some(0)
+        )
+    );
+    let d = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .unwrap();
+    assert!(
+        d.test_rms_after_mm < 0.5 * d.test_rms_before_mm,
+        "{} -> {}",
+        d.test_rms_before_mm,
+        d.test_rms_after_mm
+    );
+}

@@ -415,6 +415,10 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         )],
         ("configuration", None, None) if m == 0 => slots.by_line_of_sight(),
         ("string", _, Some(s)) if s <= m => slots.by_string_length(s - 1),
+        // Only the robot side's excess: no test said what drives it, so
+        // any joint's angle as a function of any joint's, and T moved as a
+        // function of where it is.
+        ("robot", None, None) => slots.on_the_robot_side(),
         _ => Vec::new(),
     };
     out.retain(|f| !f.is_empty());
@@ -600,6 +604,37 @@ impl Slots<'_> {
                 )]
             })
             .collect()
+    }
+
+    /// Where only the robot side's excess placed the remainder: every
+    /// joint's angle as a function of every joint's (without the periodic
+    /// scans), and T's displacement as a function of each coordinate of
+    /// where it is.
+    fn on_the_robot_side(&self) -> Vec<Vec<Kind>> {
+        let n = self.ctx.n_joints;
+        let mut out: Vec<Vec<Kind>> = (0..n)
+            .flat_map(|j| {
+                (0..n).map(move |t| {
+                    self.knotted(
+                        CorrectionTarget::JointAngle,
+                        Some(t),
+                        CorrectionDriver::JointAngle,
+                        Some(j),
+                        &JOINT_KNOTS,
+                    )
+                })
+            })
+            .collect();
+        out.extend((0..3).map(|c| {
+            self.knotted(
+                CorrectionTarget::Point,
+                None,
+                CorrectionDriver::Workspace,
+                Some(c),
+                &JOINT_KNOTS,
+            )
+        }));
+        out
     }
 
     /// Joint `j`'s (0-based) angle as a smooth function of the change of
