@@ -656,13 +656,20 @@ fn check_driver(
                     .into(),
             );
     }
-    if matches!(
-        driver,
-        CorrectionDriver::GravityTorque | CorrectionDriver::GravityTorqueChange
-    ) && target != CorrectionTarget::JointAngle
+    if driver == CorrectionDriver::GravityTorque
+        && !matches!(
+            target,
+            CorrectionTarget::JointAngle | CorrectionTarget::StringReading
+        )
     {
         return Err(
-                "a correction by a joint's gravity torque corrects a joint's angle: its target must be joint_angle"
+                "a correction by a joint's gravity torque corrects a joint's angle or a string's reading: its target must be joint_angle or string_reading"
+                    .into(),
+            );
+    }
+    if driver == CorrectionDriver::GravityTorqueChange && target != CorrectionTarget::JointAngle {
+        return Err(
+                "a correction by the change of a joint's gravity torque corrects a joint's angle: its target must be joint_angle"
                     .into(),
             );
     }

@@ -247,38 +247,44 @@ fn a_compliance_fitted_the_wrong_way_still_places_the_joint() {
     );
 }
 
-/// A named effect after which the remainder still follows the joint it
-/// acts on did not explain the structure it was found on. With no
-/// correction taking its place, it stays only if the held-out readings are
-/// clearly better with it: here (a string picking up joint 2's servo
-/// interference, an offset by the joint's load) a compliance of joint 2
-/// was kept beside an `unexplained` finding at joint 2, and is now left out
-/// and the finding says why.
+/// A string picking up a joint motor's interference (an offset by the
+/// joint's load) moves the located point as the joint is loaded: a
+/// compliance of joint 2 once fitted it, and stayed beside an `unexplained`
+/// finding at joint 2. It is not named; the remainder is placed at joint 2,
+/// and the string's reading as a function of joint 2's gravity torque is
+/// the correction, which compensation does not need (it is the string's).
 #[test]
-fn a_compliance_that_leaves_its_joint_unexplained_is_not_named() {
+fn a_string_reading_by_a_joints_load_is_no_compliance() {
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
     let (robot, rig, data) = common::load("xcheck7_servo_interference_std4");
     let report = common::identify_default(&robot, &rig, &data);
-    assert!(
-        report
-            .findings
-            .iter()
-            .all(|f| f.effect != "joint_compliance"),
-        "{:#?}",
-        report.findings
-    );
+    common::nothing_named(&report);
     let place = common::place_where(&report, |p| p.driver == "joint" && p.joint == Some(2));
     assert!(place.z > place.threshold, "{place:?}");
-    let u = report
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::StringReading,
+            Some(1),
+            CorrectionDriver::GravityTorque,
+            Some(1)
+        )
+    );
+    let d = report
         .findings
         .iter()
-        .find_map(|f| f.unexplained())
+        .find(|f| f.effect == "data_driven")
         .unwrap();
     assert!(
-        u.resembles
-            .iter()
-            .any(|r| r.contains("joint_compliance on joint 2") && r.contains("about as well")),
-        "{:#?}",
-        u.resembles
+        d.test_rms_after_mm < 0.5 * d.test_rms_before_mm,
+        "{} -> {}",
+        d.test_rms_before_mm,
+        d.test_rms_after_mm
+    );
+    assert!(
+        d.evidence.contains("compensation does not need it"),
+        "{}",
+        d.evidence
     );
 }
 

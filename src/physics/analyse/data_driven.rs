@@ -380,6 +380,11 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
             // Or its gravity load (a counterbalance, a play gravity takes
             // up): not a function of its angle alone.
             out.extend(load_families(inputs, j - 1));
+            // Or a string's reading by that load: the joint's motor
+            // interfering with the string's signal in proportion to the
+            // current that holds the load (a string's error moves the
+            // located point, so the joint's tests see it).
+            out.extend(slots.strings_by_load(j - 1));
             out
         }
         ("time", _, None) => slots.in_time(),
@@ -637,6 +642,25 @@ impl Slots<'_> {
         out
     }
 
+    /// Each string's reading as a smooth function of joint `j`'s (0-based)
+    /// gravity torque, a family per string; none without link masses.
+    fn strings_by_load(&self, j: usize) -> Vec<Vec<Kind>> {
+        if !self.ctx.has_masses {
+            return vec![];
+        }
+        (0..self.ctx.anchors.len())
+            .map(|s| {
+                self.knotted(
+                    CorrectionTarget::StringReading,
+                    Some(s),
+                    CorrectionDriver::GravityTorque,
+                    Some(j),
+                    &MOVE_KNOTS,
+                )
+            })
+            .collect()
+    }
+
     /// Joint `j`'s (0-based) angle as a smooth function of the change of
     /// its gravity torque over the last move (a drive creeping or winding
     /// up under load lags that change); none without link masses.
@@ -860,7 +884,7 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
         )
     } else if *driver == CorrectionDriver::LineOfSight {
         "compensation does not apply it: it follows how the target faces the instrument, which a target read off its centre by an amount that turns with it gives (a reflector whose vertex is off its sphere's centre, a photogrammetric target seen at steep angles), and which point data alone cannot tell from an error of the robot's that follows the flange's orientation towards the instrument; check the target (replace or characterise it, keep it facing the instrument) and, if the correction stays, measure with another target".into()
-    } else if *driver == CorrectionDriver::GravityTorque {
+    } else if *driver == CorrectionDriver::GravityTorque && !reading {
         "compensation does not apply it: it follows the joint's gravity load at the target (its angles and the payload), which compensation does not yet evaluate for a data-driven correction; the joint's error is not in proportion to its load as an elastic joint's is: check it for play that gravity takes up or a stiffness that changes with the load".into()
     } else if *driver == CorrectionDriver::MoveDirection {
         "compensation cannot use it: it depends on the moves that lead to a target, which the program that visits it decides, not the target; the joint's error follows the way it and its neighbour last moved together, as the play or friction of a drive that turns both would (a parallelogram's rod or belt, a coupled wrist): check that drive, or approach every target the same way".into()
