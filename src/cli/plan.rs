@@ -51,6 +51,11 @@ pub struct PlanArgs {
     /// Where the tour starts, `q1,...,qn` (deg; default all zero).
     #[arg(long, allow_hyphen_values = true, value_delimiter = ',')]
     pub home_deg: Option<Vec<f64>>,
+    /// A payload at T (kg, more than 0, at most 5000) some poses carry,
+    /// with joint_compliance among the effects: the plan chooses which,
+    /// visits the unloaded ones first, and writes a payload_kg column.
+    #[arg(long, allow_hyphen_values = true)]
+    pub payload_kg: Option<f64>,
     /// Where to write the poses (targets.csv with a split column).
     #[arg(long)]
     pub out: PathBuf,
@@ -83,6 +88,7 @@ pub fn run(a: PlanArgs) -> Result<(), CliError> {
         seed: a.seed,
         noise_mm: a.noise_mm,
         home_deg: a.home_deg.clone(),
+        payload_kg: a.payload_kg,
     };
     let plan = plan::plan(&robot, &rig, &opts)?;
     let report_path = a
