@@ -228,3 +228,37 @@ fn a_bad_payload_is_refused_by_name() {
         assert!(e.contains("payload_kg") && e.contains(words), "{kg}: {e}");
     }
 }
+
+/// What ordering the tour for backlash gains over the shortest tour on
+/// planned poses (printed: per robot and seed, each joint's predicted
+/// dead-band sigma with the shortest tour and with the tour planned, and
+/// the travel's ratio):
+///
+///     cargo test --test engine plan_effects::backlash_tour_gain -- --ignored --nocapture
+#[test]
+#[ignore = "a measurement, not a check"]
+fn backlash_tour_gain() {
+    for name in ["er3a", "ur5", "arm4_mdh"] {
+        let (robot, rig, _) = simulate::preset(name).unwrap();
+        for seed in 1..=3 {
+            let mut opts = PlanOptions::new(30);
+            opts.seed = seed;
+            opts.effects = vec!["backlash".into()];
+            let p = plan::plan(&robot, &rig, &opts).unwrap();
+            let b = p.report.backlash.unwrap();
+            let joints: Vec<String> = b
+                .joints
+                .iter()
+                .map(|j| match (j.sigma_shortest_deg, j.sigma_deg) {
+                    (Some(s0), Some(s)) => format!("j{} {s0:.5}->{s:.5} ({:+.0}%)", j.joint, 100.0 * (s / s0 - 1.0)),
+                    (s0, s) => format!("j{} {s0:?}->{s:?}", j.joint),
+                })
+                .collect();
+            println!(
+                "{name} seed {seed}: travel {:.2}x; {}",
+                p.report.tour_travel_deg / b.shortest_travel_deg,
+                joints.join(", ")
+            );
+        }
+    }
+}
