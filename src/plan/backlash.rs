@@ -182,7 +182,13 @@ impl BacklashDesign {
         self.variances(order)
             .into_iter()
             .flatten()
-            .map(|v| if v.is_finite() && v > 0.0 { v.ln() } else { 700.0 })
+            .map(|v| {
+                if v.is_finite() && v > 0.0 {
+                    v.ln()
+                } else {
+                    700.0
+                }
+            })
             .sum()
     }
 }

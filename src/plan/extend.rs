@@ -15,8 +15,7 @@ use nalgebra::DMatrix;
 
 use super::{
     Candidate, Columns, Entries, Scene, Workspace, default_noise, design, design_pool, design_rows,
-    normal_matrix,
-    prior_size, tour,
+    normal_matrix, prior_size, tour,
 };
 use crate::error::Result;
 use crate::identify::{IdentifyOptions, geometric::candidates as free_candidates, identifiability};

@@ -452,7 +452,12 @@ fn with_payload_report(
             })
         })
         .collect();
-    let train: Vec<&PlannedPose> = made.plan.poses.iter().filter(|p| p.split == "train").collect();
+    let train: Vec<&PlannedPose> = made
+        .plan
+        .poses
+        .iter()
+        .filter(|p| p.split == "train")
+        .collect();
     let loaded = train.iter().filter(|p| p.payload_kg > Some(0.0)).count();
     let changes = made
         .plan
@@ -461,7 +466,12 @@ fn with_payload_report(
         .filter(|w| w[0].payload_kg != w[1].payload_kg)
         .count();
     let r = &mut made.plan.report;
-    r.notes.push(payload_note(payload_kg, loaded, train.len() - loaded, changes));
+    r.notes.push(payload_note(
+        payload_kg,
+        loaded,
+        train.len() - loaded,
+        changes,
+    ));
     r.payload = Some(PayloadPlan {
         payload_kg,
         loaded_poses: loaded,
@@ -475,8 +485,12 @@ fn with_payload_report(
 /// The payload plan in words.
 fn payload_note(payload_kg: f64, loaded: usize, unloaded: usize, changes: usize) -> String {
     match (loaded, unloaded) {
-        (0, _) => format!("no pose carries the {payload_kg} kg payload: the selection found it adds nothing the robot's own weight does not"),
-        (_, 0) => format!("every pose carries the {payload_kg} kg payload: mount it before the first pose"),
+        (0, _) => format!(
+            "no pose carries the {payload_kg} kg payload: the selection found it adds nothing the robot's own weight does not"
+        ),
+        (_, 0) => format!(
+            "every pose carries the {payload_kg} kg payload: mount it before the first pose"
+        ),
         _ => format!(
             "{unloaded} chosen poses without the payload, then {loaded} with the {payload_kg} kg payload at T: the payload changes {changes} time(s), where targets.csv's payload_kg does"
         ),
@@ -534,7 +548,16 @@ fn plan_inner(
     rng.shuffle(&mut rest);
     let home = home_pose(robot, opts);
     let visits = visits(&entries, &sel.chosen, &rest[..n_check]);
-    let toured = Toured::new(&scene, &design_pool, &pool, &visits, &home, &sel.chosen, opts, noise);
+    let toured = Toured::new(
+        &scene,
+        &design_pool,
+        &pool,
+        &visits,
+        &home,
+        &sel.chosen,
+        opts,
+        noise,
+    );
     let poses = toured.poses(&pool, &visits);
     let toured_q: Vec<&[f64]> = poses.iter().map(|p| p.q_deg.as_slice()).collect();
     let tour_travel_deg = tour::path_travel_deg(&home, &toured_q);
@@ -547,7 +570,8 @@ fn plan_inner(
         point_noise_rms_mm,
         &mut rng,
     );
-    let mut parameters = predicted_sigmas(&toured.covariance(&design_pool, &sel.chosen), &cols, &scene);
+    let mut parameters =
+        predicted_sigmas(&toured.covariance(&design_pool, &sel.chosen), &cols, &scene);
     let backlash = toured.report(robot.dof());
     parameters.extend(backlash_params(backlash.as_ref()));
     let compliance = compliance_sigmas(&cols, &parameters, robot.dof());
@@ -657,7 +681,12 @@ fn visits(entries: &Entries, chosen: &[usize], checks: &[usize]) -> Vec<VisitSpe
         .iter()
         .filter(|&&e| entries.payload[e].is_some_and(|p| p > 0.0))
         .count();
-    let payload = entries.payload.iter().flatten().cloned().fold(0.0, f64::max);
+    let payload = entries
+        .payload
+        .iter()
+        .flatten()
+        .cloned()
+        .fold(0.0, f64::max);
     let n_loaded = (checks.len() * loaded + chosen.len() / 2) / chosen.len().max(1);
     let planned = entries.payload.first().is_some_and(|p| p.is_some());
     chosen
@@ -687,7 +716,10 @@ fn visits(entries: &Entries, chosen: &[usize], checks: &[usize]) -> Vec<VisitSpe
 /// at its 30 deg/s on the ER3A's planned tour), so a fifth more travel
 /// costs about 3 % of it.
 pub const BACKLASH_TRAVEL_BOUND: f64 = 1.2;
-/// Orders costed by the backlash tour's local search, at most.
+/// Moves the backlash tour's local search tries, at most, for a tour of
+/// 40 poses or fewer (about ten passes over every move of a 40-pose
+/// tour); a longer tour gets proportionally fewer, each move costing in
+/// proportion to its length.
 const BACKLASH_SEARCH_BUDGET: usize = 20_000;
 
 /// The visiting order and, with backlash, its dead bands' design.
@@ -720,7 +752,10 @@ impl Toured {
         opts: &PlanOptions,
         noise: f64,
     ) -> Self {
-        let refs: Vec<&[f64]> = visits.iter().map(|v| pool[v.cand].q_deg.as_slice()).collect();
+        let refs: Vec<&[f64]> = visits
+            .iter()
+            .map(|v| pool[v.cand].q_deg.as_slice())
+            .collect();
         let group: Vec<usize> = visits
             .iter()
             .map(|v| usize::from(v.payload_kg.is_some_and(|p| p > 0.0)))
@@ -747,7 +782,7 @@ impl Toured {
                 shortest.clone(),
                 &group,
                 BACKLASH_TRAVEL_BOUND * shortest_travel_deg,
-                BACKLASH_SEARCH_BUDGET,
+                BACKLASH_SEARCH_BUDGET * 40 / refs.len().max(40),
                 &mut |o| b.cost(o),
             ),
             None => shortest.clone(),
@@ -872,9 +907,12 @@ fn backlash_design(
         .map(|v| {
             let c = &pool[v.cand];
             let fitted = v.entry.map(|e| {
-                scene
-                    .chain
-                    .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
+                scene.chain.point_jacobian(
+                    &scene.nominal.values,
+                    &c.q_rad,
+                    OutputFrame::Rig,
+                    &mut jac,
+                );
                 let dirs = reading_directions(scene, &c.t_rig);
                 let per_joint = (0..n)
                     .map(|j| {
@@ -1688,7 +1726,8 @@ mod tests {
         // balanced: each step back costs twice its size).
         let up = ups(&after);
         assert!(6 * up.min(n - up) >= n, "{up} of {n} up: {after:?}");
-        let refs = |o: &[usize]| -> Vec<&[f64]> { o.iter().map(|&k| poses[k].q_deg.as_slice()).collect() };
+        let refs =
+            |o: &[usize]| -> Vec<&[f64]> { o.iter().map(|&k| poses[k].q_deg.as_slice()).collect() };
         let travel = tour::path_travel_deg(&home, &refs(&toured.order));
         assert!(travel <= BACKLASH_TRAVEL_BOUND * toured.shortest_travel_deg + 1e-9);
         // And its predicted sigma falls.

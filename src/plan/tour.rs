@@ -81,7 +81,7 @@ pub fn order(home: &[f64], poses: &[&[f64]]) -> Vec<usize> {
 /// reversals and single poses moved elsewhere, each kept when it lowers the
 /// cost, keeps the travel within `max_travel_deg` and keeps every pose in
 /// its `group`'s stretch of the tour (the groups' sequence unchanged);
-/// repeated until no move helps or `budget` orders have been costed.
+/// repeated until no move helps or `budget` moves have been tried.
 pub fn improve(
     home: &[f64],
     poses: &[&[f64]],
@@ -116,11 +116,11 @@ pub fn improve(
                             c.insert(i, x);
                         }
                     }
+                    spent += 1;
                     let toured: Vec<&[f64]> = c.iter().map(|&k| poses[k]).collect();
                     if groups(&c) != shape || path_travel_deg(home, &toured) > max_travel_deg {
                         continue;
                     }
-                    spent += 1;
                     let v = cost(&c);
                     if v < best - 1e-9 * best.abs().max(1.0) {
                         best = v;

@@ -139,7 +139,11 @@ async fn a_plan_with_a_payload_carries_it_per_pose() {
         .map(|p| p["payload_kg"].as_f64().unwrap())
         .collect();
     assert!(loads.iter().all(|&p| p == 0.0 || p == 8.0), "{loads:?}");
-    assert_eq!(done["report"]["payload"]["payload_kg"], 8.0, "{}", done["report"]);
+    assert_eq!(
+        done["report"]["payload"]["payload_kg"], 8.0,
+        "{}",
+        done["report"]
+    );
     app.stop().await;
 }
 

@@ -1146,13 +1146,31 @@ fn plan_with_a_payload_and_simulate_carry_it() {
             .output()
             .unwrap()
     };
-    let out = plan(&["--effects", "joint_compliance,backlash", "--payload-kg", "8"]);
+    let out = plan(&[
+        "--effects",
+        "joint_compliance,backlash",
+        "--payload-kg",
+        "8",
+    ]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(text.contains("backlash 1-sigma (deg, half the dead band): j1 "), "{text}");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("backlash 1-sigma (deg, half the dead band): j1 "),
+        "{text}"
+    );
     assert!(text.contains("payload 8 kg on "), "{text}");
     let planned = std::fs::read_to_string(dir.join("planned.csv")).unwrap();
-    assert!(planned.lines().next().unwrap().ends_with(",payload_kg,split"));
+    assert!(
+        planned
+            .lines()
+            .next()
+            .unwrap()
+            .ends_with(",payload_kg,split")
+    );
     std::fs::write(dir.join("spec.json"), r#"{"robot": "er3a", "seed": 3}"#).unwrap();
     let out = bin()
         .arg("simulate")
@@ -1164,17 +1182,31 @@ fn plan_with_a_payload_and_simulate_carry_it() {
         .arg(dir.join("session"))
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let poses = std::fs::read_to_string(dir.join("session/poses.csv")).unwrap();
     let column = |csv: &str, name: &str| -> Vec<String> {
         let mut lines = csv.lines();
-        let k = lines.next().unwrap().split(',').position(|h| h == name).unwrap();
-        lines.map(|l| l.split(',').nth(k).unwrap().to_string()).collect()
+        let k = lines
+            .next()
+            .unwrap()
+            .split(',')
+            .position(|h| h == name)
+            .unwrap();
+        lines
+            .map(|l| l.split(',').nth(k).unwrap().to_string())
+            .collect()
     };
     assert_eq!(column(&poses, "payload_kg"), column(&planned, "payload_kg"));
     assert_eq!(column(&poses, "pose"), column(&planned, "target"));
     let out = plan(&["--payload-kg", "8"]);
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("payload_kg") && err.contains("joint_compliance"), "{err}");
+    assert!(
+        !out.status.success() && err.contains("payload_kg") && err.contains("joint_compliance"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -58,7 +58,12 @@ fn without_backlash_or_a_payload_a_plan_writes_the_same_targets() {
 }
 
 /// Record `plan`'s poses for the preset with `effects` as the truth.
-fn simulate_plan(p: &Plan, preset: &str, seed: u64, effects: serde_json::Value) -> simulate::Simulated {
+fn simulate_plan(
+    p: &Plan,
+    preset: &str,
+    seed: u64,
+    effects: serde_json::Value,
+) -> simulate::Simulated {
     let spec: Spec = serde_json::from_value(serde_json::json!({
         "robot": preset, "seed": seed, "effects": effects
     }))
@@ -136,7 +141,8 @@ fn the_predicted_dead_band_sigma_is_the_spread_of_identified_ones() {
     let truth_deg = 0.02;
     let fits: Vec<Vec<f64>> = (0..runs as u64)
         .map(|seed| {
-            let effects = serde_json::json!([{"effect": "backlash", "joint": 2, "magnitude": truth_deg}]);
+            let effects =
+                serde_json::json!([{"effect": "backlash", "joint": 2, "magnitude": truth_deg}]);
             fitted_dead_bands(&simulate_plan(&p, "er3a", 100 + seed, effects), &joints)
         })
         .collect();
@@ -145,7 +151,10 @@ fn the_predicted_dead_band_sigma_is_the_spread_of_identified_ones() {
         let v: Vec<f64> = fits.iter().map(|f| f[k]).collect();
         let mean = v.iter().sum::<f64>() / runs as f64;
         let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (runs - 1) as f64).sqrt();
-        println!("joint {}: predicted {predicted:.6} deg, spread {sd:.6} deg, mean {mean:.6} (truth {truth})", j + 1);
+        println!(
+            "joint {}: predicted {predicted:.6} deg, spread {sd:.6} deg, mean {mean:.6} (truth {truth})",
+            j + 1
+        );
         assert!(
             (0.7..1.3).contains(&(sd / predicted)),
             "joint {}: spread {sd} against predicted {predicted}",
@@ -176,11 +185,16 @@ fn a_payload_plan_determines_compliance_and_the_session_carries_it() {
     let pay = p.report.payload.as_ref().unwrap();
     assert!(pay.loaded_poses > 0 && pay.payload_changes <= 1, "{pay:?}");
     let loads: Vec<f64> = p.poses.iter().map(|q| q.payload_kg.unwrap()).collect();
-    assert!(loads.windows(2).all(|w| w[0] <= w[1]), "unloaded first: {loads:?}");
+    assert!(
+        loads.windows(2).all(|w| w[0] <= w[1]),
+        "unloaded first: {loads:?}"
+    );
     let csv = p.targets_csv();
     assert!(csv.starts_with("target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,payload_kg,split\n"));
     assert_eq!(
-        drawcal::model::target_payloads(csv.as_bytes()).unwrap().unwrap(),
+        drawcal::model::target_payloads(csv.as_bytes())
+            .unwrap()
+            .unwrap(),
         loads
     );
     let j2 = pay.compliance.iter().find(|c| c.joint == 2).unwrap();
@@ -189,10 +203,22 @@ fn a_payload_plan_determines_compliance_and_the_session_carries_it() {
 
     // Simulated with a compliance of joint 2, each pose with its payload.
     let truth_deg = 2e-4; // deg/(N·m)
-    let effects = serde_json::json!([{"effect": "joint_compliance", "joint": 2, "magnitude": truth_deg}]);
+    let effects =
+        serde_json::json!([{"effect": "joint_compliance", "joint": 2, "magnitude": truth_deg}]);
     let sim = simulate_plan(&p, "er3a", 7, effects);
-    assert!(sim.poses_csv.lines().next().unwrap().ends_with(",payload_kg,split"));
-    let recorded: Vec<f64> = sim.dataset.poses.iter().map(|q| q.payload_kg.unwrap()).collect();
+    assert!(
+        sim.poses_csv
+            .lines()
+            .next()
+            .unwrap()
+            .ends_with(",payload_kg,split")
+    );
+    let recorded: Vec<f64> = sim
+        .dataset
+        .poses
+        .iter()
+        .map(|q| q.payload_kg.unwrap())
+        .collect();
     assert_eq!(recorded, loads);
     let (a, _) = crate::common::analyse_blind(&sim.robot, &sim.rig, &sim.dataset);
     let f = a
@@ -200,7 +226,10 @@ fn a_payload_plan_determines_compliance_and_the_session_carries_it() {
         .iter()
         .find(|f| f.effect == "joint_compliance" && f.joint == Some(2))
         .unwrap_or_else(|| panic!("{:#?}", a.findings));
-    println!("identified {} ± {} {} (truth {truth_deg}, predicted sigma {})", f.magnitude, f.sigma, f.unit, j2.sigma_with_payload);
+    println!(
+        "identified {} ± {} {} (truth {truth_deg}, predicted sigma {})",
+        f.magnitude, f.sigma, f.unit, j2.sigma_with_payload
+    );
     assert!(
         (f.magnitude - truth_deg).abs() < 3.0 * j2.sigma_with_payload,
         "{} against {truth_deg}, predicted sigma {}",
@@ -250,7 +279,11 @@ fn backlash_tour_gain() {
                 .joints
                 .iter()
                 .map(|j| match (j.sigma_shortest_deg, j.sigma_deg) {
-                    (Some(s0), Some(s)) => format!("j{} {s0:.5}->{s:.5} ({:+.0}%)", j.joint, 100.0 * (s / s0 - 1.0)),
+                    (Some(s0), Some(s)) => format!(
+                        "j{} {s0:.5}->{s:.5} ({:+.0}%)",
+                        j.joint,
+                        100.0 * (s / s0 - 1.0)
+                    ),
                     (s0, s) => format!("j{} {s0:?}->{s:?}", j.joint),
                 })
                 .collect();

@@ -149,7 +149,11 @@ pub(super) fn given_payloads(
     for (r, p) in given.iter().enumerate() {
         let kg = p.payload_kg.unwrap_or(0.0);
         if !(kg.is_finite() && (0.0..=5000.0).contains(&kg)) {
-            return Err(Error::cell(r + 1, "payload_kg", format!("{kg}: a payload from 0 to 5000 kg")));
+            return Err(Error::cell(
+                r + 1,
+                "payload_kg",
+                format!("{kg}: a payload from 0 to 5000 kg"),
+            ));
         }
         tour.payload[r] = Some(kg);
     }
