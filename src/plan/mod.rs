@@ -982,10 +982,9 @@ fn compliance_sigmas(
         // readings notice it (a wrist joint whose turn does not move T) is
         // one they do not see.
         let prior = cols.effect_scale[first + c];
-        if let Some(p) = params.iter().find(|p| p.name == wanted) {
-            if p.sigma > 0.0 && p.sigma < prior && prior < 1.0 {
-                out.push((*joint_index, p.sigma.to_degrees(), unit));
-            }
+        let seen = |p: &&PredictedParam| p.sigma > 0.0 && p.sigma < prior && prior < 1.0;
+        if let Some(p) = params.iter().find(|p| p.name == wanted).filter(seen) {
+            out.push((*joint_index, p.sigma.to_degrees(), unit));
         }
     }
     out

@@ -25,7 +25,16 @@ fn files(dir: &str) -> (Robot, Rig) {
 /// are written again byte for byte.
 #[test]
 fn without_backlash_or_a_payload_a_plan_writes_the_same_targets() {
-    let cases: [(&str, usize, usize, u64, &[&str], &str); 3] = [
+    // (dataset, N, candidates, seed, effects, file)
+    type Case = (
+        &'static str,
+        usize,
+        usize,
+        u64,
+        &'static [&'static str],
+        &'static str,
+    );
+    let cases: [Case; 3] = [
         ("er3a_paper_like", 30, 10_000, 1, &[], "er3a_n30_seed1.csv"),
         (
             "er3a_paper_like",
