@@ -595,9 +595,12 @@ fn plan_inner(
         n_poses: opts.n_poses,
         n_check,
         criterion: format!(
-            "I-optimal: the {} poses minimising the mean squared error of the calibrated model's T at {PREDICTION_POSES} random valid poses (linear least squares, {noise} mm per reading), chosen greedily from {} candidates then improved by exchanges",
+            "I-optimal: the {} poses minimising the mean squared error of the calibrated model's T at {PREDICTION_POSES} random valid poses (linear least squares, {noise} mm per reading), chosen greedily from {} candidates{} then improved by exchanges",
             opts.n_poses,
-            entries.len()
+            pool.len(),
+            opts.payload_kg
+                .map(|p| format!(", each without and with the {p} kg payload,"))
+                .unwrap_or_default()
         ),
         noise_mm: noise,
         candidates_drawn: drawn,
