@@ -51,6 +51,11 @@ pub struct PlanArgs {
     /// Where the tour starts, `q1,...,qn` (deg; default all zero).
     #[arg(long, allow_hyphen_values = true, value_delimiter = ',')]
     pub home_deg: Option<Vec<f64>>,
+    /// A payload at T (kg, more than 0, at most 5000) some poses carry,
+    /// with joint_compliance among the effects: the plan chooses which,
+    /// visits the unloaded ones first, and writes a payload_kg column.
+    #[arg(long, allow_hyphen_values = true)]
+    pub payload_kg: Option<f64>,
     /// Where to write the poses (targets.csv with a split column).
     #[arg(long)]
     pub out: PathBuf,
@@ -83,6 +88,7 @@ pub fn run(a: PlanArgs) -> Result<(), CliError> {
         seed: a.seed,
         noise_mm: a.noise_mm,
         home_deg: a.home_deg.clone(),
+        payload_kg: a.payload_kg,
     };
     let plan = plan::plan(&robot, &rig, &opts)?;
     let report_path = a
@@ -161,8 +167,61 @@ pub fn summary(r: &plan::PlanReport) -> String {
             .collect();
         s += &format!("no poses on this rig can determine: {}\n", names.join("; "));
     }
+    s += &backlash_summary(r);
+    s += &payload_summary(r);
     for n in &r.notes {
         s += &format!("note: {n}\n");
     }
     s
+}
+
+/// The dead bands' predicted 1-sigma, with the shortest tour's beside.
+fn backlash_summary(r: &plan::PlanReport) -> String {
+    let Some(b) = &r.backlash else {
+        return String::new();
+    };
+    let fmt = |v: Option<f64>| v.map_or("not determined".into(), |v| format!("{v:.4}"));
+    let joints: Vec<String> = b
+        .joints
+        .iter()
+        .map(|j| {
+            format!(
+                "j{} {} (shortest tour {})",
+                j.joint,
+                fmt(j.sigma_deg),
+                fmt(j.sigma_shortest_deg)
+            )
+        })
+        .collect();
+    format!(
+        "backlash 1-sigma (deg, half the dead band): {}; tour {:.0} deg, shortest {:.0} deg\n",
+        joints.join(", "),
+        r.tour_travel_deg,
+        b.shortest_travel_deg
+    )
+}
+
+/// Which poses carry the payload, and the compliance with and without it.
+fn payload_summary(r: &plan::PlanReport) -> String {
+    let Some(p) = &r.payload else {
+        return String::new();
+    };
+    let joints: Vec<String> = p
+        .compliance
+        .iter()
+        .map(|c| {
+            format!(
+                "j{} {:.3e} / {:.3e} {}",
+                c.joint, c.sigma_with_payload, c.sigma_without_payload, c.unit
+            )
+        })
+        .collect();
+    format!(
+        "payload {} kg on {} of {} poses ({} change(s)); compliance 1-sigma with / without it: {}\n",
+        p.payload_kg,
+        p.loaded_poses,
+        p.loaded_poses + p.unloaded_poses,
+        p.payload_changes,
+        joints.join(", ")
+    )
 }

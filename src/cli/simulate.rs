@@ -17,8 +17,9 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Record these joint targets, in this order (a plan's targets.csv:
-    /// `target,q1_deg..qn_deg[,split]`), instead of drawing the spec's
-    /// `n_poses`; their ids and split go into poses.csv.
+    /// `target,q1_deg..qn_deg[,payload_kg][,split]`), instead of drawing
+    /// the spec's `n_poses`; their ids, payload and split go into
+    /// poses.csv, and each pose is simulated carrying its payload.
     #[arg(long)]
     pub targets: Option<PathBuf>,
 }
@@ -62,6 +63,7 @@ pub fn run(args: SimulateArgs) -> Result<(), CliError> {
         let text = read(path)?;
         let targets = core(path, crate::model::targets_from_csv(text.as_bytes(), dof))?;
         let split = core(path, crate::model::target_splits(text.as_bytes()))?;
+        let payload = core(path, crate::model::target_payloads(text.as_bytes()))?;
         let mut given = Vec::with_capacity(targets.len());
         for (r, t) in targets.into_iter().enumerate() {
             let crate::model::TargetKind::Joints { q_deg } = t.kind else {
@@ -75,6 +77,7 @@ pub fn run(args: SimulateArgs) -> Result<(), CliError> {
                 id: t.target,
                 q_deg,
                 test: split.as_ref().map(|s| s[r]),
+                payload_kg: payload.as_ref().map(|p| p[r]),
             });
         }
         files.poses = Some(given);

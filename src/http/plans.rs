@@ -116,6 +116,12 @@ pub struct CreatePlan {
     /// Where the tour starts, one angle per joint (deg; default all zero).
     #[serde(default)]
     pub home_deg: Option<Vec<f64>>,
+    /// A payload at T (kg) some poses carry, with `joint_compliance` among
+    /// the effects: the plan chooses which poses carry it and visits the
+    /// unloaded ones first; targets.csv gains a `payload_kg` column.
+    #[serde(default)]
+    #[schema(exclusive_minimum = 0.0, maximum = 5000.0)]
+    pub payload_kg: Option<f64>,
 }
 
 impl CreatePlan {
@@ -151,6 +157,7 @@ impl CreatePlan {
             seed: self.seed.unwrap_or(d.seed),
             noise_mm: self.noise_mm,
             home_deg: self.home_deg.clone(),
+            payload_kg: self.payload_kg,
         }
     }
 }
@@ -182,6 +189,9 @@ pub struct PlanPose {
     pub q_deg: Vec<f64>,
     /// `train` (chosen for the identification) or `test` (a check pose).
     pub split: String,
+    /// Payload at T (kg) when the plan plans one: 0 or the payload.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub payload_kg: Option<f64>,
 }
 
 /// A plan: its request, its state and, once it succeeded, the plan as
@@ -223,7 +233,8 @@ pub struct PlanOut {
     /// what no pose can determine).
     #[schema(value_type = Option<Object>)]
     pub report: Option<serde_json::Value>,
-    /// targets.csv (once succeeded): `target,q1_deg..qn_deg,split`, as
+    /// targets.csv (once succeeded): `target,q1_deg..qn_deg,split` (with
+    /// `payload_kg` before `split` when a payload is planned), as
     /// `GET /plans/{id}/targets.csv` gives it.
     pub targets_csv: Option<String>,
 }
@@ -254,6 +265,7 @@ fn answer(rec: PlanRec) -> ApiResult<PlanOut> {
                     id: q.id,
                     q_deg: q.q_deg,
                     split: q.split,
+                    payload_kg: q.payload_kg,
                 })
                 .collect();
             (Some(poses), Some(report), Some(csv))

@@ -14,7 +14,7 @@ pub use compensated::{Compensated, CompensationStatus};
 pub use dataset::{Dataset, Measurement, PoseRecord, Split};
 pub use rig::{BasePose, Rig, SensorSpec};
 pub use robot::{Convention, JointSpec, LinkMass, Robot};
-pub use targets::{Target, TargetKind, target_splits, targets_from_csv};
+pub use targets::{Target, TargetKind, target_payloads, target_splits, targets_from_csv};
 
 use crate::error::{Error, Result};
 

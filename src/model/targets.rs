@@ -61,6 +61,31 @@ pub fn joint_targets_csv<'a>(
     out
 }
 
+/// targets.csv of joint targets with a payload per row:
+/// `target,q1_deg..qn_deg,payload_kg,split` (both last columns are
+/// drawcal's additions, written by `drawcal plan --payload-kg`: `drawcal
+/// simulate --targets` carries them into poses.csv; compensation ignores
+/// them).
+pub fn joint_targets_payload_csv<'a>(
+    rows: impl IntoIterator<Item = (&'a str, &'a [f64], f64, &'a str)>,
+) -> String {
+    let mut rows = rows.into_iter().peekable();
+    let n = rows.peek().map_or(0, |r| r.1.len());
+    let mut out = String::from("target");
+    for j in 1..=n {
+        out.push_str(&format!(",q{j}_deg"));
+    }
+    out.push_str(",payload_kg,split\n");
+    for (id, q_deg, payload_kg, split) in rows {
+        out.push_str(id);
+        for v in q_deg {
+            out.push_str(&format!(",{v:.4}"));
+        }
+        out.push_str(&format!(",{payload_kg},{split}\n"));
+    }
+    out
+}
+
 /// Parse targets.csv for a robot with `dof` joints.
 pub fn targets_from_csv<R: Read>(input: R, dof: usize) -> Result<Vec<Target>> {
     let (mut rdr, headers) = super::csv_with_header(input)?;
@@ -162,6 +187,30 @@ pub fn target_splits<R: Read>(input: R) -> Result<Option<Vec<bool>>> {
                 ));
             }
         });
+    }
+    Ok(Some(out))
+}
+
+/// The optional `payload_kg` column of a targets.csv (drawcal's addition,
+/// as written by `drawcal plan --payload-kg`): per row the payload at T
+/// (kg, 0 to 5000); `None` when the file has no such column.
+pub fn target_payloads<R: Read>(input: R) -> Result<Option<Vec<f64>>> {
+    let (mut rdr, headers) = super::csv_with_header(input)?;
+    let Some(col) = headers.iter().position(|h| h == "payload_kg") else {
+        return Ok(None);
+    };
+    let mut out = Vec::new();
+    for (r, rec) in rdr.records().enumerate() {
+        let rec = super::csv_record(r + 1, rec, &headers)?;
+        let v: f64 = super::parse_cell(r + 1, "payload_kg", rec.get(col).unwrap_or(""))?;
+        if !(0.0..=5000.0).contains(&v) {
+            return Err(Error::cell(
+                r + 1,
+                "payload_kg",
+                format!("{v}: a payload from 0 to 5000 kg"),
+            ));
+        }
+        out.push(v);
     }
     Ok(Some(out))
 }

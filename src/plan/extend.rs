@@ -14,8 +14,8 @@
 use nalgebra::DMatrix;
 
 use super::{
-    Candidate, Columns, Scene, Workspace, default_noise, design, design_pool, normal_matrix,
-    prior_size, tour,
+    Candidate, Columns, Entries, Scene, Workspace, default_noise, design, design_pool, design_rows,
+    normal_matrix, prior_size, tour,
 };
 use crate::error::Result;
 use crate::identify::{IdentifyOptions, geometric::candidates as free_candidates, identifiability};
@@ -81,8 +81,10 @@ pub fn extend(
         }));
     }
     let l = scene.chain.layout;
-    let mut design = design_pool(&scene, &cols, &pool, &pool, noise);
-    let recorded_rows = design_pool(&scene, &cols, &recorded, &pool, noise).rows;
+    let unloaded = Entries::new(pool.len(), None);
+    let mut design = design_pool(&scene, &cols, &pool, &unloaded, &pool, noise);
+    let recorded: Vec<(&Candidate, Option<f64>)> = recorded.iter().map(|c| (c, None)).collect();
+    let recorded_rows = design_rows(&scene, &cols, &recorded, noise);
     let p = design.p;
     design.w = DMatrix::from_fn(p, p, |a, b| {
         if a == b && targets.contains(&a) {

@@ -34,6 +34,7 @@ use crate::physics::effects::{Basis, Context, PoseInput, approach_directions};
 use crate::report::FixedParam;
 use crate::rng::Rng;
 
+mod backlash;
 pub mod candidates;
 pub mod design;
 pub mod extend;
@@ -41,6 +42,8 @@ pub mod tour;
 
 pub use candidates::{Candidate, KeepOut, Rejection, Scene, Workspace};
 pub use extend::extend;
+
+use backlash::BacklashDesign;
 
 /// The report's format tag.
 pub const PLAN_FORMAT: &str = "drawcal plan v1";
@@ -85,7 +88,15 @@ pub struct PlanOptions {
     /// limits.
     #[serde(default)]
     pub home_deg: Option<Vec<f64>>,
+    /// A payload (kg at T) the poses may carry, with `joint_compliance`
+    /// among the effects: the selection chooses which poses carry it, and
+    /// the tour visits the unloaded ones first, so that it is mounted once.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub payload_kg: Option<f64>,
 }
+
+/// Heaviest payload a plan takes (kg), as `/compensate` does.
+pub const MAX_PAYLOAD_KG: f64 = 5000.0;
 
 fn default_candidates() -> usize {
     10_000
@@ -106,6 +117,7 @@ impl PlanOptions {
             seed: default_seed(),
             noise_mm: None,
             home_deg: None,
+            payload_kg: None,
         }
     }
 }
@@ -119,6 +131,9 @@ pub struct PlannedPose {
     pub q_deg: Vec<f64>,
     /// `train` (chosen for the identification) or `test` (a check pose).
     pub split: String,
+    /// Payload at T (kg) when the plan plans one: 0 or the payload.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub payload_kg: Option<f64>,
 }
 
 /// A parameter's predicted uncertainty.
@@ -199,6 +214,75 @@ pub struct PlanReport {
     pub exchanges: usize,
     /// What the user should know.
     pub notes: Vec<String>,
+    /// The dead bands, when backlash is planned for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backlash: Option<BacklashTour>,
+    /// The payload's plan, when one is planned.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub payload: Option<PayloadPlan>,
+}
+
+/// A joint's dead band as the plan predicts it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BacklashSigma {
+    /// Joint (1-based).
+    pub joint: usize,
+    /// Predicted 1-sigma of half the dead band (deg) with the tour
+    /// planned; `None` when it is not determined: the joint's angle does
+    /// not move the readings, or every pose is approached from one side
+    /// (the dead band is then a joint offset).
+    pub sigma_deg: Option<f64>,
+    /// The same with the shortest tour.
+    pub sigma_shortest_deg: Option<f64>,
+    /// Correlation over the train poses of the joint's approach direction
+    /// with its angle (near ±1 the dead band looks like an error growing
+    /// with the angle).
+    pub direction_angle_correlation: f64,
+}
+
+/// The tour ordered for backlash.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BacklashTour {
+    /// The travel allowed, as a multiple of the shortest tour's.
+    pub travel_bound: f64,
+    /// The shortest tour's travel (deg).
+    pub shortest_travel_deg: f64,
+    /// Per joint.
+    pub joints: Vec<BacklashSigma>,
+}
+
+/// A joint's compliance with and without the payload.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ComplianceSigma {
+    /// Joint (1-based).
+    pub joint: usize,
+    /// Predicted 1-sigma with this plan (the payload carried where it
+    /// chose).
+    pub sigma_with_payload: f64,
+    /// Predicted 1-sigma of the plan the same options make without a
+    /// payload.
+    pub sigma_without_payload: f64,
+    /// `deg/(N·m)` with link masses; without them the coefficient of a
+    /// unit mass at T, `deg/m`.
+    pub unit: String,
+}
+
+/// Which poses carry the payload.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PayloadPlan {
+    /// The payload (kg at T).
+    pub payload_kg: f64,
+    /// Chosen poses carrying it.
+    pub loaded_poses: usize,
+    /// Chosen poses without it.
+    pub unloaded_poses: usize,
+    /// Times the payload is mounted or taken off during the tour (the
+    /// unloaded poses first: once when both groups have poses; none when
+    /// the selection put every pose in one group, which is then carried
+    /// from the start).
+    pub payload_changes: usize,
+    /// Per joint: the compliance's 1-sigma with and without the payload.
+    pub compliance: Vec<ComplianceSigma>,
 }
 
 /// A plan: the poses in visiting order and the report.
@@ -211,10 +295,21 @@ pub struct Plan {
 }
 
 impl Plan {
-    /// targets.csv of the plan: `target,q1_deg..qn_deg,split` (the split
-    /// column is drawcal's addition: `drawcal simulate --targets` and the
-    /// recording's poses.csv carry it over).
+    /// targets.csv of the plan: `target,q1_deg..qn_deg[,payload_kg],split`
+    /// (the payload and split columns are drawcal's additions: `drawcal
+    /// simulate --targets` and the recording's poses.csv carry them over;
+    /// the payload column only when the plan plans one).
     pub fn targets_csv(&self) -> String {
+        if self.poses.iter().any(|p| p.payload_kg.is_some()) {
+            return crate::model::targets::joint_targets_payload_csv(self.poses.iter().map(|p| {
+                (
+                    p.id.as_str(),
+                    p.q_deg.as_slice(),
+                    p.payload_kg.unwrap_or(0.0),
+                    p.split.as_str(),
+                )
+            }));
+        }
         crate::model::targets::joint_targets_csv(
             self.poses
                 .iter()
@@ -291,7 +386,8 @@ pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
 
 /// [`plan`] with the selection made as `tuning` says.
 pub fn plan_tuned(robot: &Robot, rig: &Rig, opts: &PlanOptions, tuning: &Tuning) -> Result<Plan> {
-    plan_inner(robot, rig, opts, tuning, false).map(|(p, _)| p)
+    let made = plan_inner(robot, rig, opts, tuning, false)?;
+    Ok(with_payload_report(robot, rig, opts, tuning, made)?.plan)
 }
 
 /// How well any `n_poses` of a plan's candidates could do, in the plan's
@@ -315,8 +411,98 @@ pub fn plan_with_bound(
     opts: &PlanOptions,
     tuning: &Tuning,
 ) -> Result<(Plan, DesignBound)> {
-    let (p, b) = plan_inner(robot, rig, opts, tuning, true)?;
-    Ok((p, b.expect("asked for")))
+    let made = plan_inner(robot, rig, opts, tuning, true)?;
+    let made = with_payload_report(robot, rig, opts, tuning, made)?;
+    Ok((made.plan, made.bound.expect("asked for")))
+}
+
+/// With a payload planned, the report's [`PayloadPlan`]: the loaded and
+/// unloaded poses and the compliance with and without the payload (from
+/// the plan the same options make without it).
+fn with_payload_report(
+    robot: &Robot,
+    rig: &Rig,
+    opts: &PlanOptions,
+    tuning: &Tuning,
+    mut made: Made,
+) -> Result<Made> {
+    let Some(payload_kg) = opts.payload_kg else {
+        return Ok(made);
+    };
+    let without = plan_inner(
+        robot,
+        rig,
+        &PlanOptions {
+            payload_kg: None,
+            ..opts.clone()
+        },
+        tuning,
+        false,
+    )?;
+    let compliance = made
+        .compliance
+        .iter()
+        .filter_map(|&(j, with, unit)| {
+            let &(_, w, _) = without.compliance.iter().find(|c| c.0 == j)?;
+            Some(ComplianceSigma {
+                joint: j + 1,
+                sigma_with_payload: with,
+                sigma_without_payload: w,
+                unit: unit.into(),
+            })
+        })
+        .collect();
+    let train: Vec<&PlannedPose> = made
+        .plan
+        .poses
+        .iter()
+        .filter(|p| p.split == "train")
+        .collect();
+    let loaded = train.iter().filter(|p| p.payload_kg > Some(0.0)).count();
+    let changes = made
+        .plan
+        .poses
+        .windows(2)
+        .filter(|w| w[0].payload_kg != w[1].payload_kg)
+        .count();
+    let r = &mut made.plan.report;
+    r.notes.push(payload_note(
+        payload_kg,
+        loaded,
+        train.len() - loaded,
+        changes,
+    ));
+    r.payload = Some(PayloadPlan {
+        payload_kg,
+        loaded_poses: loaded,
+        unloaded_poses: train.len() - loaded,
+        payload_changes: changes,
+        compliance,
+    });
+    Ok(made)
+}
+
+/// The payload plan in words.
+fn payload_note(payload_kg: f64, loaded: usize, unloaded: usize, changes: usize) -> String {
+    match (loaded, unloaded) {
+        (0, _) => format!(
+            "no pose carries the {payload_kg} kg payload: the selection found it adds nothing the robot's own weight does not"
+        ),
+        (_, 0) => format!(
+            "every pose carries the {payload_kg} kg payload: mount it before the first pose"
+        ),
+        _ => format!(
+            "{unloaded} chosen poses without the payload, then {loaded} with the {payload_kg} kg payload at T: the payload changes {changes} time(s), where targets.csv's payload_kg does"
+        ),
+    }
+}
+
+/// What [`plan_inner`] makes: the plan, the bound when asked, and each
+/// joint's compliance 1-sigma (deg per the coefficient's unit, the unit).
+struct Made {
+    plan: Plan,
+    bound: Option<DesignBound>,
+    compliance: Vec<(usize, f64, &'static str)>,
 }
 
 fn plan_inner(
@@ -325,7 +511,7 @@ fn plan_inner(
     opts: &PlanOptions,
     tuning: &Tuning,
     with_bound: bool,
-) -> Result<(Plan, Option<DesignBound>)> {
+) -> Result<Made> {
     check_options(robot, opts)?;
     let scene = Scene::new(robot, rig, &opts.workspace)?;
     let noise = opts.noise_mm.unwrap_or_else(|| default_noise(rig));
@@ -342,9 +528,10 @@ fn plan_inner(
         )));
     }
     let validation: Vec<Candidate> = pool.split_off(pool.len() - PREDICTION_POSES);
-    let cols = columns(&scene, &pool, opts, noise)?;
-    let design_pool = design_pool(&scene, &cols, &pool, &validation, noise);
-    let n_greedy = (2 * opts.n_poses).min(pool.len() - n_check);
+    let entries = Entries::new(pool.len(), opts.payload_kg);
+    let cols = columns(&scene, &pool, &entries, opts, noise)?;
+    let design_pool = design_pool(&scene, &cols, &pool, &entries, &validation, noise);
+    let n_greedy = (2 * opts.n_poses).min(entries.len() - n_check);
     let sel = design::select_by(
         &design_pool,
         opts.n_poses,
@@ -354,14 +541,26 @@ fn plan_inner(
     );
 
     // Check poses: random valid poses not chosen.
+    let chosen_poses: Vec<usize> = sel.chosen.iter().map(|&e| entries.cand[e]).collect();
     let mut rest: Vec<usize> = (0..pool.len())
-        .filter(|i| !sel.chosen.contains(i))
+        .filter(|i| !chosen_poses.contains(i))
         .collect();
     rng.shuffle(&mut rest);
     let home = home_pose(robot, opts);
-    let poses = visiting_order(&pool, &sel.chosen, &rest[..n_check], &home);
-    let toured: Vec<&[f64]> = poses.iter().map(|p| p.q_deg.as_slice()).collect();
-    let tour_travel_deg = tour::path_travel_deg(&home, &toured);
+    let visits = visits(&entries, &sel.chosen, &rest[..n_check]);
+    let toured = Toured::new(
+        &scene,
+        &design_pool,
+        &pool,
+        &visits,
+        &home,
+        &sel.chosen,
+        opts,
+        noise,
+    );
+    let poses = toured.poses(&pool, &visits);
+    let toured_q: Vec<&[f64]> = poses.iter().map(|p| p.q_deg.as_slice()).collect();
+    let tour_travel_deg = tour::path_travel_deg(&home, &toured_q);
 
     let point_noise_rms_mm = point_noise_rms(&scene, &validation, noise);
     let (predicted, random, by_n) = predictions(
@@ -371,7 +570,11 @@ fn plan_inner(
         point_noise_rms_mm,
         &mut rng,
     );
-    let parameters = predicted_sigmas(&design_pool, &cols, &sel.chosen, &scene);
+    let mut parameters =
+        predicted_sigmas(&toured.covariance(&design_pool, &sel.chosen), &cols, &scene);
+    let backlash = toured.report(robot.dof());
+    parameters.extend(backlash_params(backlash.as_ref()));
+    let compliance = compliance_sigmas(&cols, &parameters, robot.dof());
     let bound = with_bound.then(|| {
         let (phi, lower) = design::continuous_bound(&design_pool, 300);
         let n = opts.n_poses as f64;
@@ -381,20 +584,23 @@ fn plan_inner(
         }
     });
     let approach = if opts.effects.iter().any(|e| e == "backlash") {
-        approach_balance(&toured, &home)
+        approach_balance(&toured_q, &home)
     } else {
         vec![]
     };
-    let notes = notes(opts, &approach);
+    let notes = notes(opts, &approach, backlash.as_ref());
     let report = PlanReport {
         format: PLAN_FORMAT.into(),
         robot: robot.name.clone(),
         n_poses: opts.n_poses,
         n_check,
         criterion: format!(
-            "I-optimal: the {} poses minimising the mean squared error of the calibrated model's T at {PREDICTION_POSES} random valid poses (linear least squares, {noise} mm per reading), chosen greedily from {} candidates then improved by exchanges",
+            "I-optimal: the {} poses minimising the mean squared error of the calibrated model's T at {PREDICTION_POSES} random valid poses (linear least squares, {noise} mm per reading), chosen greedily from {} candidates{} then improved by exchanges",
             opts.n_poses,
-            pool.len()
+            pool.len(),
+            opts.payload_kg
+                .map(|p| format!(", each without and with the {p} kg payload,"))
+                .unwrap_or_default()
         ),
         noise_mm: noise,
         candidates_drawn: drawn,
@@ -411,43 +617,380 @@ fn plan_inner(
         tour_travel_deg,
         exchanges: sel.swaps,
         notes,
+        backlash,
+        payload: None,
     };
-    Ok((Plan { poses, report }, bound))
+    Ok(Made {
+        plan: Plan { poses, report },
+        bound,
+        compliance,
+    })
 }
 
-/// The chosen poses (`p01`...) and the check poses (`c01`..., split
-/// `test`) in the tour's order from `home`.
-fn visiting_order(
-    pool: &[Candidate],
-    chosen: &[usize],
-    checks: &[usize],
-    home: &[f64],
-) -> Vec<PlannedPose> {
-    let all: Vec<(usize, bool)> = chosen
+/// The rows the selection chooses from: every candidate unloaded and,
+/// when a payload is planned, every candidate again carrying it.
+struct Entries {
+    /// The candidate of each entry.
+    cand: Vec<usize>,
+    /// Its payload: `None` when no payload is planned, else 0 or the
+    /// payload (kg).
+    payload: Vec<Option<f64>>,
+}
+
+impl Entries {
+    fn new(n: usize, payload_kg: Option<f64>) -> Self {
+        match payload_kg {
+            None => Entries {
+                cand: (0..n).collect(),
+                payload: vec![None; n],
+            },
+            Some(p) => Entries {
+                cand: (0..n).chain(0..n).collect(),
+                payload: (0..2 * n)
+                    .map(|i| Some(if i < n { 0.0 } else { p }))
+                    .collect(),
+            },
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.cand.len()
+    }
+
+    /// Each entry's candidate with its payload.
+    fn of<'a>(&self, pool: &'a [Candidate]) -> Vec<(&'a Candidate, Option<f64>)> {
+        self.cand
+            .iter()
+            .zip(&self.payload)
+            .map(|(&c, &p)| (&pool[c], p))
+            .collect()
+    }
+}
+
+/// One pose to record, before the tour orders them.
+struct VisitSpec {
+    /// Candidate.
+    cand: usize,
+    /// The design entry of a chosen pose; `None` for a check pose.
+    entry: Option<usize>,
+    /// Payload (kg), when payloads are planned.
+    payload_kg: Option<f64>,
+}
+
+/// The chosen poses, then the check poses, these sharing the payload
+/// groups in the chosen poses' proportion (the last of them loaded).
+fn visits(entries: &Entries, chosen: &[usize], checks: &[usize]) -> Vec<VisitSpec> {
+    let loaded = chosen
         .iter()
-        .map(|&i| (i, false))
-        .chain(checks.iter().map(|&i| (i, true)))
-        .collect();
-    let refs: Vec<&[f64]> = all.iter().map(|&(i, _)| pool[i].q_deg.as_slice()).collect();
-    let (mut n_train, mut n_test) = (0, 0);
-    tour::order(home, &refs)
-        .into_iter()
-        .map(|k| {
-            let (i, check) = all[k];
-            let id = if check {
-                n_test += 1;
-                format!("c{n_test:02}")
-            } else {
-                n_train += 1;
-                format!("p{n_train:02}")
-            };
-            PlannedPose {
-                id,
-                q_deg: pool[i].q_deg.clone(),
-                split: if check { "test" } else { "train" }.into(),
+        .filter(|&&e| entries.payload[e].is_some_and(|p| p > 0.0))
+        .count();
+    let payload = entries
+        .payload
+        .iter()
+        .flatten()
+        .cloned()
+        .fold(0.0, f64::max);
+    let n_loaded = (checks.len() * loaded + chosen.len() / 2) / chosen.len().max(1);
+    let planned = entries.payload.first().is_some_and(|p| p.is_some());
+    chosen
+        .iter()
+        .map(|&e| VisitSpec {
+            cand: entries.cand[e],
+            entry: Some(e),
+            payload_kg: entries.payload[e],
+        })
+        .chain(checks.iter().enumerate().map(|(k, &c)| VisitSpec {
+            cand: c,
+            entry: None,
+            payload_kg: planned.then(|| {
+                if k + n_loaded >= checks.len() {
+                    payload
+                } else {
+                    0.0
+                }
+            }),
+        }))
+        .collect()
+}
+
+/// Travel a tour ordered for backlash may take, over the shortest tour's:
+/// a session's time is mostly the dwell at each pose (settling and
+/// measuring, 20 s in the simulator's session against about 4 s of moving
+/// at its 30 deg/s on the ER3A's planned tour), so a fifth more travel
+/// costs about 3 % of it.
+pub const BACKLASH_TRAVEL_BOUND: f64 = 1.2;
+/// Moves the backlash tour's local search tries, at most, for a tour of
+/// 40 poses or fewer (about ten passes over every move of a 40-pose
+/// tour); a longer tour gets proportionally fewer, each move costing in
+/// proportion to its length.
+const BACKLASH_SEARCH_BUDGET: usize = 20_000;
+
+/// The visiting order and, with backlash, its dead bands' design.
+struct Toured {
+    /// Visits (indices into the plan's visits) in order.
+    order: Vec<usize>,
+    /// The shortest tour, when backlash reordered it.
+    shortest: Vec<usize>,
+    /// The dead bands' design, when backlash is planned for.
+    backlash: Option<BacklashDesign>,
+    /// Travel of the shortest tour (deg).
+    shortest_travel_deg: f64,
+    /// Angles of each visit (rad) and whether it is fitted.
+    q_rad: Vec<(Vec<f64>, bool)>,
+}
+
+impl Toured {
+    /// Order the visits: a short tour from `home`, one payload group after
+    /// the other (unloaded first), reordered within
+    /// [`BACKLASH_TRAVEL_BOUND`] for the dead bands when backlash is
+    /// planned for.
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        scene: &Scene,
+        dpool: &design::Pool,
+        pool: &[Candidate],
+        visits: &[VisitSpec],
+        home: &[f64],
+        chosen: &[usize],
+        opts: &PlanOptions,
+        noise: f64,
+    ) -> Self {
+        let refs: Vec<&[f64]> = visits
+            .iter()
+            .map(|v| pool[v.cand].q_deg.as_slice())
+            .collect();
+        let group: Vec<usize> = visits
+            .iter()
+            .map(|v| usize::from(v.payload_kg.is_some_and(|p| p > 0.0)))
+            .collect();
+        let shortest = grouped_tour(home, &refs, &group);
+        let travel = |o: &[usize]| {
+            tour::path_travel_deg(home, &o.iter().map(|&k| refs[k]).collect::<Vec<_>>())
+        };
+        let shortest_travel_deg = travel(&shortest);
+        let q_rad = visits
+            .iter()
+            .map(|v| (pool[v.cand].q_rad.clone(), v.entry.is_some()))
+            .collect();
+        let backlash = opts
+            .effects
+            .iter()
+            .any(|e| e == "backlash")
+            .then(|| backlash_design(scene, dpool, pool, visits, chosen, noise))
+            .flatten();
+        let order = match &backlash {
+            Some(b) => tour::improve(
+                home,
+                &refs,
+                shortest.clone(),
+                &group,
+                BACKLASH_TRAVEL_BOUND * shortest_travel_deg,
+                BACKLASH_SEARCH_BUDGET * 40 / refs.len().max(40),
+                &mut |o| b.cost(o),
+            ),
+            None => shortest.clone(),
+        };
+        Toured {
+            order,
+            shortest,
+            backlash,
+            shortest_travel_deg,
+            q_rad,
+        }
+    }
+
+    /// The poses in visiting order with their ids (`p01`..., `c01`...).
+    fn poses(&self, pool: &[Candidate], visits: &[VisitSpec]) -> Vec<PlannedPose> {
+        let (mut n_train, mut n_test) = (0, 0);
+        self.order
+            .iter()
+            .map(|&k| {
+                let v = &visits[k];
+                let check = v.entry.is_none();
+                let id = if check {
+                    n_test += 1;
+                    format!("c{n_test:02}")
+                } else {
+                    n_train += 1;
+                    format!("p{n_train:02}")
+                };
+                PlannedPose {
+                    id,
+                    q_deg: pool[v.cand].q_deg.clone(),
+                    split: if check { "test" } else { "train" }.into(),
+                    payload_kg: v.payload_kg,
+                }
+            })
+            .collect()
+    }
+
+    /// Covariance of the design's columns over the chosen entries (rows in
+    /// noise units), the dead bands fitted beside them when planned for.
+    fn covariance(&self, dpool: &design::Pool, chosen: &[usize]) -> Option<DMatrix<f64>> {
+        let a = information(dpool, chosen);
+        let Some(b) = &self.backlash else {
+            return a.try_inverse();
+        };
+        let (bb, cc) = b.blocks(&self.order);
+        let (p, k) = (a.nrows(), cc.nrows());
+        let mut full = DMatrix::zeros(p + k, p + k);
+        full.view_mut((0, 0), (p, p)).copy_from(&a);
+        full.view_mut((0, p), (p, k)).copy_from(&bb);
+        full.view_mut((p, 0), (k, p)).copy_from(&bb.transpose());
+        full.view_mut((p, p), (k, k)).copy_from(&cc);
+        full.try_inverse()
+            .map(|inv| inv.view((0, 0), (p, p)).into_owned())
+    }
+
+    /// The dead bands' report, when backlash is planned for.
+    fn report(&self, n: usize) -> Option<BacklashTour> {
+        let b = self.backlash.as_ref()?;
+        let sd = |v: Option<f64>| v.filter(|v| v.is_finite()).map(|v| v.sqrt().to_degrees());
+        let now = b.variances(&self.order);
+        let before = b.variances(&self.shortest);
+        let train: Vec<&(Vec<f64>, bool)> = self.order.iter().map(|&k| &self.q_rad[k]).collect();
+        let qs: Vec<&[f64]> = train.iter().map(|(q, _)| q.as_slice()).collect();
+        let dirs = approach_directions(&qs);
+        let joints = (0..n)
+            .map(|j| {
+                let (q, d): (Vec<f64>, Vec<f64>) = train
+                    .iter()
+                    .zip(&dirs)
+                    .filter(|((_, fitted), _)| *fitted)
+                    .map(|((q, _), d)| (q[j], d[j]))
+                    .unzip();
+                BacklashSigma {
+                    joint: j + 1,
+                    sigma_deg: sd(now[j]),
+                    sigma_shortest_deg: sd(before[j]),
+                    direction_angle_correlation: backlash::direction_angle_correlation(&q, &d),
+                }
+            })
+            .collect();
+        Some(BacklashTour {
+            travel_bound: BACKLASH_TRAVEL_BOUND,
+            shortest_travel_deg: self.shortest_travel_deg,
+            joints,
+        })
+    }
+}
+
+/// A short tour of `refs` from `home` visiting group 0 first, then group
+/// 1 from where group 0 ended. With one group: [`tour::order`] itself.
+fn grouped_tour(home: &[f64], refs: &[&[f64]], group: &[usize]) -> Vec<usize> {
+    let mut out: Vec<usize> = Vec::with_capacity(refs.len());
+    for g in 0..=1 {
+        let idx: Vec<usize> = (0..refs.len()).filter(|&k| group[k] == g).collect();
+        if idx.is_empty() {
+            continue;
+        }
+        let start = out.last().map_or(home, |&k| refs[k]);
+        let sub: Vec<&[f64]> = idx.iter().map(|&k| refs[k]).collect();
+        out.extend(tour::order(start, &sub).into_iter().map(|k| idx[k]));
+    }
+    out
+}
+
+/// The dead bands' design of the visits: the chosen entries' rows, and per
+/// joint how the readings change with its angle (scaled by
+/// [`backlash::BACKLASH_SCALE_RAD`], in noise units).
+fn backlash_design(
+    scene: &Scene,
+    dpool: &design::Pool,
+    pool: &[Candidate],
+    visits: &[VisitSpec],
+    chosen: &[usize],
+    noise: f64,
+) -> Option<BacklashDesign> {
+    let n = scene.robot.dof();
+    let l = scene.chain.layout;
+    let mut jac = scene.chain.new_jacobian();
+    let list: Vec<backlash::Visit> = visits
+        .iter()
+        .map(|v| {
+            let c = &pool[v.cand];
+            let fitted = v.entry.map(|e| {
+                scene.chain.point_jacobian(
+                    &scene.nominal.values,
+                    &c.q_rad,
+                    OutputFrame::Rig,
+                    &mut jac,
+                );
+                let dirs = reading_directions(scene, &c.t_rig);
+                let per_joint = (0..n)
+                    .map(|j| {
+                        let dt = jac.d_params[l.joint(j, JointParam::Theta)];
+                        dirs.iter()
+                            .map(|u| u.dot(&dt) * backlash::BACKLASH_SCALE_RAD / noise)
+                            .collect()
+                    })
+                    .collect();
+                (dpool.rows[e].clone(), per_joint)
+            });
+            backlash::Visit {
+                q_rad: c.q_rad.clone(),
+                fitted,
             }
         })
+        .collect();
+    BacklashDesign::new(&information(dpool, chosen), &list, n)
+}
+
+/// The dead bands as predicted parameters (`j2.backlash`, deg).
+fn backlash_params(b: Option<&BacklashTour>) -> Vec<PredictedParam> {
+    b.into_iter()
+        .flat_map(|b| &b.joints)
+        .filter_map(|j| {
+            Some(PredictedParam {
+                name: format!("j{}.backlash", j.joint),
+                sigma: j.sigma_deg?,
+                unit: "deg".into(),
+            })
+        })
         .collect()
+}
+
+/// Per joint planned for compliance whose coefficient the readings see and
+/// the poses determine (a 1-sigma below the coefficient's prior size: the
+/// size at which it moves the readings by three times their noise): the
+/// 1-sigma (with link
+/// masses its only coefficient, deg/(N·m); without, its unit mass at T,
+/// deg/m) and the unit.
+fn compliance_sigmas(
+    cols: &Columns,
+    params: &[PredictedParam],
+    n: usize,
+) -> Vec<(usize, f64, &'static str)> {
+    let mut k0 = 0;
+    let mut out = Vec::new();
+    for (kind, name) in &cols.effects {
+        let first = k0;
+        k0 += kind.n_coef();
+        let Kind::JointCompliance {
+            joint_index,
+            regressors,
+        } = kind
+        else {
+            continue;
+        };
+        let (c, wanted, unit) = if regressors.is_empty() {
+            (0, name.clone(), "deg/(N·m)")
+        } else {
+            let Some(c) = regressors.iter().position(|&r| r == n) else {
+                continue;
+            };
+            (c, format!("{name}[{c}]"), "deg/m (a unit mass at T)")
+        };
+        // A coefficient that must reach a radian per unit before the
+        // readings notice it (a wrist joint whose turn does not move T) is
+        // one they do not see.
+        let prior = cols.effect_scale[first + c];
+        let seen = |p: &&PredictedParam| p.sigma > 0.0 && p.sigma < prior && prior < 1.0;
+        if let Some(p) = params.iter().find(|p| p.name == wanted).filter(seen) {
+            out.push((*joint_index, p.sigma.to_degrees(), unit));
+        }
+    }
+    out
 }
 
 /// What least squares will give (without the prior): the chosen poses,
@@ -485,9 +1028,13 @@ fn predictions(
 }
 
 /// What the user should know about the effects planned for.
-fn notes(opts: &PlanOptions, approach: &[ApproachBalance]) -> Vec<String> {
+fn notes(
+    opts: &PlanOptions,
+    approach: &[ApproachBalance],
+    backlash: Option<&BacklashTour>,
+) -> Vec<String> {
     let mut notes = Vec::new();
-    if opts.effects.iter().any(|e| e == "joint_compliance") {
+    if opts.effects.iter().any(|e| e == "joint_compliance") && opts.payload_kg.is_none() {
         notes.push("compliance is planned with the robot's own link masses; a payload changed part-way (payload_kg) separates it further".into());
     }
     if let Some(b) = approach
@@ -499,7 +1046,30 @@ fn notes(opts: &PlanOptions, approach: &[ApproachBalance]) -> Vec<String> {
             b.joint, b.from_below, b.from_above
         ));
     }
+    notes.extend(backlash.map(backlash_note));
     notes
+}
+
+/// The backlash tour in words: how far it went beyond the shortest, and
+/// the joints whose dead band the readings cannot see.
+fn backlash_note(b: &BacklashTour) -> String {
+    let unseen: Vec<String> = b
+        .joints
+        .iter()
+        .filter(|j| j.sigma_deg.is_none())
+        .map(|j| j.joint.to_string())
+        .collect();
+    let mut s = format!(
+        "the tour is ordered for the approach directions backlash needs, within {}x the shortest tour's travel ({:.0} deg); no via-points: poses.csv's row order is what tells identify the direction",
+        b.travel_bound, b.shortest_travel_deg
+    );
+    if !unseen.is_empty() {
+        s += &format!(
+            "; the dead band of joint(s) {} does not move the measured point, so no order determines it",
+            unseen.join(", ")
+        );
+    }
+    s
 }
 
 fn check_options(robot: &Robot, opts: &PlanOptions) -> Result<()> {
@@ -546,6 +1116,7 @@ fn check_options(robot: &Robot, opts: &PlanOptions) -> Result<()> {
             ));
         }
     }
+    check_payload(opts)?;
     for (i, e) in opts.effects.iter().enumerate() {
         if !PLANNABLE_EFFECTS.contains(&e.as_str()) {
             return Err(Error::field(
@@ -584,6 +1155,27 @@ fn check_options(robot: &Robot, opts: &PlanOptions) -> Result<()> {
         if !z.is_finite() {
             return Err(Error::field("workspace.floor_z_mm", "not a finite number"));
         }
+    }
+    Ok(())
+}
+
+/// A payload is a positive number of kg up to [`MAX_PAYLOAD_KG`], planned
+/// for a joint compliance.
+fn check_payload(opts: &PlanOptions) -> Result<()> {
+    let Some(p) = opts.payload_kg else {
+        return Ok(());
+    };
+    if !(p.is_finite() && p > 0.0 && p <= MAX_PAYLOAD_KG) {
+        return Err(Error::field(
+            "payload_kg",
+            format!("{p}: more than 0 and at most {MAX_PAYLOAD_KG} kg"),
+        ));
+    }
+    if !opts.effects.iter().any(|e| e == "joint_compliance") {
+        return Err(Error::field(
+            "payload_kg",
+            "a payload is planned for a joint compliance (which poses carry it, so that its gravity torque separates the compliance from the geometry): add joint_compliance to the effects, or leave payload_kg out",
+        ));
     }
     Ok(())
 }
@@ -629,13 +1221,20 @@ fn rejection_words(rejected: &BTreeMap<Rejection, usize>) -> String {
 
 /// The parameters the identification frees that the pool can determine,
 /// with their prior sizes, and the effects' coefficients.
-fn columns(scene: &Scene, pool: &[Candidate], opts: &PlanOptions, noise: f64) -> Result<Columns> {
+fn columns(
+    scene: &Scene,
+    pool: &[Candidate],
+    entries: &Entries,
+    opts: &PlanOptions,
+    noise: f64,
+) -> Result<Columns> {
     let l = scene.chain.layout;
     let cand = free_candidates(l, &IdentifyOptions::default());
     let jtj = normal_matrix(scene, pool, &cand);
     let sel = identifiability::select(&jtj, &cand, &l, identifiability::DEFAULT_TOLERANCE);
     let param_scale = sel.free.iter().map(|&i| prior_size(l, i)).collect();
-    let ctx = effect_context(scene, pool);
+    let design = entries.of(pool);
+    let ctx = effect_context(scene, &design);
     let mut effects = Vec::new();
     let n = scene.robot.dof();
     for e in &opts.effects {
@@ -645,7 +1244,7 @@ fn columns(scene: &Scene, pool: &[Candidate], opts: &PlanOptions, noise: f64) ->
                     let regressors = if ctx.has_masses {
                         vec![]
                     } else {
-                        ctx.compliance_regressors(j, &(0..pool.len()).collect::<Vec<_>>())
+                        ctx.compliance_regressors(j, &(0..design.len()).collect::<Vec<_>>())
                     };
                     effects.push((
                         Kind::JointCompliance {
@@ -688,14 +1287,14 @@ fn columns(scene: &Scene, pool: &[Candidate], opts: &PlanOptions, noise: f64) ->
     for (kind, _) in &cols.effects {
         let nc = kind.n_coef();
         let mut sq = vec![0.0; nc];
-        for (i, c) in pool.iter().enumerate() {
+        for (i, (c, _)) in design.iter().enumerate() {
             let rows = effect_rows(scene, &ctx, kind, i, c, &mut buf);
             let per = rows.len() / nc;
             for (k, r) in rows.iter().enumerate() {
                 sq[k / per] += r * r;
             }
         }
-        let rows_per = (scene.rig.n_strings().max(3) * pool.len()) as f64;
+        let rows_per = (scene.rig.n_strings().max(3) * design.len()) as f64;
         for s in sq {
             let rms = (s / rows_per).sqrt();
             scales.push(if rms > 0.0 { 3.0 * noise / rms } else { 0.0 });
@@ -759,14 +1358,15 @@ fn reading_directions(scene: &Scene, t: &Vector3<f64>) -> Vec<Vector3<f64>> {
     }
 }
 
-fn effect_context(scene: &Scene, poses: &[Candidate]) -> Context {
+/// The effects' context of candidates with their payloads (kg at T).
+fn effect_context(scene: &Scene, poses: &[(&Candidate, Option<f64>)]) -> Context {
     let inputs: Vec<PoseInput> = poses
         .iter()
-        .map(|c| PoseInput {
+        .map(|(c, payload_kg)| PoseInput {
             q_rad: &c.q_rad,
             time_s: None,
             temp_c: None,
-            payload_kg: None,
+            payload_kg: *payload_kg,
             point_rig: c.t_rig,
         })
         .collect();
@@ -836,25 +1436,55 @@ fn effect_displacement(
     (dt, buf.dl.clone())
 }
 
-/// The design pool: each candidate's readings over the columns, scaled by
-/// the priors and divided by the noise, and the prediction weight from the
-/// validation poses.
+/// The design pool: each entry's readings over the columns, scaled by the
+/// priors and divided by the noise, and the prediction weight from the
+/// validation poses (with a payload planned, each taken unloaded and
+/// loaded: compensation may be asked for either).
 fn design_pool(
     scene: &Scene,
     cols: &Columns,
     pool: &[Candidate],
+    entries: &Entries,
     validation: &[Candidate],
     noise: f64,
 ) -> design::Pool {
+    let m = scene.anchors().len().max(3);
+    let rows = design_rows(scene, cols, &entries.of(pool), noise);
+    let loads: Vec<Option<f64>> = match entries.payload.last() {
+        Some(Some(p)) => vec![Some(0.0), Some(*p)],
+        _ => vec![None],
+    };
+    let mut w = DMatrix::zeros(cols.len(), cols.len());
+    for load in &loads {
+        let v: Vec<(&Candidate, Option<f64>)> = validation.iter().map(|c| (c, *load)).collect();
+        w += prediction_weight(scene, cols, &v);
+    }
+    w /= (validation.len() * loads.len()) as f64;
+    design::Pool {
+        m,
+        p: cols.len(),
+        rows,
+        w,
+    }
+}
+
+/// Each entry's `m × p` rows (row-major), scaled by the priors, in noise
+/// units.
+fn design_rows(
+    scene: &Scene,
+    cols: &Columns,
+    entries: &[(&Candidate, Option<f64>)],
+    noise: f64,
+) -> Vec<Vec<f64>> {
     let p = cols.len();
     let m = scene.anchors().len().max(3);
     let mut jac = scene.chain.new_jacobian();
     let mut buf = Basis::default();
-    let ctx = effect_context(scene, pool);
-    let rows = pool
+    let ctx = effect_context(scene, entries);
+    entries
         .iter()
         .enumerate()
-        .map(|(i, c)| {
+        .map(|(i, (c, _))| {
             scene
                 .chain
                 .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
@@ -879,11 +1509,21 @@ fn design_pool(
             }
             r
         })
-        .collect();
-    // W: mean of J_Tᵀ J_T at the validation poses, same scaling (no noise).
-    let vctx = effect_context(scene, validation);
+        .collect()
+}
+
+/// The sum over `poses` of `J_Tᵀ J_T`, scaled like the rows (no noise).
+fn prediction_weight(
+    scene: &Scene,
+    cols: &Columns,
+    poses: &[(&Candidate, Option<f64>)],
+) -> DMatrix<f64> {
+    let p = cols.len();
+    let mut jac = scene.chain.new_jacobian();
+    let mut buf = Basis::default();
+    let vctx = effect_context(scene, poses);
     let mut w = DMatrix::zeros(p, p);
-    for (i, c) in validation.iter().enumerate() {
+    for (i, (c, _)) in poses.iter().enumerate() {
         scene
             .chain
             .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
@@ -905,8 +1545,7 @@ fn design_pool(
         }
         w += jt.transpose() * jt;
     }
-    w /= validation.len() as f64;
-    design::Pool { m, p, rows, w }
+    w
 }
 
 /// Information of a set without the prior (what least squares gives);
@@ -936,14 +1575,14 @@ fn prediction(pool: &design::Pool, set: &[usize], point_noise_rms_mm: f64) -> Pr
     }
 }
 
+/// Each column's 1-sigma from the covariance `inv` (rows in noise units:
+/// the information's inverse), in the parameters' units.
 fn predicted_sigmas(
-    pool: &design::Pool,
+    inv: &Option<DMatrix<f64>>,
     cols: &Columns,
-    set: &[usize],
     scene: &Scene,
 ) -> Vec<PredictedParam> {
-    // The rows are in noise units: the inverse is the covariance.
-    let Some(inv) = information(pool, set).try_inverse() else {
+    let Some(inv) = inv else {
         return vec![];
     };
     let l = scene.chain.layout;
@@ -1019,4 +1658,88 @@ fn approach_balance(toured: &[&[f64]], home: &[f64]) -> Vec<ApproachBalance> {
             from_above: dirs[1..].iter().filter(|d| d[j] < 0.0).count(),
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Poses sweeping joint 1 of the ER3A in 8 deg steps, the other joints
+    /// within ±2 deg of one valid pose: the shortest tour walks joint 1
+    /// one way, where its dead band is an offset.
+    fn sweep(scene: &Scene) -> Vec<Candidate> {
+        let mut rng = Rng::new(3);
+        let (pool, _, _) = scene.sample(50, 50_000, &mut rng);
+        let mut jac = scene.chain.new_jacobian();
+        let centre = pool
+            .iter()
+            .max_by_key(|c| {
+                (-12..=12)
+                    .filter(|k| {
+                        let mut q = c.q_deg.clone();
+                        q[0] += 8.0 * *k as f64;
+                        q[0].abs() < 168.0 && scene.check(q, &mut jac).is_ok()
+                    })
+                    .count()
+            })
+            .unwrap()
+            .clone();
+        (-12..=12)
+            .filter_map(|k| {
+                let mut q = centre.q_deg.clone();
+                q[0] += 8.0 * k as f64;
+                for v in q.iter_mut().skip(1) {
+                    *v = ((*v + rng.range(-2.0, 2.0)) * 1e4).round() / 1e4;
+                }
+                let inside = q
+                    .iter()
+                    .zip(&scene.robot.joints)
+                    .all(|(v, j)| *v >= j.q_min_deg && *v <= j.q_max_deg);
+                inside.then(|| scene.check(q, &mut jac).ok()).flatten()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_tour_sweeping_a_joint_one_way_is_reordered_to_see_its_dead_band() {
+        let (robot, rig, _) = crate::physics::simulate::preset("er3a").unwrap();
+        let ws = Workspace::default();
+        let scene = Scene::new(&robot, &rig, &ws).unwrap();
+        let poses = sweep(&scene);
+        assert!(poses.len() >= 12, "{} poses", poses.len());
+        let mut opts = PlanOptions::new(poses.len());
+        opts.effects = vec!["backlash".into()];
+        let noise = default_noise(&rig);
+        let entries = Entries::new(poses.len(), None);
+        let cols = columns(&scene, &poses, &entries, &opts, noise).unwrap();
+        let dpool = design_pool(&scene, &cols, &poses, &entries, &poses, noise);
+        let chosen: Vec<usize> = (0..poses.len()).collect();
+        let v = visits(&entries, &chosen, &[]);
+        let home = home_pose(&robot, &opts);
+        let toured = Toured::new(&scene, &dpool, &poses, &v, &home, &chosen, &opts, noise);
+        let q1 = |o: &[usize]| -> Vec<f64> { o.iter().map(|&k| poses[k].q_deg[0]).collect() };
+        let ups = |q: &[f64]| q.windows(2).filter(|w| w[1] > w[0]).count();
+        let (before, after) = (q1(&toured.shortest), q1(&toured.order));
+        let n = before.len() - 1;
+        // The shortest tour sweeps joint 1 one way.
+        assert!(ups(&before) == 0 || ups(&before) == n, "{before:?}");
+        // The tour planned approaches it from both sides within the travel
+        // bound (a one-way sweep of small steps can only be partly
+        // balanced: each step back costs twice its size).
+        let up = ups(&after);
+        assert!(6 * up.min(n - up) >= n, "{up} of {n} up: {after:?}");
+        let refs =
+            |o: &[usize]| -> Vec<&[f64]> { o.iter().map(|&k| poses[k].q_deg.as_slice()).collect() };
+        let travel = tour::path_travel_deg(&home, &refs(&toured.order));
+        assert!(travel <= BACKLASH_TRAVEL_BOUND * toured.shortest_travel_deg + 1e-9);
+        // And its predicted sigma falls.
+        let r = toured.report(robot.dof()).unwrap();
+        let j1 = &r.joints[0];
+        let s = j1.sigma_deg.unwrap();
+        assert!(
+            j1.sigma_shortest_deg.is_none_or(|s0| s < 0.5 * s0),
+            "joint 1: {s} deg against {:?} deg with the shortest tour",
+            j1.sigma_shortest_deg
+        );
+    }
 }

@@ -3,7 +3,8 @@
 //! The cost of a move is its slowest joint's travel (the largest joint
 //! change, deg), what a move's duration follows. Nearest neighbour from
 //! home, then 2-opt on the open path (home fixed first) until no reversal
-//! shortens it.
+//! shortens it. [`improve`] then reorders it for another cost (the
+//! approach directions backlash needs) within a bound on the travel.
 
 /// Largest joint change between two poses (deg).
 pub fn joint_travel_deg(a: &[f64], b: &[f64]) -> f64 {
@@ -74,6 +75,65 @@ pub fn order(home: &[f64], poses: &[&[f64]]) -> Vec<usize> {
         }
     }
     path
+}
+
+/// Reorder the tour `order` of `poses` from `home` to lower `cost`: segment
+/// reversals and single poses moved elsewhere, each kept when it lowers the
+/// cost, keeps the travel within `max_travel_deg` and keeps every pose in
+/// its `group`'s stretch of the tour (the groups' sequence unchanged);
+/// repeated until no move helps or `budget` moves have been tried.
+pub fn improve(
+    home: &[f64],
+    poses: &[&[f64]],
+    mut order: Vec<usize>,
+    group: &[usize],
+    max_travel_deg: f64,
+    budget: usize,
+    cost: &mut dyn FnMut(&[usize]) -> f64,
+) -> Vec<usize> {
+    let groups = |o: &[usize]| o.iter().map(|&i| group[i]).collect::<Vec<_>>();
+    let shape = groups(&order);
+    let mut best = cost(&order);
+    let mut spent = 1;
+    let n = order.len();
+    loop {
+        let mut improved = false;
+        for i in 0..n {
+            for j in i + 1..n {
+                for mv in 0..3 {
+                    if spent >= budget {
+                        return order;
+                    }
+                    let mut c = order.clone();
+                    match mv {
+                        0 => c[i..=j].reverse(),
+                        1 => {
+                            let x = c.remove(i);
+                            c.insert(j, x);
+                        }
+                        _ => {
+                            let x = c.remove(j);
+                            c.insert(i, x);
+                        }
+                    }
+                    spent += 1;
+                    let toured: Vec<&[f64]> = c.iter().map(|&k| poses[k]).collect();
+                    if groups(&c) != shape || path_travel_deg(home, &toured) > max_travel_deg {
+                        continue;
+                    }
+                    let v = cost(&c);
+                    if v < best - 1e-9 * best.abs().max(1.0) {
+                        best = v;
+                        order = c;
+                        improved = true;
+                    }
+                }
+            }
+        }
+        if !improved {
+            return order;
+        }
+    }
 }
 
 #[cfg(test)]

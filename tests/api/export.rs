@@ -57,6 +57,7 @@ fn joint_4_still() -> (String, String, String) {
                 id: format!("p{}", i + 1),
                 q_deg,
                 test: Some(i >= 30),
+                payload_kg: None,
             }
         })
         .collect();

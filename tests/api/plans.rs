@@ -114,6 +114,39 @@ async fn a_plan_from_a_stored_model_and_rig_in_the_clis_form() {
     app.stop().await;
 }
 
+/// A payload planned for a compliance: the poses carry it in the answer
+/// and targets.csv gains `payload_kg` before `split`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_plan_with_a_payload_carries_it_per_pose() {
+    let app = TestApp::spawn("plans-payload").await;
+    let (model, _, rig, _) = app.setup(DS, "PLAN-4").await;
+    let body = small(json!({"model_id": model, "rig_id": rig,
+        "effects": ["joint_compliance"], "payload_kg": 8.0}));
+    let queued = ok_json(app.post_json("/plans", &body).await, 202).await;
+    let id = queued["id"].as_i64().unwrap();
+    assert_eq!(wait_plan(&app, id).await["state"], "succeeded");
+    let done =
+        validate_response("get", "/plans/{id}", app.get(&format!("/plans/{id}")).await).await;
+    let csv = done["targets_csv"].as_str().unwrap();
+    assert!(
+        csv.starts_with("target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,payload_kg,split\n"),
+        "{csv}"
+    );
+    let loads: Vec<f64> = done["poses"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["payload_kg"].as_f64().unwrap())
+        .collect();
+    assert!(loads.iter().all(|&p| p == 0.0 || p == 8.0), "{loads:?}");
+    assert_eq!(
+        done["report"]["payload"]["payload_kg"], 8.0,
+        "{}",
+        done["report"]
+    );
+    app.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_plans_are_refused_naming_the_field_and_store_nothing() {
     let app = TestApp::spawn("plans-bad").await;
@@ -135,6 +168,9 @@ async fn bad_plans_are_refused_naming_the_field_and_store_nothing() {
         (with("effects", json!(["temperature"])), "effects"),
         (with("effects", json!(["backlash", "backlash"])), "effects"),
         (with("home_deg", json!([0, 0, 0])), "home_deg"),
+        (with("payload_kg", json!(0)), "payload_kg"),
+        (with("payload_kg", json!(6000)), "payload_kg"),
+        (with("payload_kg", json!(10)), "payload_kg"),
         (
             with(
                 "workspace",

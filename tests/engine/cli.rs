@@ -1123,3 +1123,90 @@ fn the_held_out_line_gives_the_geometric_figure_beside_a_correction() {
         .unwrap();
     assert!(geometric > 2.0 * after, "{line}");
 }
+
+/// `drawcal plan --payload-kg` with a compliance and backlash: the summary
+/// gives the dead bands and the compliance with and without the payload;
+/// targets.csv's payload_kg goes into `drawcal simulate --targets`'s
+/// poses.csv, pose by pose. A payload without a compliance is refused by
+/// name.
+#[test]
+fn plan_with_a_payload_and_simulate_carry_it() {
+    let dir = scratch("plan-payload");
+    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/er3a_paper_like");
+    let plan = |extra: &[&str]| {
+        bin()
+            .arg("plan")
+            .arg("--robot")
+            .arg(d.join("robot.json"))
+            .arg("--rig")
+            .arg(d.join("rig.json"))
+            .args(["--n", "12", "--candidates", "1000", "--out"])
+            .arg(dir.join("planned.csv"))
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = plan(&[
+        "--effects",
+        "joint_compliance,backlash",
+        "--payload-kg",
+        "8",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("backlash 1-sigma (deg, half the dead band): j1 "),
+        "{text}"
+    );
+    assert!(text.contains("payload 8 kg on "), "{text}");
+    let planned = std::fs::read_to_string(dir.join("planned.csv")).unwrap();
+    assert!(
+        planned
+            .lines()
+            .next()
+            .unwrap()
+            .ends_with(",payload_kg,split")
+    );
+    std::fs::write(dir.join("spec.json"), r#"{"robot": "er3a", "seed": 3}"#).unwrap();
+    let out = bin()
+        .arg("simulate")
+        .arg("--spec")
+        .arg(dir.join("spec.json"))
+        .arg("--targets")
+        .arg(dir.join("planned.csv"))
+        .arg("--out")
+        .arg(dir.join("session"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let poses = std::fs::read_to_string(dir.join("session/poses.csv")).unwrap();
+    let column = |csv: &str, name: &str| -> Vec<String> {
+        let mut lines = csv.lines();
+        let k = lines
+            .next()
+            .unwrap()
+            .split(',')
+            .position(|h| h == name)
+            .unwrap();
+        lines
+            .map(|l| l.split(',').nth(k).unwrap().to_string())
+            .collect()
+    };
+    assert_eq!(column(&poses, "payload_kg"), column(&planned, "payload_kg"));
+    assert_eq!(column(&poses, "pose"), column(&planned, "target"));
+    let out = plan(&["--payload-kg", "8"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("payload_kg") && err.contains("joint_compliance"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

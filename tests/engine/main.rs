@@ -39,6 +39,7 @@ mod physics_string_direction;
 mod physics_string_move;
 mod physics_workspace;
 mod plan;
+mod plan_effects;
 mod report_html;
 mod simulate_files;
 mod urdf;

@@ -110,6 +110,7 @@ fn judge(preset: &str, seed: u64, design: &[Vec<f64>], check: &[Vec<f64>]) -> Ju
             id: format!("{}", i + 1),
             q_deg: q.clone(),
             test: Some(test),
+            payload_kg: None,
         })
         .collect();
     let sim = simulate::generate_with(

@@ -40,6 +40,7 @@ fn record(name: &str, seed: u64, train: &[Vec<f64>], test: &[Vec<f64>]) -> Simul
             id: format!("p{}", i + 1),
             q_deg: q.clone(),
             test: Some(test),
+            payload_kg: None,
         })
         .collect();
     simulate::generate_with(

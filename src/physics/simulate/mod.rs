@@ -290,6 +290,10 @@ pub struct GivenPose {
     /// `Some(true)` for a `test` pose; `None` lets `spec.test_fraction`
     /// choose (for every pose, unless all have a split).
     pub test: Option<bool>,
+    /// Payload at T (kg) the pose carries, as a plan's targets.csv gives
+    /// it; `None` for none (0 kg). When any pose gives one, the spec's
+    /// `session.payload_kg` must be empty.
+    pub payload_kg: Option<f64>,
 }
 
 /// Generate a dataset from a spec whose robot is a preset (and whose rig is
@@ -319,7 +323,9 @@ pub fn generate_with(spec: &Spec, mut files: SpecFiles) -> Result<Simulated> {
         Some(given) => {
             let qs = tour::given_poses(&robot, given)?;
             let ids = given.iter().map(|p| p.id.clone()).collect();
-            tour::Tour::in_order(&spec.session, &home_deg, qs, ids, &mut rng)
+            let mut visits = tour::Tour::in_order(&spec.session, &home_deg, qs, ids, &mut rng);
+            tour::given_payloads(&spec.session, given, &mut visits)?;
+            visits
         }
         None => {
             let qs = tour::sample_poses(spec, &robot, &rig, &chain, &anchors, &geometry, &mut rng)?;
@@ -335,7 +341,7 @@ pub fn generate_with(spec: &Spec, mut files: SpecFiles) -> Result<Simulated> {
     {
         recording.is_test = split;
     }
-    let poses_csv = record::poses_csv(&spec.session, &scene, &recording);
+    let poses_csv = record::poses_csv(&scene, &recording);
     let dataset = Dataset::from_csv(poses_csv.as_bytes(), &robot, &rig)?;
     let point_noise_mm = (recording.noise_sq / visits.qs.len() as f64).sqrt();
     let truth = truth::truth_json(&truth::TruthInputs {

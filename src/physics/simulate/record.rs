@@ -6,7 +6,7 @@ use nalgebra::{Matrix3, Vector3};
 use super::effect_spec::{effect_model, effect_rms};
 use super::tour::Tour;
 use super::truth::TrueGeometry;
-use super::{NoiseSpec, SessionSpec, Spec};
+use super::{NoiseSpec, Spec};
 use crate::error::{Error, Result};
 use crate::kinematics::chain::{Chain, OutputFrame};
 use crate::model::{Rig, Robot};
@@ -292,7 +292,7 @@ fn located_difference(
 
 /// poses.csv: pose, joint angles, readings, time, temperature, the payload
 /// when the session carries payloads, and the split.
-pub(super) fn poses_csv(ss: &SessionSpec, scene: &Scene, rec: &Recording) -> String {
+pub(super) fn poses_csv(scene: &Scene, rec: &Recording) -> String {
     let tour = scene.tour;
     let (n, m) = (scene.robot.dof(), scene.anchors.len());
     let mut rows = Vec::new();
@@ -300,7 +300,7 @@ pub(super) fn poses_csv(ss: &SessionSpec, scene: &Scene, rec: &Recording) -> Str
     header.extend((1..=n).map(|j| format!("q{j}_deg")));
     header.extend((1..=m).map(|k| format!("l{k}_mm")));
     header.extend(["time_s", "temp_c"].map(String::from));
-    if !ss.payload_kg.is_empty() {
+    if tour.payload.iter().any(Option::is_some) {
         header.push("payload_kg".into());
     }
     header.push("split".into());

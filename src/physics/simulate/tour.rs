@@ -129,6 +129,37 @@ pub(super) fn given_poses(robot: &Robot, given: &[super::GivenPose]) -> Result<V
     Ok(given.iter().map(|p| p.q_deg.clone()).collect())
 }
 
+/// The payloads of poses given by the caller (a plan's targets.csv with a
+/// `payload_kg` column): each pose carries its own (none: 0 kg), in place
+/// of the session's blocks, which the spec must then leave empty.
+pub(super) fn given_payloads(
+    ss: &SessionSpec,
+    given: &[super::GivenPose],
+    tour: &mut Tour,
+) -> Result<()> {
+    if given.iter().all(|p| p.payload_kg.is_none()) {
+        return Ok(());
+    }
+    if !ss.payload_kg.is_empty() {
+        return Err(Error::field(
+            "session.payload_kg",
+            "the poses given carry their own payload_kg (a plan's targets.csv): leave the session's payloads out",
+        ));
+    }
+    for (r, p) in given.iter().enumerate() {
+        let kg = p.payload_kg.unwrap_or(0.0);
+        if !(kg.is_finite() && (0.0..=5000.0).contains(&kg)) {
+            return Err(Error::cell(
+                r + 1,
+                "payload_kg",
+                format!("{kg}: a payload from 0 to 5000 kg"),
+            ));
+        }
+        tour.payload[r] = Some(kg);
+    }
+    Ok(())
+}
+
 /// The poses in visiting order, with what the file records of each.
 pub(super) struct Tour {
     /// Pose ids (poses.csv's `pose`).

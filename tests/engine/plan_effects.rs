@@ -1,0 +1,306 @@
+//! The planner with physics effects (issue 19): backlash's dead bands
+//! predicted from the tour's approach directions and checked against the
+//! spread of identified ones over simulated sessions; a payload the plan
+//! places on some poses, carried by the simulator into poses.csv and
+//! recovered by the identification; and, without either, the same
+//! targets.csv as the code before them wrote.
+
+use drawcal::identify::lm::{self, LmSettings};
+use drawcal::identify::{IdentifyOptions, NoProgress, Observations, geometric};
+use drawcal::model::{Rig, Robot};
+use drawcal::physics::problem::EffectProblem;
+use drawcal::physics::simulate::{self, GivenPose, Spec, SpecFiles};
+use drawcal::physics::{self, EffectModel, Kind};
+use drawcal::plan::{self, Plan, PlanOptions};
+
+fn files(dir: &str) -> (Robot, Rig) {
+    let d = crate::common::dir(dir);
+    let robot = Robot::from_json(&std::fs::read_to_string(d.join("robot.json")).unwrap()).unwrap();
+    let rig = Rig::from_json(&std::fs::read_to_string(d.join("rig.json")).unwrap()).unwrap();
+    (robot, rig)
+}
+
+/// The plans of tests/data/plan_baseline (written by the code before
+/// backlash and payloads were planned, options as its README gives them)
+/// are written again byte for byte.
+#[test]
+fn without_backlash_or_a_payload_a_plan_writes_the_same_targets() {
+    // (dataset, N, candidates, seed, effects, file)
+    type Case = (
+        &'static str,
+        usize,
+        usize,
+        u64,
+        &'static [&'static str],
+        &'static str,
+    );
+    let cases: [Case; 3] = [
+        ("er3a_paper_like", 30, 10_000, 1, &[], "er3a_n30_seed1.csv"),
+        (
+            "er3a_paper_like",
+            12,
+            1000,
+            3,
+            &["joint_compliance", "joint_scale"],
+            "er3a_n12_seed3_compliance.csv",
+        ),
+        (
+            "ur5_geometric",
+            20,
+            2000,
+            5,
+            &["joint_compliance"],
+            "ur5_n20_seed5_compliance.csv",
+        ),
+    ];
+    for (dir, n, candidates, seed, effects, file) in cases {
+        let (robot, rig) = files(dir);
+        let mut opts = PlanOptions::new(n);
+        opts.candidates = candidates;
+        opts.seed = seed;
+        opts.effects = effects.iter().map(|e| e.to_string()).collect();
+        let p = plan::plan(&robot, &rig, &opts).unwrap();
+        let want = std::fs::read_to_string(crate::common::dir("plan_baseline").join(file)).unwrap();
+        assert_eq!(p.targets_csv(), want, "{file}");
+        assert!(p.report.backlash.is_none() && p.report.payload.is_none());
+    }
+}
+
+/// Record `plan`'s poses for the preset with `effects` as the truth.
+fn simulate_plan(
+    p: &Plan,
+    preset: &str,
+    seed: u64,
+    effects: serde_json::Value,
+) -> simulate::Simulated {
+    let spec: Spec = serde_json::from_value(serde_json::json!({
+        "robot": preset, "seed": seed, "effects": effects
+    }))
+    .unwrap();
+    let poses = p
+        .poses
+        .iter()
+        .map(|q| GivenPose {
+            id: q.id.clone(),
+            q_deg: q.q_deg.clone(),
+            test: Some(q.split == "test"),
+            payload_kg: q.payload_kg,
+        })
+        .collect();
+    simulate::generate_with(
+        &spec,
+        SpecFiles {
+            poses: Some(poses),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
+/// The dead bands (deg) identify fits on a session with the geometry:
+/// the same model the plan predicts, every joint in `joints` (0-based).
+fn fitted_dead_bands(sim: &simulate::Simulated, joints: &[usize]) -> Vec<f64> {
+    let opts = IdentifyOptions::default();
+    let s = Observations::new(&sim.robot, &sim.rig, &sim.dataset, &opts).unwrap();
+    let g = geometric(&s, &opts, &NoProgress).unwrap();
+    let ctx = physics::effect_context(&s, &g.after);
+    let effects: Vec<EffectModel> = joints
+        .iter()
+        .map(|&j| EffectModel {
+            kind: Kind::Backlash { joint_index: j },
+            coef: vec![0.0, 0.0],
+        })
+        .collect();
+    let problem = EffectProblem::of_observations(
+        &s,
+        &ctx,
+        s.train.clone(),
+        &g.after.values,
+        g.selection.free.clone(),
+        effects,
+    );
+    let res = lm::minimize(&problem, &problem.x0(), &LmSettings::default(), |_, _| true).unwrap();
+    let (_, fitted) = problem.unpack(&res.x);
+    fitted.iter().map(|e| e.coef[0].to_degrees()).collect()
+}
+
+/// The plan's predicted backlash 1-sigma against the spread of the dead
+/// bands identified on sessions simulated at the planned poses in the
+/// planned order (a true dead band on joint 2, the truth's geometry and
+/// noise drawn anew each time): within 30 % on every joint it sees.
+#[test]
+fn the_predicted_dead_band_sigma_is_the_spread_of_identified_ones() {
+    let (robot, rig, _) = simulate::preset("er3a").unwrap();
+    let mut opts = PlanOptions::new(20);
+    opts.candidates = 2000;
+    opts.effects = vec!["backlash".into()];
+    let p = plan::plan(&robot, &rig, &opts).unwrap();
+    let b = p.report.backlash.as_ref().unwrap();
+    let seen: Vec<(usize, f64)> = b
+        .joints
+        .iter()
+        .filter_map(|j| Some((j.joint - 1, j.sigma_deg?)))
+        .collect();
+    assert_eq!(seen.len(), 5, "{b:?}"); // joint 6 does not move T
+    let joints: Vec<usize> = seen.iter().map(|s| s.0).collect();
+    let runs: usize = std::env::var("PLAN_BACKLASH_RUNS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(40);
+    let truth_deg = 0.02;
+    let fits: Vec<Vec<f64>> = (0..runs as u64)
+        .map(|seed| {
+            let effects =
+                serde_json::json!([{"effect": "backlash", "joint": 2, "magnitude": truth_deg}]);
+            fitted_dead_bands(&simulate_plan(&p, "er3a", 100 + seed, effects), &joints)
+        })
+        .collect();
+    for (k, &(j, predicted)) in seen.iter().enumerate() {
+        let truth = if j == 1 { truth_deg } else { 0.0 };
+        let v: Vec<f64> = fits.iter().map(|f| f[k]).collect();
+        let mean = v.iter().sum::<f64>() / runs as f64;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (runs - 1) as f64).sqrt();
+        println!(
+            "joint {}: predicted {predicted:.6} deg, spread {sd:.6} deg, mean {mean:.6} (truth {truth})",
+            j + 1
+        );
+        assert!(
+            (0.7..1.3).contains(&(sd / predicted)),
+            "joint {}: spread {sd} against predicted {predicted}",
+            j + 1
+        );
+        assert!(
+            (mean - truth).abs() < 4.0 * sd / (runs as f64).sqrt(),
+            "joint {}: mean {mean} against {truth}",
+            j + 1
+        );
+    }
+}
+
+/// A plan carrying a 10 kg payload on the poses it chooses: the payload
+/// changes at most once along the tour, targets.csv carries it before
+/// `split`, the compliance is predicted better determined than without
+/// it, the simulator records each pose with its payload, and the
+/// identification recovers a true compliance of joint 2 within three
+/// predicted sigma.
+#[test]
+fn a_payload_plan_determines_compliance_and_the_session_carries_it() {
+    let (robot, rig, _) = simulate::preset("er3a").unwrap();
+    let mut opts = PlanOptions::new(30);
+    opts.candidates = 2000;
+    opts.effects = vec!["joint_compliance".into()];
+    opts.payload_kg = Some(10.0);
+    let p = plan::plan(&robot, &rig, &opts).unwrap();
+    let pay = p.report.payload.as_ref().unwrap();
+    assert!(pay.loaded_poses > 0 && pay.payload_changes <= 1, "{pay:?}");
+    let loads: Vec<f64> = p.poses.iter().map(|q| q.payload_kg.unwrap()).collect();
+    assert!(
+        loads.windows(2).all(|w| w[0] <= w[1]),
+        "unloaded first: {loads:?}"
+    );
+    let csv = p.targets_csv();
+    assert!(csv.starts_with("target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,payload_kg,split\n"));
+    assert_eq!(
+        drawcal::model::target_payloads(csv.as_bytes())
+            .unwrap()
+            .unwrap(),
+        loads
+    );
+    let j2 = pay.compliance.iter().find(|c| c.joint == 2).unwrap();
+    assert!(j2.sigma_with_payload < j2.sigma_without_payload, "{j2:?}");
+    println!("{pay:?}");
+
+    // Simulated with a compliance of joint 2, each pose with its payload.
+    let truth_deg = 2e-4; // deg/(N·m)
+    let effects =
+        serde_json::json!([{"effect": "joint_compliance", "joint": 2, "magnitude": truth_deg}]);
+    let sim = simulate_plan(&p, "er3a", 7, effects);
+    assert!(
+        sim.poses_csv
+            .lines()
+            .next()
+            .unwrap()
+            .ends_with(",payload_kg,split")
+    );
+    let recorded: Vec<f64> = sim
+        .dataset
+        .poses
+        .iter()
+        .map(|q| q.payload_kg.unwrap())
+        .collect();
+    assert_eq!(recorded, loads);
+    let (a, _) = crate::common::analyse_blind(&sim.robot, &sim.rig, &sim.dataset);
+    let f = a
+        .findings
+        .iter()
+        .find(|f| f.effect == "joint_compliance" && f.joint == Some(2))
+        .unwrap_or_else(|| panic!("{:#?}", a.findings));
+    println!(
+        "identified {} ± {} {} (truth {truth_deg}, predicted sigma {})",
+        f.magnitude, f.sigma, f.unit, j2.sigma_with_payload
+    );
+    assert!(
+        (f.magnitude - truth_deg).abs() < 3.0 * j2.sigma_with_payload,
+        "{} against {truth_deg}, predicted sigma {}",
+        f.magnitude,
+        j2.sigma_with_payload
+    );
+}
+
+/// A payload is refused with the field named: not positive, too heavy,
+/// not a number, or without a compliance to plan it for.
+#[test]
+fn a_bad_payload_is_refused_by_name() {
+    let (robot, rig, _) = simulate::preset("er3a").unwrap();
+    for (kg, effects, words) in [
+        (0.0, "joint_compliance", "more than 0"),
+        (-5.0, "joint_compliance", "more than 0"),
+        (5000.5, "joint_compliance", "at most 5000"),
+        (f64::NAN, "joint_compliance", "more than 0"),
+        (10.0, "backlash", "add joint_compliance"),
+    ] {
+        let mut opts = PlanOptions::new(20);
+        opts.effects = vec![effects.into()];
+        opts.payload_kg = Some(kg);
+        let e = plan::check(&robot, &rig, &opts).unwrap_err().to_string();
+        assert!(e.contains("payload_kg") && e.contains(words), "{kg}: {e}");
+    }
+}
+
+/// What ordering the tour for backlash gains over the shortest tour on
+/// planned poses (printed: per robot and seed, each joint's predicted
+/// dead-band sigma with the shortest tour and with the tour planned, and
+/// the travel's ratio):
+///
+///     cargo test --test engine plan_effects::backlash_tour_gain -- --ignored --nocapture
+#[test]
+#[ignore = "a measurement, not a check"]
+fn backlash_tour_gain() {
+    for name in ["er3a", "ur5", "arm4_mdh"] {
+        let (robot, rig, _) = simulate::preset(name).unwrap();
+        for seed in 1..=3 {
+            let mut opts = PlanOptions::new(30);
+            opts.seed = seed;
+            opts.effects = vec!["backlash".into()];
+            let p = plan::plan(&robot, &rig, &opts).unwrap();
+            let b = p.report.backlash.unwrap();
+            let joints: Vec<String> = b
+                .joints
+                .iter()
+                .map(|j| match (j.sigma_shortest_deg, j.sigma_deg) {
+                    (Some(s0), Some(s)) => format!(
+                        "j{} {s0:.5}->{s:.5} ({:+.0}%)",
+                        j.joint,
+                        100.0 * (s / s0 - 1.0)
+                    ),
+                    (s0, s) => format!("j{} {s0:?}->{s:?}", j.joint),
+                })
+                .collect();
+            println!(
+                "{name} seed {seed}: travel {:.2}x; {}",
+                p.report.tour_travel_deg / b.shortest_travel_deg,
+                joints.join(", ")
+            );
+        }
+    }
+}
