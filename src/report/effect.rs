@@ -695,10 +695,14 @@ fn check_target(
     driver_index: Option<usize>,
 ) -> std::result::Result<(), String> {
     if target == CorrectionTarget::StringZeroScale
-        && (driver != CorrectionDriver::StringDirection || driver_index != target_index)
+        && !match driver {
+            CorrectionDriver::StringDirection => driver_index == target_index,
+            CorrectionDriver::Time => driver_index.is_none(),
+            _ => false,
+        }
     {
         return Err(
-                "a correction of a string's zero and scale follows that string's direction: its driver must be string_direction with driver_index equal to target_index"
+                "a correction of a string's zero and scale follows that string's direction (driver string_direction with driver_index equal to target_index) or the clock (driver time)"
                     .into(),
             );
     }

@@ -175,3 +175,39 @@ fn one_strings_zero_cycling_in_time_is_corrected_on_that_string() {
         1.25,
     );
 }
+
+/// A string whose zero and scale change during the session (its cable
+/// creeping under its spring's pull, long lengths read off more than short
+/// ones) is no drift of its zero: nothing is named, and the string's zero
+/// and scale as functions of the clock predict the held-out readings far
+/// better than its reading by the clock could; compensation does not need
+/// it (it is the string's).
+#[test]
+fn a_string_whose_scale_creeps_is_corrected_by_its_zero_and_scale_in_time() {
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
+    let (robot, rig, data) = common::load("xcheck7_cable_creep_std4");
+    let report = common::identify_default(&robot, &rig, &data);
+    common::nothing_named(&report);
+    common::place_where(&report, |p| p.driver == "time");
+    assert_eq!(
+        common::correction_slot(&report),
+        (
+            CorrectionTarget::StringZeroScale,
+            Some(0),
+            CorrectionDriver::Time,
+            None
+        )
+    );
+    let d = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .unwrap();
+    assert!(
+        d.test_rms_after_mm < 0.5 * d.test_rms_before_mm,
+        "{} -> {}",
+        d.test_rms_before_mm,
+        d.test_rms_after_mm
+    );
+    assert!(d.evidence.contains("string 1 read"), "{}", d.evidence);
+}

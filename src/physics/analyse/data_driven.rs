@@ -388,9 +388,13 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
             out
         }
         ("time", _, None) => slots.in_time(),
-        ("time", _, Some(s)) if s <= m => {
-            vec![slots.clocked(CorrectionTarget::StringReading, Some(s - 1))]
-        }
+        // One string by the clock: its reading, or its zero and scale (a
+        // cable that creeps or a drum that warms reads long lengths off
+        // more than short ones).
+        ("time", _, Some(s)) if s <= m => vec![
+            slots.clocked(CorrectionTarget::StringReading, Some(s - 1)),
+            slots.clocked(CorrectionTarget::StringZeroScale, Some(s - 1)),
+        ],
         ("temperature", _, _) => slots.at_temperature(),
         ("workspace", None, None) => slots.over_workspace(),
         ("workspace", _, Some(s)) if s <= m => slots.by_string_direction(s - 1),
@@ -485,6 +489,8 @@ impl Slots<'_> {
         }
         for s in 0..m {
             out.push(self.clocked(CorrectionTarget::StringReading, Some(s)));
+            // Or its zero and scale (a cable creeping, a drum warming).
+            out.push(self.clocked(CorrectionTarget::StringZeroScale, Some(s)));
             // Or a cycle (a sensor's electronics or spool following the
             // cell's heating cycle; a zero that creeps and resets): several
             // cycles need more knots than the poses hold.
@@ -907,6 +913,17 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
                 "clock"
             }
         )
+    } else if let Kind::DataDriven {
+        target: CorrectionTarget::StringZeroScale,
+        target_index: Some(s),
+        driver: CorrectionDriver::Time,
+        ..
+    } = kind
+    {
+        format!(
+            "compensation does not need it: it corrects what string {} read, not where the robot went; its zero and its scale changed during the session, long lengths more than short ones (a cable creeping under its spring's pull, a drum or cable warming): let the string settle under tension before measuring, check its cable and drum, or log their temperature",
+            s + 1
+        )
     } else if *driver == CorrectionDriver::Motion {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; T was measured before the arm settled: dwell longer at each pose or approach slower, and check the servo tuning".into()
     } else if kind.robot_side() {
@@ -1158,6 +1175,7 @@ fn expanded(inputs: &Inputs, fixed: &FixedBase, families: &[Vec<Kind>]) -> Vec<K
             f.first(),
             Some(Kind::DataDriven {
                 target: CorrectionTarget::StringZeroScale,
+                driver: CorrectionDriver::StringDirection,
                 ..
             })
         )

@@ -272,6 +272,7 @@ fn placed_by_correction(finding: &mut Finding, kept: &[crate::physics::effects::
         Kind::DataDriven {
             target: CorrectionTarget::StringZeroScale,
             target_index: Some(s),
+            driver: CorrectionDriver::StringDirection,
             ..
         } => Some(*s),
         _ => None,
