@@ -17,10 +17,64 @@
 //! above all: one direction throughout is an offset) is badly determined
 //! however many poses it is seen at. `A⁻¹` and each pose's part of `B`
 //! and `C` are computed once; an order costs `O(N n p + n p²)`.
+//!
+//! Here too what the plan makes of it: the travel a tour ordered for
+//! backlash may take ([`BACKLASH_TRAVEL_BOUND`]), the design built from
+//! the plan's visits ([`backlash_design`]), and the report's dead bands
+//! ([`BacklashTour`]) as predicted parameters and in words. The order
+//! itself is made in `visits` (`Toured`).
 
 use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
 
+use super::columns::{information, reading_directions};
+use super::visits::VisitSpec;
+use super::{Candidate, PredictedParam, Scene, design};
+use crate::kinematics::JointParam;
+use crate::kinematics::chain::OutputFrame;
 use crate::physics::effects::step_direction;
+
+/// A joint's dead band as the plan predicts it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BacklashSigma {
+    /// Joint (1-based).
+    pub joint: usize,
+    /// Predicted 1-sigma of half the dead band (deg) with the tour
+    /// planned; `None` when it is not determined: the joint's angle does
+    /// not move the readings, or every pose is approached from one side
+    /// (the dead band is then a joint offset).
+    pub sigma_deg: Option<f64>,
+    /// The same with the shortest tour.
+    pub sigma_shortest_deg: Option<f64>,
+    /// Correlation over the train poses of the joint's approach direction
+    /// with its angle (near ±1 the dead band looks like an error growing
+    /// with the angle).
+    pub direction_angle_correlation: f64,
+}
+
+/// The tour ordered for backlash.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BacklashTour {
+    /// The travel allowed, as a multiple of the shortest tour's.
+    pub travel_bound: f64,
+    /// The shortest tour's travel (deg).
+    pub shortest_travel_deg: f64,
+    /// Per joint.
+    pub joints: Vec<BacklashSigma>,
+}
+
+/// Travel a tour ordered for backlash may take, over the shortest tour's:
+/// a session's time is mostly the dwell at each pose (settling and
+/// measuring, 20 s in the simulator's session against about 4 s of moving
+/// at its 30 deg/s on the ER3A's planned tour), so a fifth more travel
+/// costs about 3 % of it.
+pub const BACKLASH_TRAVEL_BOUND: f64 = 1.2;
+
+/// Moves the backlash tour's local search tries, at most, for a tour of
+/// 40 poses or fewer (about ten passes over every move of a 40-pose
+/// tour); a longer tour gets proportionally fewer, each move costing in
+/// proportion to its length.
+pub(super) const BACKLASH_SEARCH_BUDGET: usize = 20_000;
 
 /// Prior size of a dead band and of an offset (rad): a joint offset's
 /// tolerance, 0.1 deg, so that their columns are scaled like the
@@ -225,4 +279,85 @@ pub(super) fn direction_angle_correlation(q: &[f64], dir: &[f64]) -> f64 {
     } else {
         sqd / (sqq * sdd).sqrt()
     }
+}
+
+/// The dead bands' design of the visits: the chosen entries' rows, and per
+/// joint how the readings change with its angle (scaled by
+/// [`BACKLASH_SCALE_RAD`], in noise units).
+pub(super) fn backlash_design(
+    scene: &Scene,
+    dpool: &design::Pool,
+    pool: &[Candidate],
+    visits: &[VisitSpec],
+    chosen: &[usize],
+    noise: f64,
+) -> Option<BacklashDesign> {
+    let n = scene.robot.dof();
+    let l = scene.chain.layout;
+    let mut jac = scene.chain.new_jacobian();
+    let list: Vec<Visit> = visits
+        .iter()
+        .map(|v| {
+            let c = &pool[v.cand];
+            let fitted = v.entry.map(|e| {
+                scene.chain.point_jacobian(
+                    &scene.nominal.values,
+                    &c.q_rad,
+                    OutputFrame::Rig,
+                    &mut jac,
+                );
+                let dirs = reading_directions(scene, &c.t_rig);
+                let per_joint = (0..n)
+                    .map(|j| {
+                        let dt = jac.d_params[l.joint(j, JointParam::Theta)];
+                        dirs.iter()
+                            .map(|u| u.dot(&dt) * BACKLASH_SCALE_RAD / noise)
+                            .collect()
+                    })
+                    .collect();
+                (dpool.rows[e].clone(), per_joint)
+            });
+            Visit {
+                q_rad: c.q_rad.clone(),
+                fitted,
+            }
+        })
+        .collect();
+    BacklashDesign::new(&information(dpool, chosen), &list, n)
+}
+
+/// The dead bands as predicted parameters (`j2.backlash`, deg).
+pub(super) fn backlash_params(b: Option<&BacklashTour>) -> Vec<PredictedParam> {
+    b.into_iter()
+        .flat_map(|b| &b.joints)
+        .filter_map(|j| {
+            Some(PredictedParam {
+                name: format!("j{}.backlash", j.joint),
+                sigma: j.sigma_deg?,
+                unit: "deg".into(),
+            })
+        })
+        .collect()
+}
+
+/// The backlash tour in words: how far it went beyond the shortest, and
+/// the joints whose dead band the readings cannot see.
+pub(super) fn backlash_note(b: &BacklashTour) -> String {
+    let unseen: Vec<String> = b
+        .joints
+        .iter()
+        .filter(|j| j.sigma_deg.is_none())
+        .map(|j| j.joint.to_string())
+        .collect();
+    let mut s = format!(
+        "the tour is ordered for the approach directions backlash needs, within {}x the shortest tour's travel ({:.0} deg); no via-points: poses.csv's row order is what tells identify the direction",
+        b.travel_bound, b.shortest_travel_deg
+    );
+    if !unseen.is_empty() {
+        s += &format!(
+            "; the dead band of joint(s) {} does not move the measured point, so no order determines it",
+            unseen.join(", ")
+        );
+    }
+    s
 }

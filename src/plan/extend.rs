@@ -13,10 +13,10 @@
 
 use nalgebra::DMatrix;
 
-use super::{
-    Candidate, Columns, Entries, Scene, Workspace, default_noise, design, design_pool, design_rows,
-    normal_matrix, prior_size, tour,
-};
+use super::columns::{Columns, design_pool, design_rows, normal_matrix, prior_size};
+use super::options::default_noise;
+use super::payload::Entries;
+use super::{Candidate, Scene, Workspace, design, tour};
 use crate::error::Result;
 use crate::identify::{IdentifyOptions, geometric::candidates as free_candidates, identifiability};
 use crate::model::{Rig, Robot};

@@ -136,6 +136,22 @@ pub fn improve(
     }
 }
 
+/// A short tour of `refs` from `home` visiting group 0 first, then group
+/// 1 from where group 0 ended. With one group: [`order`] itself.
+pub(super) fn grouped_tour(home: &[f64], refs: &[&[f64]], group: &[usize]) -> Vec<usize> {
+    let mut out: Vec<usize> = Vec::with_capacity(refs.len());
+    for g in 0..=1 {
+        let idx: Vec<usize> = (0..refs.len()).filter(|&k| group[k] == g).collect();
+        if idx.is_empty() {
+            continue;
+        }
+        let start = out.last().map_or(home, |&k| refs[k]);
+        let sub: Vec<&[f64]> = idx.iter().map(|&k| refs[k]).collect();
+        out.extend(order(start, &sub).into_iter().map(|k| idx[k]));
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
