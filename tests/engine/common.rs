@@ -285,3 +285,41 @@ pub fn unnamed_near_the_twin(
     );
     (report, robot, data)
 }
+
+/// A recording whose remainder no catalogue effect explains (`tests/data/<dir>`),
+/// analysed with the defaults: nothing is named, some unexplained place is
+/// one `wanted` accepts, the first data-driven correction kept has `slot`
+/// (`(target, target_index, driver, driver_index)`) and takes the held-out
+/// RMS below `factor` times what it was. The report and the correction's
+/// finding, for the case's own checks.
+pub fn corrected_unnamed(
+    dir: &str,
+    wanted: impl Fn(&drawcal::report::Place) -> bool,
+    slot: (
+        drawcal::physics::effects::CorrectionTarget,
+        Option<usize>,
+        drawcal::physics::effects::CorrectionDriver,
+        Option<usize>,
+    ),
+    factor: f64,
+) -> (drawcal::report::Report, drawcal::report::Finding) {
+    let (robot, rig, data) = load(dir);
+    let report = identify_default(&robot, &rig, &data);
+    nothing_named(&report);
+    let place = place_where(&report, wanted);
+    assert!(place.z > place.threshold, "{place:?}");
+    assert_eq!(correction_slot(&report), slot);
+    let d = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "data_driven")
+        .cloned()
+        .expect("correction_slot found one");
+    assert!(
+        d.test_rms_after_mm < factor * d.test_rms_before_mm,
+        "{} -> {}",
+        d.test_rms_before_mm,
+        d.test_rms_after_mm
+    );
+    (report, d)
+}

@@ -122,30 +122,16 @@ fn a_stop_short_graded_with_the_move_is_not_backlash() {
 #[test]
 fn play_in_a_drive_turning_two_joints_is_placed_at_their_motion_and_corrected() {
     use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
-    let (robot, rig, data) = common::load("xcheck7_parallelogram_backlash_std4");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    let place = common::place_where(&report, |p| p.driver == "motion" && p.joint == Some(3));
-    assert!(place.z > place.threshold, "{place:?}");
-    assert_eq!(
-        common::correction_slot(&report),
+    let (_, d) = common::corrected_unnamed(
+        "xcheck7_parallelogram_backlash_std4",
+        |p| p.driver == "motion" && p.joint == Some(3),
         (
             CorrectionTarget::JointAngle,
             Some(2),
             CorrectionDriver::MoveDirection,
-            Some(1)
-        )
-    );
-    let d = report
-        .findings
-        .iter()
-        .find(|f| f.effect == "data_driven")
-        .unwrap();
-    assert!(
-        d.test_rms_after_mm < 0.75 * d.test_rms_before_mm,
-        "{} -> {}",
-        d.test_rms_before_mm,
-        d.test_rms_after_mm
+            Some(1),
+        ),
+        0.75,
     );
     assert!(
         d.evidence.contains("compensation cannot use it"),
@@ -163,30 +149,16 @@ fn play_in_a_drive_turning_two_joints_is_placed_at_their_motion_and_corrected() 
 #[test]
 fn a_joint_creeping_under_its_load_is_placed_at_its_motion_and_corrected() {
     use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
-    let (robot, rig, data) = common::load("xcheck8_dwell_creep_std4");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    let place = common::place_where(&report, |p| p.driver == "motion" && p.joint == Some(3));
-    assert!(place.z > place.threshold, "{place:?}");
-    assert_eq!(
-        common::correction_slot(&report),
+    let (_, d) = common::corrected_unnamed(
+        "xcheck8_dwell_creep_std4",
+        |p| p.driver == "motion" && p.joint == Some(3),
         (
             CorrectionTarget::JointAngle,
             Some(2),
             CorrectionDriver::GravityTorqueChange,
-            Some(2)
-        )
-    );
-    let d = report
-        .findings
-        .iter()
-        .find(|f| f.effect == "data_driven")
-        .unwrap();
-    assert!(
-        d.test_rms_after_mm < 0.75 * d.test_rms_before_mm,
-        "{} -> {}",
-        d.test_rms_before_mm,
-        d.test_rms_after_mm
+            Some(2),
+        ),
+        0.75,
     );
     assert!(
         d.evidence.contains("compensation cannot use it"),

@@ -256,30 +256,16 @@ fn a_compliance_fitted_the_wrong_way_still_places_the_joint() {
 #[test]
 fn a_string_reading_by_a_joints_load_is_no_compliance() {
     use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
-    let (robot, rig, data) = common::load("xcheck7_servo_interference_std4");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    let place = common::place_where(&report, |p| p.driver == "joint" && p.joint == Some(2));
-    assert!(place.z > place.threshold, "{place:?}");
-    assert_eq!(
-        common::correction_slot(&report),
+    let (_, d) = common::corrected_unnamed(
+        "xcheck7_servo_interference_std4",
+        |p| p.driver == "joint" && p.joint == Some(2),
         (
             CorrectionTarget::StringReading,
             Some(1),
             CorrectionDriver::GravityTorque,
-            Some(1)
-        )
-    );
-    let d = report
-        .findings
-        .iter()
-        .find(|f| f.effect == "data_driven")
-        .unwrap();
-    assert!(
-        d.test_rms_after_mm < 0.5 * d.test_rms_before_mm,
-        "{} -> {}",
-        d.test_rms_before_mm,
-        d.test_rms_after_mm
+            Some(1),
+        ),
+        0.5,
     );
     assert!(
         d.evidence.contains("compensation does not need it"),
@@ -296,28 +282,15 @@ fn a_string_reading_by_a_joints_load_is_no_compliance() {
 #[test]
 fn a_correction_where_only_the_robot_side_placed_the_remainder_replaces_forced_names() {
     use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
-    let (robot, rig, data) = common::load("xcheck4_harness_windup_std4");
-    let report = common::identify_default(&robot, &rig, &data);
-    common::nothing_named(&report);
-    common::place_where(&report, |p| p.driver == "robot");
-    assert_eq!(
-        common::correction_slot(&report),
+    common::corrected_unnamed(
+        "xcheck4_harness_windup_std4",
+        |p| p.driver == "robot",
         (
             CorrectionTarget::JointAngle,
             Some(0),
             CorrectionDriver::JointAngle,
-            Some(0)
-        )
-    );
-    let d = report
-        .findings
-        .iter()
-        .find(|f| f.effect == "data_driven")
-        .unwrap();
-    assert!(
-        d.test_rms_after_mm < 0.5 * d.test_rms_before_mm,
-        "{} -> {}",
-        d.test_rms_before_mm,
-        d.test_rms_after_mm
+            Some(0),
+        ),
+        0.5,
     );
 }
