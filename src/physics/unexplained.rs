@@ -688,20 +688,7 @@ fn drive_tests(obs: &Observations, ctx: &Context, along: Option<&[Vec<f64>]>) ->
     let n = ctx.n_joints;
     let mut out = Vec::new();
     for i in 0..n.saturating_sub(1) {
-        let angle: Vec<f64> = obs
-            .train
-            .iter()
-            .map(|&k| {
-                ctx.driver_value(
-                    &ctx.poses[k],
-                    CorrectionDriver::MoveDirection,
-                    Some(i),
-                    None,
-                )
-            })
-            .collect();
-        let mut order: Vec<usize> = (0..angle.len()).collect();
-        order.sort_by(|a, b| angle[*a].total_cmp(&angle[*b]));
+        let order = train_order(obs, ctx, CorrectionDriver::MoveDirection, i);
         let mut pairs: Vec<(usize, usize)> = order.windows(2).map(|w| (w[0], w[1])).collect();
         if let (Some(&first), Some(&last)) = (order.first(), order.last()) {
             pairs.push((last, first));
@@ -741,20 +728,7 @@ fn load_change_tests(
     };
     (0..ctx.n_joints)
         .map(|j| {
-            let change: Vec<f64> = obs
-                .train
-                .iter()
-                .map(|&k| {
-                    ctx.driver_value(
-                        &ctx.poses[k],
-                        CorrectionDriver::GravityTorqueChange,
-                        Some(j),
-                        None,
-                    )
-                })
-                .collect();
-            let mut order: Vec<usize> = (0..change.len()).collect();
-            order.sort_by(|a, b| change[*a].total_cmp(&change[*b]));
+            let order = train_order(obs, ctx, CorrectionDriver::GravityTorqueChange, j);
             ScalarTest {
                 name: format!(
                     "the change of joint {}'s gravity torque over the last move",
@@ -769,6 +743,24 @@ fn load_change_tests(
             }
         })
         .collect()
+}
+
+/// The train poses (positions in `obs.train`) sorted by the value of a
+/// correction's `driver` (with `index`), as the correction sees it.
+fn train_order(
+    obs: &Observations,
+    ctx: &Context,
+    driver: CorrectionDriver,
+    index: usize,
+) -> Vec<usize> {
+    let v: Vec<f64> = obs
+        .train
+        .iter()
+        .map(|&k| ctx.driver_value(&ctx.poses[k], driver, Some(index), None))
+        .collect();
+    let mut order: Vec<usize> = (0..v.len()).collect();
+    order.sort_by(|a, b| v[*a].total_cmp(&v[*b]));
+    order
 }
 
 impl ScalarTest {
