@@ -346,6 +346,11 @@ pub struct PoseContext {
     /// Per joint: its gravity torque less the previous pose's (N·m; zero
     /// for the first pose and without link masses).
     pub torque_change_nm: Vec<f64>,
+    /// Per pair of neighbouring joints `(i, i + 1)`: the direction of their
+    /// last move, the angle of `(Δq_i, Δq_(i+1))` (rad); where neither
+    /// moved, the pair's previous direction (a drive's play keeps the side
+    /// it last turned, as backlash does); zero before any move.
+    pub move_direction_rad: Vec<f64>,
     /// Displacement of T in the rig frame (mm) per rad/(N·m) of a base
     /// tilt: the gravity moment of the arm and payload about the base
     /// origin (N·m), as a rotation, applied to T (zero without masses).
@@ -638,6 +643,7 @@ impl Context {
                     },
                     torque,
                     torque_change_nm: vec![0.0; n],
+                    move_direction_rad: vec![0.0; n.saturating_sub(1)],
                     tilt,
                     base_moment_nm,
                     d_lengths,
@@ -645,6 +651,19 @@ impl Context {
                 }
             })
             .collect();
+        for i in 1..ctx_poses.len() {
+            for pair in 0..n.saturating_sub(1) {
+                let (a, b) = (
+                    ctx_poses[i].move_q_rad[pair],
+                    ctx_poses[i].move_q_rad[pair + 1],
+                );
+                ctx_poses[i].move_direction_rad[pair] = if a == 0.0 && b == 0.0 {
+                    ctx_poses[i - 1].move_direction_rad[pair]
+                } else {
+                    b.atan2(a)
+                };
+            }
+        }
         if masses.is_some() {
             for i in 1..ctx_poses.len() {
                 let change = (0..n)
@@ -954,12 +973,7 @@ impl Context {
         match driver {
             CorrectionDriver::JointAngle => pc.q_rad.get(i).copied().unwrap_or(0.0),
             CorrectionDriver::JointMove => pc.move_q_rad.get(i).copied().unwrap_or(0.0),
-            CorrectionDriver::MoveDirection => {
-                match (pc.move_q_rad.get(i), pc.move_q_rad.get(i + 1)) {
-                    (Some(a), Some(b)) => b.atan2(*a),
-                    _ => 0.0,
-                }
-            }
+            CorrectionDriver::MoveDirection => pc.move_direction_rad.get(i).copied().unwrap_or(0.0),
             CorrectionDriver::Time => pc.time_s,
             CorrectionDriver::Temperature => pc.temp_c.or(self.temp_ref_c).unwrap_or(0.0),
             CorrectionDriver::Workspace => workspace_coordinate(&pc.point_rig, i),

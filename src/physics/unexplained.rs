@@ -489,11 +489,13 @@ struct ScalarTest {
     name: String,
     /// The string (1-based) whose part it tests, if a string's.
     sensor: Option<usize>,
-    /// The joint (1-based) whose part it tests, if a joint's.
-    joint: Option<usize>,
+    /// The joint (1-based) whose part it tests, if a joint's, and what an
+    /// agreement there would mean.
+    joint: Option<(usize, &'static str)>,
     driver: &'static str,
     /// The side the place is on: "sensor" (the string's own part),
-    /// "strings" (three strings: either side) or "point" (point data).
+    /// "strings" (three strings: either side), "point" (point data) or
+    /// "robot" (a joint's part).
     side: &'static str,
     test: ScalarTestKind,
     values: Vec<f64>,
@@ -690,8 +692,9 @@ fn drive_tests(obs: &Observations, ctx: &Context, along: Option<&[Vec<f64>]>) ->
     for i in 0..n.saturating_sub(1) {
         let order = train_order(obs, ctx, CorrectionDriver::MoveDirection, i);
         let mut pairs: Vec<(usize, usize)> = order.windows(2).map(|w| (w[0], w[1])).collect();
-        if let (Some(&first), Some(&last)) = (order.first(), order.last()) {
-            pairs.push((last, first));
+        // Round the circle: the last joins the first (with three or more).
+        if order.len() > 2 {
+            pairs.push((order[order.len() - 1], order[0]));
         }
         for j in [i, i + 1] {
             out.push(ScalarTest {
@@ -701,7 +704,7 @@ fn drive_tests(obs: &Observations, ctx: &Context, along: Option<&[Vec<f64>]>) ->
                     i + 2
                 ),
                 sensor: None,
-                joint: Some(j + 1),
+                joint: Some((j + 1, DRIVE_PLAY)),
                 driver: "motion",
                 side: "robot",
                 test: ScalarTestKind::Neighbours(pairs.clone()),
@@ -735,7 +738,7 @@ fn load_change_tests(
                     j + 1
                 ),
                 sensor: None,
-                joint: Some(j + 1),
+                joint: Some((j + 1, LOAD_LAG)),
                 driver: "motion",
                 side: "robot",
                 test: ScalarTestKind::Neighbours(order.windows(2).map(|w| (w[0], w[1])).collect()),
@@ -744,6 +747,11 @@ fn load_change_tests(
         })
         .collect()
 }
+
+/// What a joint's agreement by its and a neighbour's move direction means.
+const DRIVE_PLAY: &str = "follows the way it and its neighbour last moved, not only the side it arrived from (a drive turning both joints with play or friction: a parallelogram's rod or belt, a coupled wrist)";
+/// What a joint's agreement by the change of its load means.
+const LOAD_LAG: &str = "follows the change of its gravity load over the last move, where a compliance follows the load itself (a drive that creeps or winds up under load: a harmonic drive's flexspline relaxing during the dwell)";
 
 /// The train poses (positions in `obs.train`) sorted by the value of a
 /// correction's `driver` (with `index`), as the correction sees it.
@@ -768,9 +776,9 @@ impl ScalarTest {
     /// and the threshold `zcrit`.
     fn sentence(&self, name: &str, z: f64, zcrit: f64) -> String {
         let three = self.side == "strings";
-        if let Some(j) = self.joint {
+        if let Some((j, means)) = self.joint {
             return format!(
-                "joint {j}'s part of the residual (along the direction it moves T) agrees between poses neighbouring by {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): joint {j}'s angle is off by an amount that follows the way the joint last moved or was last loaded, not only the side it arrived from (a drive turning two joints with play or friction: a parallelogram's rod or belt, a coupled wrist; or a drive that creeps or winds up under load), in a form no catalogue effect has"
+                "joint {j}'s part of the residual (along the direction it moves T) agrees between poses neighbouring by {name} more than independent noise allows (z = {z:.1}, threshold {zcrit:.1}): joint {j}'s angle is off by an amount that {means}, in a form no catalogue effect has"
             );
         }
         let (whose, reads) = if self.sensor.is_none() {
@@ -963,12 +971,11 @@ fn neighbours(
         if z > zcrit {
             // One place per string or joint (or none) and driver: its
             // strongest test.
-            match places
-                .iter_mut()
-                .find(|p| p.driver == t.driver && p.sensor == t.sensor && p.joint == t.joint)
-            {
+            match places.iter_mut().find(|p| {
+                p.driver == t.driver && p.sensor == t.sensor && p.joint == t.joint.map(|j| j.0)
+            }) {
                 Some(p) => p.z = p.z.max(z),
-                None => places.push(place(t.driver, t.joint, t.sensor, t.side, z)),
+                None => places.push(place(t.driver, t.joint.map(|j| j.0), t.sensor, t.side, z)),
             }
             if best.as_ref().is_none_or(|b| z > b.0) {
                 best = Some((z, t.name.clone()));

@@ -667,11 +667,24 @@ fn check_driver(
                     .into(),
             );
     }
-    if driver == CorrectionDriver::GravityTorqueChange && target != CorrectionTarget::JointAngle {
+    if driver == CorrectionDriver::GravityTorqueChange
+        && (target != CorrectionTarget::JointAngle
+            || driver_index.is_none()
+            || target_index != driver_index)
+    {
         return Err(
-                "a correction by the change of a joint's gravity torque corrects a joint's angle: its target must be joint_angle"
+                "a correction by the change of a joint's gravity torque corrects that joint's angle: its target must be joint_angle with target_index equal to driver_index"
                     .into(),
             );
+    }
+    if matches!(
+        driver,
+        CorrectionDriver::GravityTorque
+            | CorrectionDriver::JointMove
+            | CorrectionDriver::JointAngle
+    ) && driver_index.is_none()
+    {
+        return Err("a correction by a joint's angle, move or load needs its driver_index".into());
     }
     if driver == CorrectionDriver::Motion && target != CorrectionTarget::Point {
         return Err("a correction by the motion moves T: its target must be point".into());

@@ -890,6 +890,19 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
         )
     } else if *driver == CorrectionDriver::LineOfSight {
         "compensation does not apply it: it follows how the target faces the instrument, which a target read off its centre by an amount that turns with it gives (a reflector whose vertex is off its sphere's centre, a photogrammetric target seen at steep angles), and which point data alone cannot tell from an error of the robot's that follows the flange's orientation towards the instrument; check the target (replace or characterise it, keep it facing the instrument) and, if the correction stays, measure with another target".into()
+    } else if let Kind::DataDriven {
+        target: CorrectionTarget::StringReading,
+        target_index: Some(s),
+        driver: CorrectionDriver::GravityTorque,
+        driver_index: Some(j),
+        ..
+    } = kind
+    {
+        format!(
+            "compensation does not need it: it corrects what string {} read, not where the robot went; the reading follows joint {}'s load, as interference from that joint's motor in the string's signal would (it grows with the current that holds the load): route and shield the string's cable away from that motor's, and check its grounding",
+            s + 1,
+            j + 1
+        )
     } else if *driver == CorrectionDriver::GravityTorque && !reading {
         "compensation does not apply it: it follows the joint's gravity load at the target (its angles and the payload), which compensation does not yet evaluate for a data-driven correction; the joint's error is not in proportion to its load as an elastic joint's is: check it for play that gravity takes up or a stiffness that changes with the load".into()
     } else if *driver == CorrectionDriver::MoveDirection {

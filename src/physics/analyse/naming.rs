@@ -752,12 +752,14 @@ pub(super) fn say_why_unnamed(state: &mut State, series: &[Series], z: f64) {
 /// The names dropped, for a sentence; empty when nothing was done.
 pub(super) fn drop_backlash_beside_motion(inputs: &Inputs, state: &mut State) -> Vec<String> {
     use crate::physics::effects::Kind;
-    // T's motion, not one string's last change (a sensor's own).
+    // T's motion, not one string's last change (a sensor's own) nor one
+    // joint's (its drive's own way of moving or being loaded, which says
+    // nothing of the other joints' dead bands).
     let motion = state.findings.iter().any(|f| {
         f.unexplained().is_some_and(|u| {
             u.places
                 .iter()
-                .any(|p| p.driver == "motion" && p.sensor.is_none())
+                .any(|p| p.driver == "motion" && p.sensor.is_none() && p.joint.is_none())
         })
     });
     let ks: Vec<usize> = (0..state.accepted.len())
