@@ -63,7 +63,8 @@ pub enum CorrectionTarget {
     /// length `l` (mm). A scale that varies with where the string points
     /// (its exit walking along its drum's axis as it pays out, a guide
     /// that bends it more in some directions) is such a correction by the
-    /// string's direction.
+    /// string's direction; a cable creeping under its spring's pull or a
+    /// drum warming, one by the clock.
     StringZeroScale,
     /// Every string's scale at once (dimensionless, one coefficient per
     /// knot): each string reads its length times it more. Potentiometers
@@ -135,7 +136,8 @@ pub enum CorrectionDriver {
     /// and the payload at T): a joint whose angle error follows its load
     /// in a way no linear stiffness does (a play that gravity takes up as
     /// the load changes sign, a stiffness that hardens) is a function of
-    /// it.
+    /// it; so is a string's reading that picks up the joint's motor
+    /// interference (it grows with the current holding the load).
     GravityTorque,
     /// Point data: the instrument's line of sight to T (the direction from
     /// the rig frame's origin, which is the instrument's) in the flange

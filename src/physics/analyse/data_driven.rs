@@ -993,7 +993,7 @@ fn periodic(
 /// A family of periodic candidates of one scalar (a joint's angle, a
 /// string's reading) screened: the [`SCREENED_PERIODS`]
 /// periods whose correction alone would take most from the residual, at
-/// every knot count of [`PERIODIC_KNOTS`] (a sinusoid needs few knots, a
+/// every knot count of [`knots_per_period`] (a sinusoid needs few knots, a
 /// sharper shape more). Fitting every period scanned beside the whole
 /// model would cost a long session seconds.
 fn screened(inputs: &Inputs, fixed: &FixedBase, family: &[Kind]) -> Vec<Kind> {

@@ -148,11 +148,14 @@ pub(super) fn given_payloads(
     }
     for (r, p) in given.iter().enumerate() {
         let kg = p.payload_kg.unwrap_or(0.0);
-        if !(kg.is_finite() && (0.0..=5000.0).contains(&kg)) {
+        if !(kg.is_finite() && (0.0..=crate::model::MAX_PAYLOAD_KG).contains(&kg)) {
             return Err(Error::cell(
                 r + 1,
                 "payload_kg",
-                format!("{kg}: a payload from 0 to 5000 kg"),
+                format!(
+                    "{kg}: a payload from 0 to {} kg",
+                    crate::model::MAX_PAYLOAD_KG
+                ),
             ));
         }
         tour.payload[r] = Some(kg);
