@@ -469,6 +469,28 @@ pub fn approach_directions(q: &[&[f64]]) -> Vec<Vec<f64>> {
     out
 }
 
+/// What each pose changed from the one before, which the context's first
+/// pass (one pose at a time) cannot see: each neighbouring joint pair's
+/// move direction (kept where neither joint moved, as a play keeps its
+/// side) and, with link masses, each joint's change of gravity torque.
+fn fill_changes(poses: &mut [PoseContext], n: usize, has_masses: bool) {
+    for i in 1..poses.len() {
+        for pair in 0..n.saturating_sub(1) {
+            let (a, b) = (poses[i].move_q_rad[pair], poses[i].move_q_rad[pair + 1]);
+            poses[i].move_direction_rad[pair] = if a == 0.0 && b == 0.0 {
+                poses[i - 1].move_direction_rad[pair]
+            } else {
+                b.atan2(a)
+            };
+        }
+        if has_masses {
+            poses[i].torque_change_nm = (0..n)
+                .map(|j| poses[i].torque[j][0] - poses[i - 1].torque[j][0])
+                .collect();
+        }
+    }
+}
+
 /// A warm-up settling with time constant `tau`: its progress after `h`
 /// (both in the thermal driver's unit, hours or thousands of rows), `tau ·
 /// (1 - exp(-h / tau))`, which grows like `h` at first.
@@ -651,27 +673,7 @@ impl Context {
                 }
             })
             .collect();
-        for i in 1..ctx_poses.len() {
-            for pair in 0..n.saturating_sub(1) {
-                let (a, b) = (
-                    ctx_poses[i].move_q_rad[pair],
-                    ctx_poses[i].move_q_rad[pair + 1],
-                );
-                ctx_poses[i].move_direction_rad[pair] = if a == 0.0 && b == 0.0 {
-                    ctx_poses[i - 1].move_direction_rad[pair]
-                } else {
-                    b.atan2(a)
-                };
-            }
-        }
-        if masses.is_some() {
-            for i in 1..ctx_poses.len() {
-                let change = (0..n)
-                    .map(|j| ctx_poses[i].torque[j][0] - ctx_poses[i - 1].torque[j][0])
-                    .collect();
-                ctx_poses[i].torque_change_nm = change;
-            }
-        }
+        fill_changes(&mut ctx_poses, n, masses.is_some());
         let mut payloads: Vec<f64> = poses.iter().filter_map(|p| p.payload_kg).collect();
         payloads.sort_by(f64::total_cmp);
         let payload_ref_kg = (!payloads.is_empty()).then(|| payloads[payloads.len() / 2]);
