@@ -140,6 +140,7 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
     let at = index.map_or(0, |i| i + 1);
     match target {
         CorrectionTarget::JointAngle => format!("joint {at}'s angle"),
+        CorrectionTarget::JointPlay => format!("joint {at}'s play (half its dead band, by the side it arrived from)"),
         CorrectionTarget::Point => "the position of T relative to the rig".into(),
         CorrectionTarget::PointSpherical => {
             "the position of T in the spherical frame about the rig's origin (azimuth, elevation, distance)".into()
@@ -886,6 +887,10 @@ impl Context {
                 }
                 CorrectionTarget::JointAngle => {
                     out.dq[k * n + target_index.unwrap_or(0)] += w;
+                }
+                CorrectionTarget::JointPlay => {
+                    let j = target_index.unwrap_or(0);
+                    out.dq[k * n + j] += w * pc.direction.get(j).copied().unwrap_or(0.0);
                 }
                 CorrectionTarget::StringReading => {
                     out.dl[k * m + target_index.unwrap_or(0)] += w;

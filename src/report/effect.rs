@@ -73,6 +73,13 @@ pub enum CorrectionTarget {
     /// anchors spreading about their centroid
     /// ([`InstrumentScale`](Self::InstrumentScale)) is another geometry.
     ReadingScale,
+    /// Half one joint's dead band (rad): the joint sits at commanded +
+    /// the correction times the side it arrived from (+1 from below, -1
+    /// from above; nothing where the recording does not say). A play that
+    /// changes during the session (grease thinning as the drive warms,
+    /// wear), where the catalogue's backlash is one constant play, is such
+    /// a correction in the clock.
+    JointPlay,
 }
 
 /// What drives a data-driven correction.
@@ -758,6 +765,17 @@ fn check_target(
                     .into(),
             );
     }
+    if target == CorrectionTarget::JointPlay
+        && !matches!(
+            driver,
+            CorrectionDriver::Time | CorrectionDriver::Temperature
+        )
+    {
+        return Err(
+                "a correction of a joint's play follows the clock or the temperature (a play that changes as the drive warms or wears): its driver must be time or temperature"
+                    .into(),
+            );
+    }
     if !matches!(
         target,
         CorrectionTarget::Point
@@ -852,6 +870,29 @@ mod tests {
         assert!(check_correction(&by_moves(joint, Some(1), None)).is_err());
         let string = CorrectionTarget::StringReading;
         assert!(check_correction(&by_moves(string, Some(1), Some(1))).is_err());
+    }
+
+    #[test]
+    fn a_joints_play_follows_the_clock_or_the_temperature() {
+        let play = |target_index, driver| Kind::DataDriven {
+            target: CorrectionTarget::JointPlay,
+            target_index,
+            driver,
+            driver_index: None,
+            knots: vec![0.0, 600.0, 1200.0],
+            period: None,
+            range: None,
+            axis: None,
+        };
+        assert_eq!(check_correction(&play(Some(1), CorrectionDriver::Time)), Ok(()));
+        assert_eq!(
+            check_correction(&play(Some(1), CorrectionDriver::Temperature)),
+            Ok(())
+        );
+        // Its joint is needed; a play by a string's length is no physics.
+        assert!(check_correction(&play(None, CorrectionDriver::Time)).is_err());
+        let err = check_correction(&play(Some(1), CorrectionDriver::StringLength)).unwrap_err();
+        assert!(err.contains("time or temperature"), "{err}");
     }
 
     #[test]

@@ -166,3 +166,31 @@ fn a_joint_creeping_under_its_load_is_placed_at_its_motion_and_corrected() {
         d.evidence
     );
 }
+
+/// A joint's play that shrinks as its drive warms up takes the sign of the
+/// side the joint arrived from but changes size over the session, which
+/// the catalogue's backlash (one constant play) is not: nothing is named,
+/// the remainder is placed at joint 2's motion (its part by the side it
+/// arrived from agrees between poses neighbouring in time), and a
+/// correction of joint 2's play by the clock predicts the held-out readings
+/// better; compensation cannot use it (the clock is this session's).
+#[test]
+fn a_play_changing_during_the_session_is_placed_at_its_motion_and_corrected() {
+    use drawcal::physics::effects::{CorrectionDriver, CorrectionTarget};
+    let (_, d) = common::corrected_unnamed(
+        "xcheck9_warmup_play_std4",
+        |p| p.driver == "motion" && p.joint == Some(2),
+        (
+            CorrectionTarget::JointPlay,
+            Some(1),
+            CorrectionDriver::Time,
+            None,
+        ),
+        0.6,
+    );
+    assert!(
+        d.evidence.contains("compensation cannot use it") && d.evidence.contains("play"),
+        "{}",
+        d.evidence
+    );
+}

@@ -294,3 +294,35 @@ fn a_correction_where_only_the_robot_side_placed_the_remainder_replaces_forced_n
         0.5,
     );
 }
+
+/// A reducer stiffer against one sense of torque than the other deflects
+/// by the torque's size as well as by the torque: a harmonic of the joint's
+/// angle resembles that (the load turns over with the angle) and is what a
+/// forward selection first names, but a function of the joint's gravity
+/// torque predicts the held-out readings clearly better, so the harmonic is
+/// dropped rather than named and the remainder is corrected by the load.
+#[test]
+fn a_reducer_stiffer_one_way_is_not_a_harmonic() {
+    let (report, d) = common::corrected_unnamed(
+        "xcheck9_asymmetric_stiffness_std4",
+        |p| p.driver == "joint" && p.joint == Some(2),
+        (
+            CorrectionTarget::JointAngle,
+            Some(1),
+            CorrectionDriver::GravityTorque,
+            Some(1),
+        ),
+        0.5,
+    );
+    let u = report
+        .findings
+        .iter()
+        .find(|f| f.effect == "unexplained")
+        .expect("an unexplained finding");
+    assert!(
+        u.evidence.contains("joint_periodic") && u.evidence.contains("gravity torque"),
+        "{}",
+        u.evidence
+    );
+    assert!(d.evidence.contains("compensation"), "{}", d.evidence);
+}

@@ -411,17 +411,32 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
             let mut out = move_families(inputs, j - 1);
             out.extend(slots.by_move_direction(j - 1));
             out.extend(slots.by_load_change(j - 1));
+            // Or its play changing during the session.
+            out.push(slots.clocked(CorrectionTarget::JointPlay, Some(j - 1)));
             out
         }
         // The move that led to each pose: T off along it by a function of
         // its length (overshoot or lag of an arm not settled at the dwell).
-        ("motion", _, _) => vec![slots.knotted(
-            CorrectionTarget::Point,
-            None,
-            CorrectionDriver::Motion,
-            None,
-            &JOINT_KNOTS,
-        )],
+        // Or one string's reading by its own last change: a string that
+        // lags or stretches with the way it moved reads off along its own
+        // direction, and the located point, which every string's reading
+        // makes, follows the move.
+        ("motion", _, _) => {
+            let mut out = vec![slots.knotted(
+                CorrectionTarget::Point,
+                None,
+                CorrectionDriver::Motion,
+                None,
+                &JOINT_KNOTS,
+            )];
+            out.extend((0..m).map(|s| {
+                slots.signed(
+                    (CorrectionTarget::StringReading, Some(s)),
+                    (CorrectionDriver::StringMove, Some(s)),
+                )
+            }));
+            out
+        }
         ("configuration", None, None) if m == 0 => slots.by_line_of_sight(),
         ("string", _, Some(s)) if s <= m => slots.by_string_length(s - 1),
         // Only the robot side's excess: no test said what drives it, so
@@ -911,6 +926,21 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
         "compensation cannot use it: it depends on the load the joint carried at the pose before a target, which the program that visits it decides, not the target; the joint lags the change of its load as a drive that creeps or winds up under load would (a harmonic drive's flexspline relaxing during the dwell, friction holding part of its deflection): dwell longer before measuring, check the drive, or approach every target from the same load".into()
     } else if *driver == CorrectionDriver::JointMove {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; the joint stops short by an amount that grows with the move: check its drive for friction or elastic wind-up (a brake dragging, a worn or preloaded gear, a soft coupling), or approach every target with the same move".into()
+    } else if let Kind::DataDriven {
+        target: CorrectionTarget::JointPlay,
+        target_index: Some(t),
+        ..
+    } = kind
+    {
+        format!(
+            "compensation cannot use it: joint {}'s play changed with this session's {} (grease thinning as the drive warmed up, wear), which a future target does not carry; check that joint's drive for play and wear, warm the robot up before calibrating and before precise work, or approach every target from the same side",
+            t + 1,
+            if *driver == CorrectionDriver::Temperature {
+                "temperature"
+            } else {
+                "clock"
+            }
+        )
     } else if let Kind::DataDriven {
         target: CorrectionTarget::JointAngle,
         target_index: Some(t),

@@ -199,7 +199,7 @@ fn locate_and_correct(inputs: &Inputs, state: &mut State) -> bool {
         .iter()
         .map(|e| e.kind.clone())
         .collect();
-    placed_by_correction(&mut state.findings[at], &kept);
+    placed_by_correction(&mut state.findings[at], &kept, inputs.ctx.anchors.len());
     pruned_and_restated(inputs, state);
     true
 }
@@ -237,11 +237,18 @@ fn wrong_way_place(inputs: &Inputs, state: &State) -> Option<Finding> {
     ))
 }
 
-/// A correction of one joint's angle by the clock, kept where the
-/// remainder was located in time, says where that structure lives: the
-/// `unexplained` finding's time place takes the joint, and its evidence
-/// says why.
-fn placed_by_correction(finding: &mut Finding, kept: &[crate::physics::effects::Kind]) {
+/// A kept correction that says where the structure lives moves the
+/// `unexplained` finding's place there, and its evidence says why: one
+/// joint's angle by the clock (the time place takes the joint), one
+/// string's reading over the workspace or its zero and scale by its
+/// direction (the workspace place takes the string), one string's reading
+/// by its last change (the move's place takes the string; `n_strings`
+/// says whether the rig can tell its side).
+fn placed_by_correction(
+    finding: &mut Finding,
+    kept: &[crate::physics::effects::Kind],
+    n_strings: usize,
+) {
     use crate::physics::effects::{CorrectionDriver, CorrectionTarget, Kind};
     let Some(FindingModel::Unexplained(u)) = &mut finding.parameters else {
         return;
@@ -263,6 +270,36 @@ fn placed_by_correction(finding: &mut Finding, kept: &[crate::physics::effects::
             .filter(|p| p.driver == "workspace" && p.sensor.is_none())
         {
             p.sensor = Some(s + 1);
+        }
+    }
+    // One string's reading by its last change of length says whose
+    // motion: the move's place takes the string.
+    if let Some(s) = kept.iter().find_map(|k| match k {
+        Kind::DataDriven {
+            target: CorrectionTarget::StringReading,
+            target_index: Some(s),
+            driver: CorrectionDriver::StringMove,
+            ..
+        } => Some(*s),
+        _ => None,
+    }) {
+        let mut moved = false;
+        for p in u
+            .places
+            .iter_mut()
+            .filter(|p| p.driver == "motion" && p.joint.is_none() && p.sensor.is_none())
+        {
+            p.sensor = Some(s + 1);
+            // Three strings cannot tell a string's error from T's.
+            p.side = if n_strings > 3 { "sensor" } else { "strings" }.into();
+            moved = true;
+        }
+        if moved {
+            finding.evidence = format!(
+                "{}; it is string {}'s: a correction of that string's reading by its last change of length predicted the train poses best (cross-validated against T moved along its move and every other string's)",
+                finding.evidence,
+                s + 1
+            );
         }
     }
     // One string's zero and scale by where it points says whose, whichever

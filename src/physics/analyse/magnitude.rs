@@ -103,7 +103,7 @@ fn size_of<'a>(
             let kind = e.kind.clone();
             let train = obs.train.clone();
             let scale = match target {
-                CorrectionTarget::JointAngle => deg,
+                CorrectionTarget::JointAngle | CorrectionTarget::JointPlay => deg,
                 CorrectionTarget::InstrumentScale | CorrectionTarget::ReadingScale => 1e6,
                 _ => 1.0,
             };

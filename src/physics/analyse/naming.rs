@@ -83,6 +83,10 @@ fn overlapping(state: &State) -> Vec<usize> {
                     _,
                 ) => false,
                 (CorrectionTarget::JointAngle, _, other) => other.joint() == *target_index,
+                // A play in time can be the one constant play too.
+                (CorrectionTarget::JointPlay, _, Kind::Backlash { joint_index }) => {
+                    Some(*joint_index) == *target_index
+                }
                 (CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale, _, other) => {
                     other.sensor() == *target_index
                 }
@@ -378,37 +382,51 @@ pub(super) fn steady_anchor(inputs: &Inputs, state: &mut State) -> bool {
 /// compliances at 3x the noise were replaced).
 const LOAD_SHAPE_Z: f64 = 3.0;
 
-/// A compliance turns a joint in proportion to its gravity torque. When a
-/// smooth function of that torque (or one jumping where it changes sign)
-/// predicts the held-out readings clearly better (paired z of at least
-/// [`LOAD_SHAPE_Z`]), the joint is not an elastic one:
-/// the compliance is dropped, an `unexplained` finding at the joint's
-/// angle says so and the correction is kept. Each compliance with link
-/// masses is tried; true when any was replaced.
+/// A compliance turns a joint in proportion to its gravity torque; a
+/// harmonic follows its angle. When a smooth function of that torque (or
+/// one jumping where it changes sign) predicts the held-out readings
+/// clearly better (paired z of at least [`LOAD_SHAPE_Z`]), the joint's
+/// error follows its load in a form neither has (a reducer stiffer one way
+/// than the other, play that gravity takes up, a stiffness that changes
+/// with the load; a harmonic of the angle only resembled it, as the load
+/// turns over with the angle): the named effect is dropped, an
+/// `unexplained` finding at the joint's angle says so and the correction
+/// is kept. Each compliance and each harmonic with link masses is tried;
+/// true when any was replaced.
 pub(super) fn uneven_load(inputs: &Inputs, state: &mut State) -> bool {
     use crate::physics::effects::Kind;
     let mut any = false;
-    let joints: Vec<usize> = state
+    let tried: Vec<Kind> = state
         .accepted
         .iter()
-        .filter_map(|e| match &e.kind {
-            Kind::JointCompliance {
-                joint_index,
-                regressors,
-            } if regressors.is_empty() => Some(*joint_index),
-            _ => None,
+        .filter(|e| match &e.kind {
+            Kind::JointCompliance { regressors, .. } => regressors.is_empty(),
+            Kind::JointPeriodic { .. } => true,
+            _ => false,
         })
+        .map(|e| e.kind.clone())
         .collect();
-    for j in joints {
-        let Some(k) = state.accepted.iter().position(|e| {
-            matches!(&e.kind, Kind::JointCompliance { joint_index, regressors } if *joint_index == j && regressors.is_empty())
-        }) else {
+    for kind in tried {
+        let Some(j) = kind.joint() else { continue };
+        // Gone already (with an earlier replacement's pruning).
+        let Some(k) = state.accepted.iter().position(|e| e.kind == kind) else {
             continue;
         };
         let families = super::data_driven::load_families(inputs, j);
         if families.is_empty() {
             continue;
         }
+        let (shape, physics) = match kind {
+            Kind::JointPeriodic { .. } => (
+                "a harmonic of its angle",
+                "the error follows the load, not the angle (the load turns over with the angle, so a harmonic resembled it); a reducer stiffer one way than the other, play that gravity takes up, or a stiffness that changes with the load would do this",
+            ),
+            _ => (
+                "an angle in proportion to its gravity torque",
+                "the joint is not elastic; play that gravity takes up as the load changes sign, or a stiffness that changes with the load, would do this",
+            ),
+        };
+        let name = described(&kind);
         any |= replace_by_correction(
             inputs,
             state,
@@ -420,11 +438,11 @@ pub(super) fn uneven_load(inputs: &Inputs, state: &mut State) -> bool {
                 Some(Replacement {
                     joint: Some(j + 1),
                     located: format!(
-                        "an error of joint {}'s angle that follows its gravity load out of proportion, located by the test of joint_compliance's shape (an angle in proportion to the gravity torque, against a smooth function of it)",
+                        "an error of joint {}'s angle that follows its gravity load out of proportion, located by the test of {name}'s shape ({shape}, against a smooth function of the gravity torque)",
                         j + 1
                     ),
                     why: format!(
-                        "joint_compliance on joint {} (an angle in proportion to its gravity torque) was kept, but a smooth function of that torque predicts the held-out readings better (paired z = {z:.1}, needs {LOAD_SHAPE_Z}): the joint is not elastic; play that gravity takes up as the load changes sign, or a stiffness that changes with the load, would do this",
+                        "{name} ({shape}) was kept, but a smooth function of joint {}'s gravity torque predicts the held-out readings better (paired z = {z:.1}, needs {LOAD_SHAPE_Z}): {physics}",
                         j + 1
                     ),
                 })
