@@ -884,7 +884,10 @@ mod tests {
             range: None,
             axis: None,
         };
-        assert_eq!(check_correction(&play(Some(1), CorrectionDriver::Time)), Ok(()));
+        assert_eq!(
+            check_correction(&play(Some(1), CorrectionDriver::Time)),
+            Ok(())
+        );
         assert_eq!(
             check_correction(&play(Some(1), CorrectionDriver::Temperature)),
             Ok(())

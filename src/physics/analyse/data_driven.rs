@@ -24,8 +24,9 @@
 //! torque (the last two smooth or jumping where the driver changes sign),
 //! a string's zero and scale by its direction about an axis fitted from
 //! the residual ([`aimed`]), every string's scale by the clock or the
-//! temperature, and, where the naming gate took named steps out, a
-//! function of the clock jumping there.
+//! temperature, a joint's play (by the side it arrived from) by the clock,
+//! and, where the naming gate took named steps out, a function of the
+//! clock jumping there.
 
 use nalgebra::{DMatrix, Vector3};
 

@@ -294,6 +294,15 @@ fn placed_by_correction(
             p.side = if n_strings > 3 { "sensor" } else { "strings" }.into();
             moved = true;
         }
+        // One place per string and driver: the strongest (they are
+        // strongest first), where the string's own test placed it too.
+        let mut seen = Vec::new();
+        u.places.retain(|p| {
+            let key = (p.driver.clone(), p.joint, p.sensor);
+            let first = !seen.contains(&key);
+            seen.push(key);
+            first
+        });
         if moved {
             finding.evidence = format!(
                 "{}; it is string {}'s: a correction of that string's reading by its last change of length predicted the train poses best (cross-validated against T moved along its move and every other string's)",

@@ -2,7 +2,7 @@
 //! workspace the residual is largest.
 
 use super::confined::Concentrated;
-use super::neighbours::{Along, Neighbours, AXES};
+use super::neighbours::{AXES, Along, Neighbours};
 use super::robot_side::{Excess, Motion};
 use super::scalar::ScalarTest;
 use crate::physics::effects::Context;

@@ -4,13 +4,13 @@
 //! lives: neighbouring poses (by a joint angle, also along the direction
 //! that joint moves T; by time, temperature, the joint configuration; by a
 //! string's length, direction or last move) that agree more than noise
-//! allows ([`neighbours`], [`scalar`]); with four or more strings, a
+//! allows ([`neighbours`](mod@neighbours), [`scalar`]); with four or more strings, a
 //! robot-side residual above the strings' own noise, and a residual that
 //! follows the move into each pose ([`robot_side`]); and a mismatch
 //! confined to a stretch of one joint's range that the held-out poses
-//! confirm ([`confined`]). [`located`] says which of them holds.
+//! confirm ([`confined`]). [`located`](mod@located) says which of them holds.
 //!
-//! The layout: this file builds the finding; [`orderings`] says which
+//! The layout: this file builds the finding; [`orderings`](mod@orderings) says which
 //! poses neighbour which; [`nearest`] finds nearest poses.
 
 mod confined;
@@ -23,11 +23,13 @@ mod scalar;
 
 pub(in crate::physics) use robot_side::robot_side_share;
 
-use confined::{concentrated, Concentrated};
+use confined::{Concentrated, concentrated};
 use located::{located, worst_region};
-use neighbours::{neighbours, Along};
+use neighbours::{Along, neighbours};
 use orderings::orderings;
-use robot_side::{flange_components, joint_components, motion_test, robot_side_excess, Excess, Motion};
+use robot_side::{
+    Excess, Motion, flange_components, joint_components, motion_test, robot_side_excess,
+};
 use scalar::{
     drive_tests, line_of_sight_test, load_change_tests, play_in_time_tests, string_tests,
 };

@@ -159,7 +159,10 @@ pub(super) fn neighbours(
 /// How much more neighbours agree than independent noise allows: per pair
 /// the product `d` of their residuals, summed over its own scale, or
 /// their signs counted, whichever is the larger z.
-pub(super) fn agreement_z(pairs: &[(usize, usize)], d: &dyn Fn(usize, usize) -> f64) -> Option<f64> {
+pub(super) fn agreement_z(
+    pairs: &[(usize, usize)],
+    d: &dyn Fn(usize, usize) -> f64,
+) -> Option<f64> {
     let (mut s, mut v, mut signs, mut n) = (0.0, 0.0, 0.0, 0usize);
     for &(i, k) in pairs {
         let x = d(i, k);

@@ -13,7 +13,7 @@ use crate::physics::effects::{Context, CorrectionDriver};
 /// nearest neighbour in joint space (the layout [`unexplained_plot`]
 /// reads).
 ///
-/// [`unexplained_plot`]: super::evidence::unexplained_plot
+/// [`unexplained_plot`]: crate::physics::evidence::unexplained_plot
 pub(super) fn orderings(obs: &Observations, ctx: &Context) -> Vec<(String, Vec<(usize, usize)>)> {
     let n = ctx.n_joints;
     let mut keys: Vec<(String, Vec<f64>)> = (0..n)

@@ -32,7 +32,10 @@ pub(super) fn common_displacement(
 
 /// Share of the train string residual energy that a displacement of T per
 /// pose explains, and the share noise alone would give (3/m).
-pub(in crate::physics) fn robot_side_share(obs: &Observations, p: &[f64]) -> (Option<f64>, Option<f64>) {
+pub(in crate::physics) fn robot_side_share(
+    obs: &Observations,
+    p: &[f64],
+) -> (Option<f64>, Option<f64>) {
     let m = obs.anchors.len();
     if m <= 3 {
         return (None, None);

@@ -51,7 +51,12 @@ pub(super) enum ScalarTestKind {
 /// string's, its side undecided). A string that reads wrong by a function
 /// of its length (a drum's pitch, a worn spool) or of the clock shows here,
 /// not in the robot-side tests.
-pub(super) fn string_tests(obs: &Observations, ctx: &Context, res: &[f64], rpp: usize) -> Vec<ScalarTest> {
+pub(super) fn string_tests(
+    obs: &Observations,
+    ctx: &Context,
+    res: &[f64],
+    rpp: usize,
+) -> Vec<ScalarTest> {
     let m = obs.anchors.len();
     if m < 3 || rpp != m {
         return vec![];
@@ -216,7 +221,11 @@ pub(super) fn line_of_sight_test(
 /// the same for poses whose moves point alike, whatever the joints' own
 /// signs say. A joint's own backlash, which the catalogue names first, is
 /// such a function too; what stays after it is not.
-pub(super) fn drive_tests(obs: &Observations, ctx: &Context, along: Option<&[Vec<f64>]>) -> Vec<ScalarTest> {
+pub(super) fn drive_tests(
+    obs: &Observations,
+    ctx: &Context,
+    along: Option<&[Vec<f64>]>,
+) -> Vec<ScalarTest> {
     let Some(along) = along else {
         return vec![];
     };
