@@ -249,21 +249,17 @@ fn placed_by_correction(
     kept: &[crate::physics::effects::Kind],
     n_strings: usize,
 ) {
-    use crate::physics::effects::{CorrectionDriver, CorrectionTarget, Kind};
+    use crate::physics::effects::{CorrectionDriver, CorrectionTarget};
     let Some(FindingModel::Unexplained(u)) = &mut finding.parameters else {
         return;
     };
     // One string's reading as a field over the workspace says whose: the
     // workspace place takes the string.
-    if let Some(s) = kept.iter().find_map(|k| match k {
-        Kind::DataDriven {
-            target: CorrectionTarget::StringReading,
-            target_index: Some(s),
-            driver: CorrectionDriver::Workspace,
-            ..
-        } => Some(*s),
-        _ => None,
-    }) {
+    if let Some(s) = kept_index(
+        kept,
+        CorrectionTarget::StringReading,
+        CorrectionDriver::Workspace,
+    ) {
         for p in u
             .places
             .iter_mut()
@@ -274,15 +270,11 @@ fn placed_by_correction(
     }
     // One string's reading by its last change of length says whose
     // motion: the move's place takes the string.
-    if let Some(s) = kept.iter().find_map(|k| match k {
-        Kind::DataDriven {
-            target: CorrectionTarget::StringReading,
-            target_index: Some(s),
-            driver: CorrectionDriver::StringMove,
-            ..
-        } => Some(*s),
-        _ => None,
-    }) {
+    if let Some(s) = kept_index(
+        kept,
+        CorrectionTarget::StringReading,
+        CorrectionDriver::StringMove,
+    ) {
         let mut moved = false;
         for p in u
             .places
@@ -314,15 +306,11 @@ fn placed_by_correction(
     // One string's zero and scale by where it points says whose, whichever
     // string the place's own test pointed at (one string's error moves
     // the located point, so every string's residual follows it).
-    if let Some(s) = kept.iter().find_map(|k| match k {
-        Kind::DataDriven {
-            target: CorrectionTarget::StringZeroScale,
-            target_index: Some(s),
-            driver: CorrectionDriver::StringDirection,
-            ..
-        } => Some(*s),
-        _ => None,
-    }) {
+    if let Some(s) = kept_index(
+        kept,
+        CorrectionTarget::StringZeroScale,
+        CorrectionDriver::StringDirection,
+    ) {
         let mut moved = false;
         for p in u
             .places
@@ -341,15 +329,7 @@ fn placed_by_correction(
         }
     }
     // The first such correction kept says where (one joint per place).
-    let Some(t) = kept.iter().find_map(|k| match k {
-        Kind::DataDriven {
-            target: CorrectionTarget::JointAngle,
-            target_index: Some(t),
-            driver: CorrectionDriver::Time,
-            ..
-        } => Some(*t),
-        _ => None,
-    }) else {
+    let Some(t) = kept_index(kept, CorrectionTarget::JointAngle, CorrectionDriver::Time) else {
         return;
     };
     let mut placed = false;
@@ -368,6 +348,24 @@ fn placed_by_correction(
             t + 1
         );
     }
+}
+
+/// The target index (a joint or a string, 0-based) of the first kept
+/// correction of `target` by `driver`.
+fn kept_index(
+    kept: &[crate::physics::effects::Kind],
+    target: crate::physics::effects::CorrectionTarget,
+    driver: crate::physics::effects::CorrectionDriver,
+) -> Option<usize> {
+    kept.iter().find_map(|k| match k {
+        crate::physics::effects::Kind::DataDriven {
+            target: t,
+            target_index: Some(i),
+            driver: d,
+            ..
+        } if *t == target && *d == driver => Some(*i),
+        _ => None,
+    })
 }
 
 /// Once a data-driven correction is in: the named effects it makes
