@@ -16,7 +16,7 @@ use super::extract::{ApiJson, ApiQuery, Id};
 use super::{ApiError, ApiResult, AppState, ErrorBody, PageParams, Paged};
 use crate::report::Report;
 use crate::store::time::normalize_bound;
-use crate::store::{ActivationRec, CalibrationFilter, CalibrationRec, StoreError};
+use crate::store::{ActivationRec, CalibrationFilter, CalibrationRec, CalibrationRow, StoreError};
 
 /// Output format of history lists.
 #[derive(Debug, Clone, Copy, Default, Deserialize, ToSchema, PartialEq, Eq)]
@@ -99,9 +99,13 @@ pub(super) fn text_cell(s: &str) -> String {
     cell
 }
 
+/// What a cell may not begin with unguarded: a spreadsheet reads such text
+/// as a formula.
+const FORMULA_STARTS: [char; 6] = ['=', '+', '-', '@', '\t', '\r'];
+
 /// [`text_cell`] appended to `cell` (no allocation per cell).
 fn push_text_cell(cell: &mut String, s: &str) {
-    if s.starts_with(['=', '+', '-', '@', '\t', '\r']) {
+    if s.starts_with(FORMULA_STARTS) {
         cell.push('\'');
     }
     cell.push_str(s);
@@ -116,8 +120,8 @@ fn push_text_cell(cell: &mut String, s: &str) {
 /// 2^-13 of the exact one, so it rounds as the exact value does unless its
 /// fraction is within 10^-3 of one half; those values, negative ones (and
 /// `-0.0`), huge ones, NaN and infinities take the standard path.
-fn push_fixed4(s: &mut String, v: f64) {
-    use std::fmt::Write;
+fn push_fixed4(s: &mut Vec<u8>, v: f64) {
+    use std::io::Write;
     const LIMIT: f64 = (1u64 << 40) as f64;
     let x = v * 10_000.0;
     // False for NaN and +inf; the sign test refuses -0.0 and negatives.
@@ -125,11 +129,11 @@ fn push_fixed4(s: &mut String, v: f64) {
         let n = x.round() as u64;
         let frac = n % 10_000;
         let digits = [frac / 1000, frac / 100 % 10, frac / 10 % 10, frac % 10];
-        // Writing to a `String` cannot fail.
-        let _ = write!(s, "{}", n / 10_000);
-        s.push('.');
-        s.extend(digits.map(|d| char::from(b'0' + d as u8)));
+        s.extend_from_slice(itoa::Buffer::new().format(n / 10_000).as_bytes());
+        s.push(b'.');
+        s.extend(digits.map(|d| b'0' + d as u8));
     } else {
+        // Writing to a `Vec` cannot fail.
         let _ = write!(s, "{v:.4}");
     }
 }
@@ -195,137 +199,192 @@ const CALIBRATION_COLUMNS: [&str; 19] = [
 /// length.
 const CSV_CHUNK_BYTES: usize = 32 * 1024;
 
-/// Calibrations written as CSV records into a buffer that is taken a
-/// piece at a time: the same writer, settings and cells as [`csv_table`]
-/// (a test compares them byte for byte), without a `String` per cell.
+/// Calibrations written as CSV, a piece of [`CSV_CHUNK_BYTES`] at a time,
+/// on the thread that reads them ([`crate::store::ExportSink`]): straight
+/// from the row the database driver holds into the piece's bytes, no
+/// `String` per cell or per row. The dialect is [`csv_writer`]'s, written
+/// here by hand (its rules are few: a cell holding `,`, `"`, `\r` or `\n`
+/// is quoted, with its quotes doubled; `,` between cells, `\n` after a
+/// record); tests compare the bytes with that writer's over awkward and
+/// random text.
 struct CalibrationCsv {
-    w: csv::Writer<Vec<u8>>,
-    /// The cell being formatted (reused).
-    cell: String,
+    buf: Vec<u8>,
 }
 
 impl CalibrationCsv {
     /// A writer that has written the header.
-    fn new() -> ApiResult<Self> {
-        let mut w = csv_writer(Vec::with_capacity(CSV_CHUNK_BYTES + 1024));
-        w.write_record(CALIBRATION_COLUMNS).map_err(csv_error)?;
-        Ok(CalibrationCsv {
-            w,
-            cell: String::new(),
-        })
+    fn new() -> Self {
+        let mut csv = CalibrationCsv {
+            buf: Vec::with_capacity(CSV_CHUNK_BYTES + 1024),
+        };
+        for (i, name) in CALIBRATION_COLUMNS.iter().enumerate() {
+            if i > 0 {
+                csv.buf.push(b',');
+            }
+            csv.cell(false, name);
+        }
+        csv.buf.push(b'\n');
+        csv
     }
 
-    /// Write the cell formatted by `f`.
-    fn field(&mut self, f: impl FnOnce(&mut String)) -> csv::Result<()> {
-        self.cell.clear();
-        f(&mut self.cell);
-        self.w.write_field(&self.cell)
+    /// A text cell: after the formula guard's `'` if `guard` and `s` begins
+    /// like a formula ([`push_text_cell`]), quoted if it must be.
+    fn cell(&mut self, guard: bool, s: &str) {
+        let quote = guard && s.starts_with(FORMULA_STARTS);
+        let bytes = s.as_bytes();
+        if bytes
+            .iter()
+            .any(|&b| matches!(b, b',' | b'"' | b'\r' | b'\n'))
+        {
+            self.buf.push(b'"');
+            if quote {
+                self.buf.push(b'\'');
+            }
+            let mut parts = bytes.split(|&b| b == b'"');
+            if let Some(first) = parts.next() {
+                self.buf.extend_from_slice(first);
+            }
+            for part in parts {
+                self.buf.extend_from_slice(b"\"\"");
+                self.buf.extend_from_slice(part);
+            }
+            self.buf.push(b'"');
+        } else {
+            if quote {
+                self.buf.push(b'\'');
+            }
+            self.buf.extend_from_slice(bytes);
+        }
     }
 
-    /// Write one calibration's record.
-    fn row(&mut self, c: &CalibrationRec) -> ApiResult<()> {
-        self.record(c).map_err(csv_error)
+    /// An integer cell, then the separator.
+    fn int(&mut self, v: i64) {
+        self.buf
+            .extend_from_slice(itoa::Buffer::new().format(v).as_bytes());
+        self.buf.push(b',');
     }
 
-    fn record(&mut self, c: &CalibrationRec) -> csv::Result<()> {
-        use std::fmt::Write;
-        // Writing to a `String` cannot fail.
-        let num = |x: Option<f64>| {
-            move |s: &mut String| {
-                if let Some(v) = x {
-                    push_fixed4(s, v);
+    /// A held-out or training RMS cell (`{:.4}`, empty when absent), then
+    /// the separator.
+    fn num(&mut self, v: Option<f64>) {
+        if let Some(v) = v {
+            push_fixed4(&mut self.buf, v);
+        }
+        self.buf.push(b',');
+    }
+
+    /// The effects' cell, then the separator: the stored list with `;`
+    /// between its names instead of `,` (as before), which needs no quotes,
+    /// so the cell is quoted only for what else it holds.
+    fn effects(&mut self, stored: &str) {
+        let bytes = stored.as_bytes();
+        if bytes.iter().any(|&b| matches!(b, b'"' | b'\r' | b'\n')) {
+            self.buf.push(b'"');
+            for &b in bytes {
+                match b {
+                    b',' => self.buf.push(b';'),
+                    b'"' => self.buf.extend_from_slice(b"\"\""),
+                    b => self.buf.push(b),
                 }
             }
-        };
-        let int = |v: i64| {
-            move |s: &mut String| {
-                let _ = write!(s, "{v}");
-            }
-        };
-        self.field(int(c.id))?;
-        self.field(int(c.robot_id))?;
-        self.field(|s| push_text_cell(s, &c.serial_number))?;
-        self.field(int(c.model_id))?;
-        for t in [&c.site, &c.line, &c.cell] {
-            self.field(|s| push_text_cell(s, t.as_deref().unwrap_or_default()))?;
-        }
-        self.field(int(c.version))?;
-        self.w.write_field(&c.created_at)?;
-        self.w.write_field(&c.method)?;
-        self.field(int(c.n_poses))?;
-        self.field(int(c.n_test))?;
-        self.field(num(c.test_rms_before_mm))?;
-        self.field(num(c.test_rms_after_mm))?;
-        self.field(num(c.train_rms_after_mm))?;
-        // A list inside a cell: `;` between the effects, as before.
-        self.field(|s| s.extend(c.effects.chars().map(|ch| if ch == ',' { ';' } else { ch })))?;
-        self.w
-            .write_field(if c.active { "true" } else { "false" })?;
-        self.field(int(c.session_id))?;
-        self.field(int(c.job_id))?;
-        self.w.write_record(None::<&[u8]>)
-    }
-
-    /// The bytes written so far, now in the buffer.
-    fn len(&mut self) -> ApiResult<usize> {
-        self.w.flush().map_err(csv_error)?;
-        Ok(self.w.get_ref().len())
-    }
-
-    /// Write rows from `rows` until a piece is ready; `true` when `rows`
-    /// has ended.
-    async fn fill(&mut self, rows: &mut CalibrationStream) -> ApiResult<bool> {
-        while self.len()? < CSV_CHUNK_BYTES {
-            match rows.next().await {
-                Some(row) => self.row(&row?)?,
-                None => return Ok(true),
+            self.buf.push(b'"');
+        } else {
+            for (i, name) in bytes.split(|&b| b == b',').enumerate() {
+                if i > 0 {
+                    self.buf.push(b';');
+                }
+                self.buf.extend_from_slice(name);
             }
         }
-        Ok(false)
+        self.buf.push(b',');
     }
 
-    /// Take what is written.
-    fn take(&mut self) -> ApiResult<Bytes> {
-        // A new writer for the next piece: the csv writer lends its
-        // buffer only by value.
-        let next = csv_writer(Vec::with_capacity(CSV_CHUNK_BYTES + 1024));
-        let w = std::mem::replace(&mut self.w, next);
-        Ok(Bytes::from(w.into_inner().map_err(csv_error)?))
+    /// A text cell, then the separator.
+    fn text(&mut self, guard: bool, s: &str) {
+        self.cell(guard, s);
+        self.buf.push(b',');
     }
 }
 
-/// Calibrations as the store reads them.
-type CalibrationStream = BoxStream<'static, Result<CalibrationRec, StoreError>>;
+impl crate::store::ExportSink for CalibrationCsv {
+    type Piece = Bytes;
 
-/// A `text/csv` answer of calibrations, written as the store reads them, a
-/// piece of [`CSV_CHUNK_BYTES`] at a time: memory stays bounded however
-/// many rows match, and the first bytes leave before the last row is
-/// read. The first piece is written before the answer starts, so a query
-/// that fails is an error answer (its status chosen where every error's
-/// is); a failure after that can only end the answer early: the
-/// connection is closed mid-body, which a client sees as an incomplete
-/// answer, never as a complete shorter CSV.
-async fn calibrations_csv(mut rows: CalibrationStream) -> ApiResult<Response> {
-    let mut csv = CalibrationCsv::new()?;
-    let ended = csv.fill(&mut rows).await?;
-    let first = csv.take()?;
-    if ended {
+    /// One calibration's record, its cells in [`CALIBRATION_COLUMNS`]'
+    /// order: the serial number and the robot's tags behind the formula
+    /// guard, the RMS figures as `{:.4}`, the effects' list with `;`
+    /// between its names.
+    fn row(&mut self, c: &CalibrationRow<'_>) {
+        self.int(c.id);
+        self.int(c.robot_id);
+        self.text(true, c.serial_number);
+        self.int(c.model_id);
+        for t in [c.site, c.line, c.cell] {
+            self.text(true, t.unwrap_or_default());
+        }
+        self.int(c.version);
+        self.text(false, c.created_at);
+        self.text(false, c.method);
+        self.int(c.n_poses);
+        self.int(c.n_test);
+        self.num(c.test_rms_before_mm);
+        self.num(c.test_rms_after_mm);
+        self.num(c.train_rms_after_mm);
+        // A list inside a cell: `;` between the effects, as before (`;`
+        // needs no quotes, so the cell needs them only for what else it
+        // holds).
+        self.effects(c.effects);
+        self.buf
+            .extend_from_slice(if c.active { b"true," } else { b"false," });
+        self.int(c.session_id);
+        self.int(c.job_id);
+        // The last cell's separator becomes the record's end.
+        if let Some(last) = self.buf.last_mut() {
+            *last = b'\n';
+        }
+    }
+
+    fn ready(&mut self) -> Option<Bytes> {
+        (self.buf.len() >= CSV_CHUNK_BYTES).then(|| {
+            Bytes::from(std::mem::replace(
+                &mut self.buf,
+                Vec::with_capacity(CSV_CHUNK_BYTES + 1024),
+            ))
+        })
+    }
+
+    fn finish(&mut self) -> Option<Bytes> {
+        (!self.buf.is_empty()).then(|| Bytes::from(std::mem::take(&mut self.buf)))
+    }
+}
+
+/// A calibrations CSV's pieces as the store hands them out.
+type CsvPieces = BoxStream<'static, Result<Bytes, StoreError>>;
+
+/// A `text/csv` answer of calibrations, written as the store reads them
+/// ([`CalibrationCsv`]), a piece of [`CSV_CHUNK_BYTES`] at a time: memory
+/// stays bounded however many rows match, and the first bytes leave
+/// before the last row is read. The first piece is taken before the answer
+/// starts, so a query that fails is an error answer (its status chosen
+/// where every error's is); a failure after that can only end the answer
+/// early: the connection is closed mid-body, which a client sees as an
+/// incomplete answer, never as a complete shorter CSV. Only the last piece
+/// can be shorter than [`CSV_CHUNK_BYTES`], so a short first piece is the
+/// whole answer, which is sent with its length.
+async fn calibrations_csv(mut pieces: CsvPieces) -> ApiResult<Response> {
+    let Some(first) = pieces.next().await else {
+        return Err(ApiError::Internal(
+            "CSV export: the store handed out nothing, not even the header".into(),
+        ));
+    };
+    let first = first?;
+    if first.len() < CSV_CHUNK_BYTES {
         return Ok(([(CONTENT_TYPE, "text/csv")], first).into_response());
     }
-    let rest = futures_util::stream::unfold(Some((rows, csv)), |state| async move {
-        let (mut rows, mut csv) = state?;
-        let piece = match csv.fill(&mut rows).await {
-            Ok(ended) => csv.take().map(|piece| (piece, ended)),
-            Err(e) => Err(e),
-        };
-        match piece {
-            Ok((piece, true)) if piece.is_empty() => None,
-            Ok((piece, ended)) => Some((Ok(piece), (!ended).then_some((rows, csv)))),
-            Err(e) => {
-                tracing::error!(error = %e, "CSV export cut short");
-                Some((Err(e), None))
-            }
-        }
+    let rest = pieces.map(|piece| {
+        piece.map_err(|e| {
+            tracing::error!(error = %e, "CSV export cut short");
+            ApiError::from(e)
+        })
     });
     let body = futures_util::stream::once(std::future::ready(Ok::<_, ApiError>(first))).chain(rest);
     Ok(([(CONTENT_TYPE, "text/csv")], Body::from_stream(body)).into_response())
@@ -352,7 +411,10 @@ pub async fn list_calibrations(
     // range is a bad request either way.
     let page = p.page()?;
     if f.format == Some(Format::Csv) {
-        return calibrations_csv(app.store.stream_calibrations(&filter).await).await;
+        let pieces = app
+            .store
+            .export_calibrations(&filter, CalibrationCsv::new());
+        return calibrations_csv(pieces.await).await;
     }
     let (items, total) = app.store.list_calibrations(&filter, page).await?;
     Ok(Json(Paged::new(items, total, page)).into_response())
@@ -449,11 +511,18 @@ pub async fn robot_accuracy(
         robot_id: Some(id),
         ..Default::default()
     };
-    let rows = app.store.stream_calibrations(&filter).await;
     if q.format == Some(Format::Csv) {
-        return calibrations_csv(rows).await;
+        let pieces = app
+            .store
+            .export_calibrations(&filter, CalibrationCsv::new());
+        return calibrations_csv(pieces.await).await;
     }
-    let rows: Vec<CalibrationRec> = rows.try_collect().await?;
+    let rows: Vec<CalibrationRec> = app
+        .store
+        .stream_calibrations(&filter)
+        .await
+        .try_collect()
+        .await?;
     let history = rows
         .into_iter()
         .map(|c| AccuracyPoint {
@@ -657,9 +726,14 @@ mod tests {
     #[test]
     fn fixed4_is_the_standard_formatting() {
         let check = |v: f64| {
-            let mut s = String::new();
+            let mut s = Vec::new();
             push_fixed4(&mut s, v);
-            assert_eq!(s, format!("{v:.4}"), "{v:e} ({:#x})", v.to_bits());
+            assert_eq!(
+                String::from_utf8_lossy(&s),
+                format!("{v:.4}"),
+                "{v:e} ({:#x})",
+                v.to_bits()
+            );
         };
         let mut special = vec![
             0.0,
@@ -802,8 +876,122 @@ mod tests {
         .unwrap()
     }
 
+    /// The pieces of `rows` as the store hands them out
+    /// (`Store::export_calibrations`): each row written into the sink, a
+    /// piece handed out when it is ready, the rest at the end; a failure
+    /// ends them.
+    fn pieces(rows: Vec<Result<CalibrationRec, StoreError>>) -> Vec<Result<Bytes, StoreError>> {
+        use crate::store::ExportSink;
+        let mut csv = CalibrationCsv::new();
+        let mut out = Vec::new();
+        for row in rows {
+            match row {
+                Ok(c) => {
+                    csv.row(&c.as_row());
+                    out.extend(csv.ready().map(Ok));
+                }
+                Err(e) => {
+                    out.push(Err(e));
+                    return out;
+                }
+            }
+        }
+        out.extend(csv.finish().map(Ok));
+        out
+    }
+
+    /// The CSV of `rows`, written by the export's writer.
+    fn written(rows: &[CalibrationRec]) -> Vec<u8> {
+        let pieces = pieces(rows.iter().cloned().map(Ok).collect());
+        let n = pieces.len();
+        for (i, p) in pieces.iter().enumerate() {
+            let len = p.as_ref().unwrap().len();
+            assert!(
+                i + 1 == n || len >= CSV_CHUNK_BYTES,
+                "piece {i} of {n}: {len} bytes"
+            );
+        }
+        pieces.into_iter().flat_map(|p| p.unwrap()).collect()
+    }
+
     async fn answer(rows: Vec<Result<CalibrationRec, StoreError>>) -> ApiResult<Response> {
-        calibrations_csv(futures_util::stream::iter(rows).boxed()).await
+        calibrations_csv(futures_util::stream::iter(pieces(rows)).boxed()).await
+    }
+
+    /// The export's hand-written CSV is the csv crate's, whatever the text:
+    /// every text column filled with random strings of the characters the
+    /// dialect and the formula guard treat specially (`,`, `"`, `\r`,
+    /// `\n`, `=`, `+`, `-`, `@`, tab, `;`), quotes, spaces and non-ASCII, of
+    /// lengths 0 to 12; integers of every size and sign; figures present and
+    /// absent, of any size.
+    #[test]
+    fn written_csv_is_the_csv_writer_on_random_text() {
+        const BITS: [&str; 16] = [
+            ",", "\"", "\r", "\n", "=", "+", "-", "@", "\t", ";", "'", " ", "a", "Zü", "日", "0",
+        ];
+        let mut z = 0x0dd5_eed5_u64;
+        let mut next = move || {
+            z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut x = z;
+            x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            x ^ (x >> 31)
+        };
+        let text = |next: &mut dyn FnMut() -> u64| -> String {
+            (0..next() % 13)
+                .map(|_| BITS[(next() % BITS.len() as u64) as usize])
+                .collect()
+        };
+        for round in 0..100 {
+            let mut rows = awkward(40);
+            for c in &mut rows {
+                let int = |x: u64| match x % 4 {
+                    0 => x as i64,
+                    1 => -((x >> 3) as i64),
+                    2 => (x % 1000) as i64,
+                    _ => [0, -1, i64::MIN, i64::MAX][(x >> 2) as usize % 4],
+                };
+                let num = |x: u64| {
+                    (!x.is_multiple_of(5))
+                        .then(|| f64::from_bits(x >> 2) * [1.0, 1e-300, -1.0][x as usize % 3])
+                };
+                c.id = int(next());
+                c.robot_id = int(next());
+                c.model_id = int(next());
+                c.session_id = int(next());
+                c.job_id = int(next());
+                c.version = int(next());
+                c.n_poses = int(next());
+                c.n_test = int(next());
+                c.serial_number = text(&mut next);
+                c.site = (!next().is_multiple_of(4)).then(|| text(&mut next));
+                c.line = (!next().is_multiple_of(4)).then(|| text(&mut next));
+                c.cell = (!next().is_multiple_of(4)).then(|| text(&mut next));
+                c.method = text(&mut next);
+                c.effects = text(&mut next);
+                c.created_at = text(&mut next);
+                c.test_rms_before_mm = num(next());
+                c.test_rms_after_mm = num(next());
+                c.train_rms_after_mm = num(next());
+                c.active = next().is_multiple_of(2);
+            }
+            assert_eq!(
+                String::from_utf8_lossy(&written(&rows)),
+                String::from_utf8_lossy(&table(&rows)),
+                "round {round}"
+            );
+        }
+    }
+
+    /// The pieces of a large export: each but the last at least
+    /// [`CSV_CHUNK_BYTES`] (so that a short first piece is the whole
+    /// answer), together the table's bytes.
+    #[test]
+    fn a_large_export_is_written_in_full_pieces() {
+        let rows = awkward(2_000);
+        let all = pieces(rows.iter().cloned().map(Ok).collect());
+        assert!(all.len() > 3, "{} pieces", all.len());
+        assert_eq!(written(&rows), table(&rows));
     }
 
     /// Small exports are answered whole (with a length), large ones in

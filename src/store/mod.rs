@@ -296,6 +296,147 @@ impl CalibrationRec {
     }
 }
 
+/// One exported calibration as the database holds it, borrowed: its text
+/// points into the database driver's buffers and is valid for one call of
+/// [`ExportSink::row`], so that an export need not copy a row into owned
+/// strings to write it somewhere else. The fields are [`CalibrationRec`]'s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationRow<'a> {
+    /// Id.
+    pub id: i64,
+    /// Robot calibrated.
+    pub robot_id: i64,
+    /// Robot serial number.
+    pub serial_number: &'a str,
+    /// Robot model.
+    pub model_id: i64,
+    /// Robot site tag.
+    pub site: Option<&'a str>,
+    /// Robot line tag.
+    pub line: Option<&'a str>,
+    /// Robot cell tag.
+    pub cell: Option<&'a str>,
+    /// Session the data came from.
+    pub session_id: i64,
+    /// Job that produced it.
+    pub job_id: i64,
+    /// Version number, per robot, from 1.
+    pub version: i64,
+    /// Identification method.
+    pub method: &'a str,
+    /// Poses used (train + test).
+    pub n_poses: i64,
+    /// Held-out poses.
+    pub n_test: i64,
+    /// Held-out RMS with the nominal model (mm).
+    pub test_rms_before_mm: Option<f64>,
+    /// Held-out RMS with the calibrated model (mm).
+    pub test_rms_after_mm: Option<f64>,
+    /// Training RMS with the calibrated model (mm).
+    pub train_rms_after_mm: Option<f64>,
+    /// Physical effects found, as stored: comma separated.
+    pub effects: &'a str,
+    /// Whether it is the robot's active calibration now.
+    pub active: bool,
+    /// Creation time.
+    pub created_at: &'a str,
+}
+
+impl CalibrationRow<'_> {
+    /// The row, owned.
+    pub fn to_rec(&self) -> CalibrationRec {
+        CalibrationRec {
+            id: self.id,
+            robot_id: self.robot_id,
+            serial_number: self.serial_number.to_string(),
+            model_id: self.model_id,
+            site: self.site.map(str::to_string),
+            line: self.line.map(str::to_string),
+            cell: self.cell.map(str::to_string),
+            session_id: self.session_id,
+            job_id: self.job_id,
+            version: self.version,
+            method: self.method.to_string(),
+            n_poses: self.n_poses,
+            n_test: self.n_test,
+            test_rms_before_mm: self.test_rms_before_mm,
+            test_rms_after_mm: self.test_rms_after_mm,
+            train_rms_after_mm: self.train_rms_after_mm,
+            effects: self.effects.to_string(),
+            active: self.active,
+            created_at: self.created_at.to_string(),
+        }
+    }
+}
+
+impl CalibrationRec {
+    /// The record as a borrowed row (what an [`ExportSink`] takes).
+    pub fn as_row(&self) -> CalibrationRow<'_> {
+        CalibrationRow {
+            id: self.id,
+            robot_id: self.robot_id,
+            serial_number: &self.serial_number,
+            model_id: self.model_id,
+            site: self.site.as_deref(),
+            line: self.line.as_deref(),
+            cell: self.cell.as_deref(),
+            session_id: self.session_id,
+            job_id: self.job_id,
+            version: self.version,
+            method: &self.method,
+            n_poses: self.n_poses,
+            n_test: self.n_test,
+            test_rms_before_mm: self.test_rms_before_mm,
+            test_rms_after_mm: self.test_rms_after_mm,
+            train_rms_after_mm: self.train_rms_after_mm,
+            effects: &self.effects,
+            active: self.active,
+            created_at: &self.created_at,
+        }
+    }
+}
+
+/// Where the rows of an export go ([`Store::export_calibrations`]): it
+/// takes each row as the database driver holds it, on the thread that
+/// reads them (on SQLite a blocking thread of its own, on PostgreSQL the
+/// runtime's), and hands out what it made of them a piece at a time (a
+/// piece of CSV, a batch of records), so that the export's memory is a
+/// piece or two, whatever its size.
+pub trait ExportSink: Send + 'static {
+    /// What is handed out.
+    type Piece: Send + 'static;
+    /// Take the next row (oldest first).
+    fn row(&mut self, row: &CalibrationRow<'_>);
+    /// A piece to hand out now, if one is ready; asked after every row.
+    fn ready(&mut self) -> Option<Self::Piece>;
+    /// What is left after the last row, if anything.
+    fn finish(&mut self) -> Option<Self::Piece>;
+}
+
+/// Rows kept as records, handed out [`RecordBatches::ROWS`] at a time
+/// ([`Store::stream_calibrations`]).
+struct RecordBatches(Vec<CalibrationRec>);
+
+impl RecordBatches {
+    /// Rows a batch: one hand-over (and at most one thread wake-up) per
+    /// batch, not per row; a batch is a few tens of KB.
+    const ROWS: usize = 256;
+}
+
+impl ExportSink for RecordBatches {
+    type Piece = Vec<CalibrationRec>;
+    fn row(&mut self, row: &CalibrationRow<'_>) {
+        self.0.push(row.to_rec());
+    }
+    fn ready(&mut self) -> Option<Vec<CalibrationRec>> {
+        (self.0.len() >= Self::ROWS)
+            .then(|| std::mem::replace(&mut self.0, Vec::with_capacity(Self::ROWS)))
+    }
+    fn finish(&mut self) -> Option<Vec<CalibrationRec>> {
+        (!self.0.is_empty()).then(|| std::mem::take(&mut self.0))
+    }
+}
+
 fn split_effects(stored: &str) -> Vec<String> {
     stored
         .split(',')
@@ -691,7 +832,33 @@ impl Store {
         &self,
         f: &CalibrationFilter,
     ) -> futures_util::stream::BoxStream<'static, Result<CalibrationRec>> {
-        dispatch!(self.stream_calibrations(f))
+        use futures_util::StreamExt;
+        let batches = RecordBatches(Vec::with_capacity(RecordBatches::ROWS));
+        self.export_calibrations(f, batches)
+            .await
+            .flat_map(|batch| {
+                futures_util::stream::iter(match batch {
+                    Ok(rows) => rows.into_iter().map(Ok).collect::<Vec<_>>(),
+                    Err(e) => vec![Err(e)],
+                })
+            })
+            .boxed()
+    }
+    /// Every calibration the filter matches, oldest first, written into
+    /// `sink` as the database reads them, on the thread that reads them;
+    /// the stream hands out the sink's pieces as they are ready, then what
+    /// is left, or ends with a failure (after which it has nothing more).
+    /// The query, its bounds on memory and on exports in flight, are
+    /// [`Store::stream_calibrations`]'s (which is this, with records for
+    /// pieces). On SQLite the reader thread waits, holding its connection,
+    /// while the pieces are not taken (it stays at most two ahead); on
+    /// PostgreSQL the rows are read as the stream is polled.
+    pub async fn export_calibrations<S: ExportSink>(
+        &self,
+        f: &CalibrationFilter,
+        sink: S,
+    ) -> futures_util::stream::BoxStream<'static, Result<S::Piece>> {
+        dispatch!(self.export_calibrations(f, sink))
     }
     /// The database's plan of [`Store::stream_calibrations`]'s query for a
     /// filter, one line a step (as [`Store::explain_calibrations`]).

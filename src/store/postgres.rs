@@ -55,6 +55,13 @@ fn robot_ids_condition(conds: &str) -> Option<String> {
     ))
 }
 
+/// Whether a filtered export reads the matching ids first and then their
+/// rows in id order (SQLite's shape, `sqlite.rs`), rather than the rows
+/// and then sorting them: not here, where the rows come from a bitmap scan
+/// of the robots' ids (`robot_ids_condition`) and are sorted, which was not
+/// measured against that shape.
+const EXPORT_IDS_FIRST: bool = false;
+
 /// How a query's plan is asked for.
 const EXPLAIN: &str = "EXPLAIN";
 
@@ -81,12 +88,14 @@ impl Backend {
     async fn begin_write(&self) -> sqlx::Result<sqlx::Transaction<'static, Db>> {
         self.pool.begin().await
     }
-    /// `Store::stream_calibrations`: the export query's rows as sqlx reads
-    /// them, each decoded by position (`export_row`).
-    pub async fn stream_calibrations(
+    /// `Store::export_calibrations`: the export query's rows as sqlx reads
+    /// them, each written into `sink` as it comes, borrowed from sqlx's row
+    /// (`export_row`), on the runtime's thread.
+    pub async fn export_calibrations<S: ExportSink>(
         &self,
         f: &CalibrationFilter,
-    ) -> futures_util::stream::BoxStream<'static, Result<CalibrationRec>> {
+        sink: S,
+    ) -> futures_util::stream::BoxStream<'static, Result<S::Piece>> {
         use futures_util::StreamExt;
         let (sql, args) = calibration_export_sql(f);
         // The semaphore is never closed.
@@ -94,43 +103,102 @@ impl Backend {
         // The pool's stream holds a clone of the pool and the query its
         // own copy of the bound values, so the stream outlives `self` and
         // `f`: it is polled by the answer's body, after the handler.
-        bind_filter!(sqlx::query::<Db>(sqlx::AssertSqlSafe(sql)), args)
-            .fetch(&self.pool)
-            .map(move |row| {
-                // Held as long as the stream.
-                let _held = &permit;
-                Ok(export_row(&row?)?)
-            })
-            .boxed()
+        let rows =
+            bind_filter!(sqlx::query::<Db>(sqlx::AssertSqlSafe(sql)), args).fetch(&self.pool);
+        // The permit is held as long as the stream.
+        let checked = false;
+        futures_util::stream::unfold(Some((rows, sink, permit, checked)), |state| async move {
+            let (mut rows, mut sink, permit, mut checked) = state?;
+            loop {
+                match rows.next().await {
+                    Some(Ok(row)) => {
+                        // The columns' types once, then every row's values
+                        // by position without asking again.
+                        let read = if checked {
+                            Ok(())
+                        } else {
+                            checked = true;
+                            check_export_columns(&row)
+                        };
+                        if let Err(e) = read.and_then(|()| export_row(&row).map(|c| sink.row(&c))) {
+                            return Some((Err(e.into()), None));
+                        }
+                        if let Some(piece) = sink.ready() {
+                            return Some((Ok(piece), Some((rows, sink, permit, checked))));
+                        }
+                    }
+                    Some(Err(e)) => return Some((Err(e.into()), None)),
+                    None => return sink.finish().map(|piece| (Ok(piece), None)),
+                }
+            }
+        })
+        .boxed()
     }
 }
 
+/// Check that the export query's columns (`calibration_select!`'s, in
+/// order) have the types [`export_row`] decodes, from a row's description,
+/// which every row of the query shares. sqlx checks a column's type at
+/// every value it decodes (`Row::try_get`, with its `PgType` clones and
+/// comparisons): about a fifth of the server's time in a 5,000-row CSV,
+/// 95,000 checks of the same 19 types (BENCHMARKS.md, "Fleet scale").
+fn check_export_columns(row: &sqlx::postgres::PgRow) -> sqlx::Result<()> {
+    use sqlx::postgres::PgTypeInfo;
+    use sqlx::{Column, Row, Type, TypeInfo};
+    let int = <i64 as Type<Db>>::compatible;
+    let text = <&str as Type<Db>>::compatible;
+    let real = <f64 as Type<Db>>::compatible;
+    let boolean = <bool as Type<Db>>::compatible;
+    let want: [fn(&PgTypeInfo) -> bool; 19] = [
+        int, int, text, int, text, text, text, int, int, int, text, int, int, real, real, real,
+        text, boolean, text,
+    ];
+    let columns = row.columns();
+    if columns.len() != want.len() {
+        return Err(sqlx::Error::Protocol(format!(
+            "export: {} columns, not the {} expected",
+            columns.len(),
+            want.len()
+        )));
+    }
+    for (c, ok) in columns.iter().zip(want) {
+        if !ok(c.type_info()) {
+            return Err(sqlx::Error::ColumnDecode {
+                index: c.name().to_string(),
+                source: format!("unexpected type {}", c.type_info().name()).into(),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// A row of the export query (`calibration_select!`'s columns, in order),
-/// its columns taken by position: by name, each of the 19 was a hash
-/// lookup, about a tenth of the runtime thread's time in a 5,000-row CSV
-/// (BENCHMARKS.md, "Fleet scale"). The store suite compares every column
-/// with the paged list's rows, which are decoded by name.
-fn export_row(row: &sqlx::postgres::PgRow) -> sqlx::Result<CalibrationRec> {
+/// borrowed from sqlx's row, its columns taken by position (by name, each
+/// of the 19 was a hash lookup) and decoded without sqlx's check of their
+/// types, which [`check_export_columns`] made once for the query. The store
+/// suite compares every column with the paged list's rows, which are
+/// decoded by name, checked.
+fn export_row(row: &sqlx::postgres::PgRow) -> sqlx::Result<super::CalibrationRow<'_>> {
     use sqlx::Row;
-    Ok(CalibrationRec {
-        id: row.try_get(0)?,
-        robot_id: row.try_get(1)?,
-        serial_number: row.try_get(2)?,
-        model_id: row.try_get(3)?,
-        site: row.try_get(4)?,
-        line: row.try_get(5)?,
-        cell: row.try_get(6)?,
-        session_id: row.try_get(7)?,
-        job_id: row.try_get(8)?,
-        version: row.try_get(9)?,
-        method: row.try_get(10)?,
-        n_poses: row.try_get(11)?,
-        n_test: row.try_get(12)?,
-        test_rms_before_mm: row.try_get(13)?,
-        test_rms_after_mm: row.try_get(14)?,
-        train_rms_after_mm: row.try_get(15)?,
-        effects: row.try_get(16)?,
-        active: row.try_get(17)?,
-        created_at: row.try_get(18)?,
+    Ok(super::CalibrationRow {
+        id: row.try_get_unchecked(0)?,
+        robot_id: row.try_get_unchecked(1)?,
+        serial_number: row.try_get_unchecked(2)?,
+        model_id: row.try_get_unchecked(3)?,
+        site: row.try_get_unchecked(4)?,
+        line: row.try_get_unchecked(5)?,
+        cell: row.try_get_unchecked(6)?,
+        session_id: row.try_get_unchecked(7)?,
+        job_id: row.try_get_unchecked(8)?,
+        version: row.try_get_unchecked(9)?,
+        method: row.try_get_unchecked(10)?,
+        n_poses: row.try_get_unchecked(11)?,
+        n_test: row.try_get_unchecked(12)?,
+        test_rms_before_mm: row.try_get_unchecked(13)?,
+        test_rms_after_mm: row.try_get_unchecked(14)?,
+        train_rms_after_mm: row.try_get_unchecked(15)?,
+        effects: row.try_get_unchecked(16)?,
+        active: row.try_get_unchecked(17)?,
+        created_at: row.try_get_unchecked(18)?,
     })
 }

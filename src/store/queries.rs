@@ -4,7 +4,8 @@
 // `LOCK_ROBOT_SQL`. Nothing else differs between the backends.
 
 use super::{
-    ActivationRec, AuditRec, CalibrationFilter, CalibrationRec, JobRec, KeyRec, ModelRec,
+    ActivationRec, AuditRec, CalibrationFilter, CalibrationRec, ExportSink, JobRec, KeyRec,
+    ModelRec,
     NewCalibration, NewKey, NewRobot, Page, Result, RigRec, RobotRec, SessionRec, StoreError,
     now_rfc3339,
 };
@@ -163,14 +164,31 @@ fn calibration_export_sql(f: &CalibrationFilter) -> (String, Vec<FilterArg<'_>>)
             filter = format!("{filter}AND {ids} ");
         }
     }
-    // Sorted as numbers with a filter, for the page's reason above: the
-    // planner then reads the matching rows from the filter's indexes and
-    // sorts them, instead of walking the primary key through every
-    // calibration. Without a filter every row is read anyway, in the
-    // primary key's order.
-    let order = if args.is_empty() { "c.id" } else { "c.id + 0" };
+    if args.is_empty() {
+        // Every row is read anyway, in the primary key's order.
+        return (format!("{}ORDER BY c.id", calibration_select!()), args);
+    }
+    if EXPORT_IDS_FIRST {
+        // The matching ids from the filter's indexes, then their rows in
+        // id order (as the page query does, without its page).
+        let from = if robots.is_empty() {
+            "FROM calibrations c"
+        } else {
+            "FROM calibrations c JOIN robots r ON r.id = c.robot_id"
+        };
+        return (
+            format!(
+                "{}WHERE c.id IN (SELECT c.id {from} {filter}) ORDER BY c.id",
+                calibration_select!()
+            ),
+            args,
+        );
+    }
+    // Sorted as numbers, for the page's reason above: the planner then
+    // reads the matching rows from the filter's indexes and sorts them,
+    // instead of walking the primary key through every calibration.
     (
-        format!("{}{filter}ORDER BY {order}", calibration_select!()),
+        format!("{}{filter}ORDER BY c.id + 0", calibration_select!()),
         args,
     )
 }

@@ -6,10 +6,12 @@
 //! channel from the connection's thread to the runtime's, which on a busy
 //! machine means a thread wake-up per row. For a site's 5,000-row CSV that
 //! was most of the request's 29-33 ms of CPU; SQLite's own stepping and
-//! sorting were 14 % (BENCHMARKS.md, "Fleet scale"): 8 ms in all now. Here the export's
+//! sorting were 14 % (BENCHMARKS.md, "Fleet scale"). Here the export's
 //! statement runs on a blocking thread that holds the pooled connection's
 //! handle (`SqliteConnection::lock_handle`, sqlx's door for this), reads
-//! each row's columns in place and hands the rows over in batches.
+//! each row's columns in place, borrowed, into the export's sink
+//! ([`ExportSink`]: for a CSV, the CSV's bytes are written here, not on the
+//! runtime's thread) and hands the sink's pieces over as they are ready.
 //!
 //! The statement is sqlx's export query text (`calibration_export_sql`),
 //! with the same bound values; only the reading differs. The store suite
@@ -21,7 +23,7 @@ use std::ptr::NonNull;
 
 use libsqlite3_sys as ffi;
 
-use super::{CalibrationRec, Result, StoreError};
+use super::{CalibrationRow, ExportSink, Result, StoreError};
 
 /// A bound value of the export's statement, owned (the statement runs on
 /// another thread than the one that built the filter).
@@ -30,11 +32,6 @@ pub(super) enum Arg {
     Text(String),
     Real(f64),
 }
-
-/// Rows handed to the reader at a time: one channel message (and at most
-/// one thread wake-up) per batch instead of per row; small enough that a
-/// batch is a few tens of KB.
-pub(super) const BATCH_ROWS: usize = 256;
 
 fn error(what: &str, detail: impl std::fmt::Display) -> StoreError {
     StoreError::Db(sqlx::Error::Protocol(format!(
@@ -152,11 +149,16 @@ impl Statement {
         (!self.is_null(col)).then(|| unsafe { ffi::sqlite3_column_double(self.stmt, col) })
     }
 
-    fn text(&self, col: c_int) -> Result<String> {
-        // SAFETY: as `is_null`. The text pointer is valid until the next
-        // step or column call on this column; it is copied at once, with its
-        // length asked after the text (the order SQLite's documentation
-        // gives for a conversion-free read).
+    /// A text column, borrowed from SQLite: valid until the next step of
+    /// the statement (which takes `&mut self`, so the borrow checker keeps
+    /// the text from outliving it). No other call is made on the column
+    /// while the text is held (SQLite frees a column's text when it
+    /// converts the value to another type).
+    fn text(&self, col: c_int) -> Result<&str> {
+        // SAFETY: as `is_null`. The length is asked after the text (the
+        // order SQLite's documentation gives for a conversion-free read);
+        // the pointer stays valid until the statement is stepped, reset or
+        // finalized, none of which can happen while `&self` is borrowed.
         let bytes = unsafe {
             let p = ffi::sqlite3_column_text(self.stmt, col);
             let n = ffi::sqlite3_column_bytes(self.stmt, col);
@@ -170,10 +172,10 @@ impl Statement {
                 std::slice::from_raw_parts(p, n as usize)
             }
         };
-        String::from_utf8(bytes.to_vec()).map_err(|e| error("text column", e))
+        std::str::from_utf8(bytes).map_err(|e| error("text column", e))
     }
 
-    fn opt_text(&self, col: c_int) -> Result<Option<String>> {
+    fn opt_text(&self, col: c_int) -> Result<Option<&str>> {
         if self.is_null(col) {
             Ok(None)
         } else {
@@ -181,9 +183,9 @@ impl Statement {
         }
     }
 
-    /// The current row, in `calibration_select!`'s column order.
-    fn calibration(&self) -> Result<CalibrationRec> {
-        Ok(CalibrationRec {
+    /// The current row, in `calibration_select!`'s column order, borrowed.
+    fn calibration(&self) -> Result<CalibrationRow<'_>> {
+        Ok(CalibrationRow {
             id: self.int(0),
             robot_id: self.int(1),
             serial_number: self.text(2)?,
@@ -208,17 +210,19 @@ impl Statement {
 }
 
 /// Run the export's `sql` with `args` on the connection `db` (whose lock the
-/// calling thread holds) and send its rows to `out` in batches, oldest
-/// first; a failure is sent as the last item. Returns when every row is
-/// sent, or early when the receiver is gone (the client went away).
-/// Blocking: run it on a blocking thread.
-pub(super) fn read_calibrations(
+/// calling thread holds), write its rows into `sink` as they are stepped to,
+/// oldest first, and send the sink's pieces to `out` as they are ready and
+/// what is left at the end; a failure is sent as the last item. Returns
+/// when every row is written, or early when the receiver is gone (the
+/// client went away). Blocking: run it on a blocking thread.
+pub(super) fn read_calibrations<S: ExportSink>(
     db: NonNull<ffi::sqlite3>,
     sql: &str,
     args: &[Arg],
-    out: &tokio::sync::mpsc::Sender<Result<Vec<CalibrationRec>>>,
+    mut sink: S,
+    out: &tokio::sync::mpsc::Sender<Result<S::Piece>>,
 ) {
-    let run = || -> Result<bool> {
+    let mut run = || -> Result<()> {
         let mut stmt = Statement::prepare(db, sql)?;
         // SAFETY: a live statement; the count is fixed once prepared.
         let columns = unsafe { ffi::sqlite3_column_count(stmt.stmt) };
@@ -226,17 +230,18 @@ pub(super) fn read_calibrations(
             return Err(error("columns", format!("{columns}, not the 19 expected")));
         }
         stmt.bind(args)?;
-        let mut batch = Vec::with_capacity(BATCH_ROWS);
         while stmt.step()? {
-            batch.push(stmt.calibration()?);
-            if batch.len() == BATCH_ROWS {
-                let full = std::mem::replace(&mut batch, Vec::with_capacity(BATCH_ROWS));
-                if out.blocking_send(Ok(full)).is_err() {
-                    return Ok(false);
-                }
+            sink.row(&stmt.calibration()?);
+            if let Some(piece) = sink.ready()
+                && out.blocking_send(Ok(piece)).is_err()
+            {
+                return Ok(());
             }
         }
-        Ok(batch.is_empty() || out.blocking_send(Ok(batch)).is_ok())
+        if let Some(piece) = sink.finish() {
+            let _ = out.blocking_send(Ok(piece));
+        }
+        Ok(())
     };
     if let Err(e) = run() {
         let _ = out.blocking_send(Err(e));

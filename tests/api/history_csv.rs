@@ -70,21 +70,53 @@ async fn pinned_bytes(app: &TestApp) {
         .create_robot(&robot("Zürich 7", Some("plant \"B\""), None, Some("@c1")))
         .await
         .unwrap();
-    let mut ids = Vec::new();
-    for (r, c) in [
+    // A robot whose rows are long (quoted, guarded, non-ASCII text), for
+    // an export of several pieces (32 KB each): every row of it must come
+    // whole and in order, across the pieces' edges.
+    let long_serial = format!("={}", "x\"y,z ".repeat(40));
+    let long_site = format!("-{}", "ü".repeat(60));
+    let r3 = store
+        .create_robot(&robot(
+            &long_serial,
+            Some(&long_site),
+            Some("L\n3"),
+            Some("+c"),
+        ))
+        .await
+        .unwrap();
+    let figures = [
         (
-            &r1,
             cal(
                 Some(0.03125),
                 Some(1.5e-5),
                 Some(12345.678_95),
                 "joint_compliance,backlash",
             ),
+            "0.0312,0.0000,12345.6789,joint_compliance;backlash",
         ),
-        (&r2, cal(None, Some(0.00015), Some(2.0 / 3.0), "")),
-        (&r1, cal(Some(7.0), Some(0.99995), None, "thermal")),
-        (&r2, cal(Some(4.99995), Some(0.00125), Some(0.0), "")),
-    ] {
+        (
+            cal(None, Some(0.00015), Some(2.0 / 3.0), ""),
+            ",0.0001,0.6667,",
+        ),
+        (
+            cal(Some(7.0), Some(0.99995), None, "thermal"),
+            "7.0000,1.0000,,thermal",
+        ),
+        (
+            cal(Some(4.99995), Some(0.00125), Some(0.0), ""),
+            "5.0000,0.0013,0.0000,",
+        ),
+    ];
+    let mut ids = Vec::new();
+    for (r, c) in [
+        (&r1, figures[0].0.clone()),
+        (&r2, figures[1].0.clone()),
+        (&r1, figures[2].0.clone()),
+        (&r2, figures[3].0.clone()),
+    ]
+    .into_iter()
+    .chain((0..LONG_ROWS).map(|i| (&r3, figures[i % 4].0.clone())))
+    {
         let s = store.create_session(r.id, rig.id, None).await.unwrap();
         store.create_job(s.id, r.id, "{}", 3).await.unwrap();
         let job = store.claim_job("pin", 60_000, 10).await.unwrap().unwrap();
@@ -98,7 +130,7 @@ async fn pinned_bytes(app: &TestApp) {
     store.close().await;
 
     // Only the dates are the store's own ("now"): taken from the JSON list.
-    let list = ok_json(app.get("/calibrations").await, 200).await;
+    let list = ok_json(app.get("/calibrations?limit=1000").await, 200).await;
     let created: Vec<String> = list["items"]
         .as_array()
         .unwrap()
@@ -114,22 +146,41 @@ async fn pinned_bytes(app: &TestApp) {
             "{id},{robot},Zürich 7,{m},\"plant \"\"B\"\"\",,'@c1,2,{created},lm,50,15,5.0000,0.0013,0.0000,,false,{session},{job}",
         ],
     );
-    let mut want = String::from(
+    let header = String::from(
         "calibration_id,robot_id,serial_number,model_id,site,line,cell,version,created_at,\
          method,n_poses,n_test,test_rms_before_mm,test_rms_after_mm,train_rms_after_mm,\
          effects,active,session_id,job_id\n",
     );
-    for (i, row) in rows.iter().enumerate() {
-        let (id, robot, session, job) = ids[i];
-        want += &row
-            .replace("{id}", &id.to_string())
-            .replace("{robot}", &robot.to_string())
-            .replace("{m}", &m.to_string())
-            .replace("{created}", &created[i])
-            .replace("{session}", &session.to_string())
-            .replace("{job}", &job.to_string());
-        want.push('\n');
-    }
+    let long_row = format!(
+        "{{id}},{{robot}},\"'={}\",{{m}},'{long_site},\"L\n3\",'+c,{{version}},{{created}},lm,50,15,{{figures}},false,{{session}},{{job}}",
+        "x\"\"y,z ".repeat(40)
+    );
+    let rows: Vec<String> = rows
+        .iter()
+        .map(|r| r.to_string())
+        .chain((0..LONG_ROWS).map(|i| {
+            long_row
+                .replace("{version}", &(i + 1).to_string())
+                .replace("{figures}", figures[i % 4].1)
+        }))
+        .collect();
+    // Each record, ended (a cell may hold a line break: no `lines()`).
+    let body: Vec<String> = rows
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            let (id, robot, session, job) = ids[i];
+            row.replace("{id}", &id.to_string())
+                .replace("{robot}", &robot.to_string())
+                .replace("{m}", &m.to_string())
+                .replace("{created}", &created[i])
+                .replace("{session}", &session.to_string())
+                .replace("{job}", &job.to_string())
+                + "\n"
+        })
+        .collect();
+    let want = header.clone() + &body.concat();
+    assert!(want.len() > 3 * 32 * 1024, "{} bytes", want.len());
     let r = app.get("/calibrations?format=csv").await;
     assert_eq!(r.status(), 200);
     assert_eq!(r.headers()["content-type"], "text/csv");
@@ -137,12 +188,9 @@ async fn pinned_bytes(app: &TestApp) {
     // A filtered export (the site filter's own statement) and a robot's
     // accuracy history: the same rows' bytes.
     let pick = |ks: &[usize]| -> String {
-        let mut lines = want.lines();
-        let mut s = format!("{}\n", lines.next().unwrap());
-        let body: Vec<&str> = lines.collect();
+        let mut s = header.clone();
         for &k in ks {
-            s += body[k];
-            s.push('\n');
+            s += &body[k];
         }
         s
     };
@@ -160,6 +208,41 @@ async fn pinned_bytes(app: &TestApp) {
         .await
         .unwrap();
     assert_eq!(acc, pick(&[1, 3]));
+    let long: Vec<usize> = (4..4 + LONG_ROWS).collect();
+    let site = app
+        .get(&format!(
+            "/calibrations?format=csv&site={}",
+            enc(&long_site)
+        ))
+        .await
+        .text()
+        .await
+        .unwrap();
+    assert_eq!(site, pick(&long));
+    let acc = app
+        .get(&format!("/robots/{}/accuracy?format=csv", r3.id))
+        .await
+        .text()
+        .await
+        .unwrap();
+    assert_eq!(acc, pick(&long));
+}
+
+/// The long robot's calibrations: about 700 bytes a row, so the whole
+/// export is more than three pieces.
+const LONG_ROWS: usize = 200;
+
+/// `s` percent-encoded for a query string.
+fn enc(s: &str) -> String {
+    s.bytes()
+        .map(|b| {
+            if b.is_ascii_alphanumeric() {
+                (b as char).to_string()
+            } else {
+                format!("%{b:02X}")
+            }
+        })
+        .collect()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -620,7 +620,9 @@ async fn store_conformance_sqlite() {
 /// 100,000 calibrations). SQLite's planner needs no statistics for this,
 /// so an empty database shows the plan a full one gets. (A date bound
 /// alone, `from` without `to`, may be a scan in id order that stops at the
-/// page's last row: the planner's choice, 9 ms at 100,000.)
+/// page's last row: the planner's choice, 9 ms at 100,000.) The export
+/// reads the matching ids first and then the rows in id order, sorting
+/// nothing (`EXPORT_IDS_FIRST` in src/store/sqlite.rs says why).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn history_filters_use_indexes_sqlite() {
     let dir = fresh_dir("store-plans");
@@ -641,7 +643,20 @@ async fn history_filters_use_indexes_sqlite() {
                 min_test_rms_mm: None,
             };
             let mut plan = store.explain_calibrations(&f, PAGE).await.unwrap();
-            plan.extend(store.explain_calibration_export(&f).await.unwrap());
+            let export = store.explain_calibration_export(&f).await.unwrap();
+            // The export reads the ids first, then the rows in id order:
+            // no whole rows sorted (nor anything else).
+            assert!(
+                export.iter().all(|l| !l.contains("TEMP B-TREE")),
+                "{f:?} sorts its export: {export:#?}"
+            );
+            assert!(
+                export.iter().any(|l| l
+                    .trim_start()
+                    .starts_with("SEARCH c USING INTEGER PRIMARY KEY")),
+                "{f:?}: the export's rows not by id: {export:#?}"
+            );
+            plan.extend(export);
             let scans: Vec<&String> = plan
                 .iter()
                 .filter(|l| {
