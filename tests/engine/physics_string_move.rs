@@ -22,3 +22,24 @@ fn a_string_reading_by_its_direction_of_travel_is_located_at_its_last_change() {
         )
     );
 }
+
+/// A string read through a slow filter lags its last change of length;
+/// the located point, which every string's reading makes, follows the move,
+/// so T's own move test locates it first. At that place the string's
+/// reading by its last change is tried beside T moved along its move, and
+/// kept, it moves the place to the string.
+#[test]
+fn a_lagging_string_found_by_ts_move_is_placed_at_the_string() {
+    let (_, d) = common::corrected_unnamed(
+        "xcheck9_string_filter_lag_std4",
+        |p| p.driver == "motion" && p.sensor == Some(1) && p.joint.is_none(),
+        (
+            CorrectionTarget::StringReading,
+            Some(0),
+            CorrectionDriver::StringMove,
+            Some(0),
+        ),
+        0.8,
+    );
+    assert!(d.evidence.contains("compensation"), "{}", d.evidence);
+}
