@@ -4,13 +4,14 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::columns::Columns;
+use super::columns::{Columns, design_pool_in, effect_columns, predicted_sigmas};
 use super::{
-    Candidate, MAX_PAYLOAD_KG, Made, PlanOptions, PlannedPose, PredictedParam, Tuning, plan_inner,
+    Candidate, Drawn, MAX_PAYLOAD_KG, Plan, PlanOptions, PlannedPose, PredictedParam, Tuning,
+    choose,
 };
 use crate::error::{Error, Result};
-use crate::model::{Rig, Robot};
 use crate::physics::Kind;
+use crate::rng::Rng;
 
 /// A joint's compliance with and without the payload.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -86,34 +87,71 @@ impl Entries {
     }
 }
 
-/// With a payload planned, the report's [`PayloadPlan`]: the loaded and
-/// unloaded poses and the compliance with and without the payload (from
-/// the plan the same options make without it).
-pub(super) fn with_payload_report(
-    robot: &Robot,
-    rig: &Rig,
+/// The compliance 1-sigma per joint of the plan the same options make
+/// without the payload (what [`add_payload_report`] sets beside the
+/// plan's own), made from the payload plan's draws: the same candidates
+/// and prediction poses, the same parameters freed, and the draws'
+/// random state `after_draws` for its check poses. The candidates
+/// unloaded are the payload plan's first entries, so their effect context
+/// is `drawn.ctx`'s first poses. It is the plan `plan` makes without
+/// `payload_kg`, but for its curve over N (the greedy steps past N, which
+/// change none of its poses, are not taken) and its report.
+pub(super) fn compliance_without_payload(
+    drawn: &Drawn,
     opts: &PlanOptions,
     tuning: &Tuning,
-    mut made: Made,
-) -> Result<Made> {
-    let Some(payload_kg) = opts.payload_kg else {
-        return Ok(made);
+    mut after_draws: Rng,
+) -> Vec<(usize, f64, &'static str)> {
+    let opts = PlanOptions {
+        payload_kg: None,
+        ..opts.clone()
     };
-    let without = plan_inner(
-        robot,
-        rig,
-        &PlanOptions {
-            payload_kg: None,
-            ..opts.clone()
-        },
+    let scene = drawn.scene;
+    let entries = Entries::new(drawn.pool.len(), None);
+    let design = entries.of(drawn.pool);
+    let cols = effect_columns(scene, drawn.free, drawn.ctx, &design, &opts, drawn.noise);
+    let dpool = design_pool_in(
+        scene,
+        &cols,
+        drawn.ctx,
+        &design,
+        &entries,
+        drawn.validation,
+        drawn.noise,
+    );
+    let chosen = choose(
+        scene,
+        &dpool,
+        drawn.pool,
+        &entries,
+        &opts,
         tuning,
-        false,
-    )?;
-    let compliance = made
-        .compliance
+        opts.n_poses,
+        drawn.n_check,
+        &mut after_draws,
+        drawn.noise,
+    );
+    let params = predicted_sigmas(
+        &chosen.toured.covariance(&dpool, &chosen.sel.chosen),
+        &cols,
+        scene,
+    );
+    compliance_sigmas(&cols, &params, scene.robot.dof())
+}
+
+/// The report's [`PayloadPlan`] and its note: the loaded and unloaded
+/// poses of `plan`, and per joint its compliance 1-sigma (`with`) beside
+/// the plan's without the payload (`without`).
+pub(super) fn add_payload_report(
+    plan: &mut Plan,
+    payload_kg: f64,
+    with: &[(usize, f64, &'static str)],
+    without: &[(usize, f64, &'static str)],
+) {
+    let compliance = with
         .iter()
         .filter_map(|&(j, with, unit)| {
-            let &(_, w, _) = without.compliance.iter().find(|c| c.0 == j)?;
+            let &(_, w, _) = without.iter().find(|c| c.0 == j)?;
             Some(ComplianceSigma {
                 joint: j + 1,
                 sigma_with_payload: with,
@@ -122,20 +160,14 @@ pub(super) fn with_payload_report(
             })
         })
         .collect();
-    let train: Vec<&PlannedPose> = made
-        .plan
-        .poses
-        .iter()
-        .filter(|p| p.split == "train")
-        .collect();
+    let train: Vec<&PlannedPose> = plan.poses.iter().filter(|p| p.split == "train").collect();
     let loaded = train.iter().filter(|p| p.payload_kg > Some(0.0)).count();
-    let changes = made
-        .plan
+    let changes = plan
         .poses
         .windows(2)
         .filter(|w| w[0].payload_kg != w[1].payload_kg)
         .count();
-    let r = &mut made.plan.report;
+    let r = &mut plan.report;
     r.notes.push(payload_note(
         payload_kg,
         loaded,
@@ -149,7 +181,6 @@ pub(super) fn with_payload_report(
         payload_changes: changes,
         compliance,
     });
-    Ok(made)
 }
 
 /// The payload plan in words.
