@@ -461,14 +461,25 @@ pub(super) fn information(pool: &design::Pool, set: &[usize]) -> DMatrix<f64> {
     mm
 }
 
+/// What least squares on the poses `set` predicts: the model's RMS error
+/// at random valid poses and the held-out RMS. Infinite where the set does
+/// not determine every column (fewer readings than columns, or columns its
+/// poses cannot tell apart: the information is then not positive
+/// definite), rather than the number the rounding makes of a singular
+/// inverse.
 pub(super) fn prediction(
     pool: &design::Pool,
     set: &[usize],
     point_noise_rms_mm: f64,
 ) -> PredictionAtN {
-    let model = information(pool, set)
-        .try_inverse()
-        .map_or(f64::INFINITY, |inv| (&pool.w * inv).trace().max(0.0));
+    let info = information(pool, set);
+    let model = if info.clone().cholesky().is_none() {
+        f64::INFINITY
+    } else {
+        info.try_inverse()
+            .map_or(f64::INFINITY, |inv| (&pool.w * inv).trace())
+    };
+    let model = if model > 0.0 { model } else { f64::INFINITY };
     PredictionAtN {
         n_poses: set.len(),
         model_rms_mm: model.sqrt(),
