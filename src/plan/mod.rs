@@ -61,7 +61,9 @@ use columns::{
     predicted_sigmas, prediction,
 };
 use options::{check_options, default_noise, home_pose};
-use payload::{Entries, add_payload_report, compliance_sigmas, compliance_without_payload};
+use payload::{
+    Entries, add_payload_report, compliance_sigmas, compliance_without_payload, has_masses,
+};
 use visits::{Toured, VisitSpec, visits};
 
 /// Valid random poses drawn before giving up on finding enough, per pose
@@ -209,7 +211,7 @@ fn plan_inner(
         predicted_sigmas(&toured.covariance(&design_pool, &sel.chosen), &cols, &scene);
     let backlash = toured.report(robot.dof());
     parameters.extend(backlash_params(backlash.as_ref()));
-    let compliance = compliance_sigmas(&cols, &parameters, robot.dof());
+    let compliance = compliance_sigmas(&cols, &parameters, robot);
     let bound = with_bound.then(|| {
         let (phi, lower) = design::continuous_bound(&design_pool, 300);
         let n = opts.n_poses as f64;
@@ -223,7 +225,7 @@ fn plan_inner(
     } else {
         vec![]
     };
-    let notes = notes(opts, &approach, backlash.as_ref());
+    let notes = notes(robot, opts, &approach, backlash.as_ref());
     let report = PlanReport {
         format: PLAN_FORMAT.into(),
         robot: robot.name.clone(),
@@ -257,21 +259,31 @@ fn plan_inner(
     };
     let mut plan = Plan { poses, report };
     if let Some(payload_kg) = opts.payload_kg {
-        let without = compliance_without_payload(
-            &Drawn {
-                scene: &scene,
-                pool: &pool,
-                validation: &validation,
-                free: &free,
-                ctx: &ctx,
-                n_check,
-                noise,
-            },
-            opts,
-            tuning,
-            after_draws,
+        // Without link masses no plan without a payload determines a
+        // compliance: there is nothing to set beside this one's.
+        let without = has_masses(robot).then(|| {
+            compliance_without_payload(
+                &Drawn {
+                    scene: &scene,
+                    pool: &pool,
+                    validation: &validation,
+                    free: &free,
+                    ctx: &ctx,
+                    n_check,
+                    noise,
+                },
+                opts,
+                tuning,
+                after_draws,
+            )
+        });
+        add_payload_report(
+            &mut plan,
+            robot,
+            payload_kg,
+            &compliance,
+            without.as_deref(),
         );
-        add_payload_report(&mut plan, payload_kg, &compliance, &without);
     }
     Ok(Made { plan, bound })
 }
@@ -375,13 +387,18 @@ fn predictions(
 
 /// What the user should know about the effects planned for.
 fn notes(
+    robot: &Robot,
     opts: &PlanOptions,
     approach: &[ApproachBalance],
     backlash: Option<&BacklashTour>,
 ) -> Vec<String> {
     let mut notes = Vec::new();
     if opts.effects.iter().any(|e| e == "joint_compliance") && opts.payload_kg.is_none() {
-        notes.push("compliance is planned with the robot's own link masses; a payload changed part-way (payload_kg) separates it further".into());
+        notes.push(if has_masses(robot) {
+            "compliance is planned with the robot's own link masses; a payload changed part-way (payload_kg) separates it further".into()
+        } else {
+            "robot.json has no link masses: without a payload the compliance is planned as lumped terms (the compliance times the links' unknown masses), which predict the deflection under the arm's own weight but do not determine the compliance itself; a payload changed part-way (payload_kg) determines it".into()
+        });
     }
     if let Some(b) = approach
         .iter()
