@@ -211,8 +211,12 @@ fn payload_summary(r: &plan::PlanReport) -> String {
         .iter()
         .map(|c| {
             format!(
-                "j{} {:.3e} / {:.3e} {}",
-                c.joint, c.sigma_with_payload, c.sigma_without_payload, c.unit
+                "j{} {:.3e} / {} {}",
+                c.joint,
+                c.sigma_with_payload,
+                c.sigma_without_payload
+                    .map_or("not determined".into(), |s| format!("{s:.3e}")),
+                c.unit
             )
         })
         .collect();

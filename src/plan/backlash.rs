@@ -31,7 +31,6 @@ use super::columns::{information, reading_directions};
 use super::visits::VisitSpec;
 use super::{Candidate, PredictedParam, Scene, design};
 use crate::kinematics::JointParam;
-use crate::kinematics::chain::OutputFrame;
 use crate::physics::effects::step_direction;
 
 /// A joint's dead band as the plan predicts it.
@@ -300,12 +299,7 @@ pub(super) fn backlash_design(
         .map(|v| {
             let c = &pool[v.cand];
             let fitted = v.entry.map(|e| {
-                scene.chain.point_jacobian(
-                    &scene.nominal.values,
-                    &c.q_rad,
-                    OutputFrame::Rig,
-                    &mut jac,
-                );
+                scene.point_jacobian(&c.q_rad, &mut jac);
                 let dirs = reading_directions(scene, &c.t_rig);
                 let per_joint = (0..n)
                     .map(|j| {

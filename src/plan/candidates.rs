@@ -9,7 +9,7 @@ use nalgebra::{DMatrix, Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::kinematics::chain::{Chain, OutputFrame, PointJacobian};
+use crate::kinematics::chain::{Chain, OutputFrame, PointJacobian, Trig, joint_trig};
 use crate::kinematics::{JointParam, Params};
 use crate::model::{BasePose, Rig, Robot};
 use crate::rng::Rng;
@@ -150,6 +150,8 @@ pub struct Scene<'a> {
     pub chain: Chain,
     /// Nominal parameters with rig.json's base pose.
     pub nominal: Params,
+    /// Their trigonometry, for [`Scene::point_jacobian`].
+    trig: Trig,
     anchors: Vec<Vector3<f64>>,
     /// Unit normal of the anchors' plane when they are coplanar.
     plane: Option<Vector3<f64>>,
@@ -210,15 +212,29 @@ impl<'a> Scene<'a> {
             robot,
             rig,
             workspace,
-            chain,
             plane: coplanar_normal(&anchors),
             anchors,
             base_r,
             base_t,
             reach_mm,
             range_mm: rig.sensor.and_then(|s| s.range_mm).unwrap_or(2000.0),
+            trig: chain.trig(&nominal.values),
+            chain,
             nominal,
         })
+    }
+
+    /// The nominal T at joint angles `q_rad` and its derivatives by every
+    /// parameter, in the rig frame ([`Chain::point_jacobian`] of the
+    /// nominal parameters, their trigonometry computed once).
+    pub fn point_jacobian(&self, q_rad: &[f64], jac: &mut PointJacobian) {
+        self.chain.point_jacobian_trig(
+            &self.nominal.values,
+            &self.trig,
+            &joint_trig(q_rad),
+            OutputFrame::Rig,
+            jac,
+        );
     }
 
     /// The anchors (rig frame, mm).
@@ -249,8 +265,7 @@ impl<'a> Scene<'a> {
         jac: &mut PointJacobian,
     ) -> std::result::Result<Candidate, Rejection> {
         let q_rad: Vec<f64> = q_deg.iter().map(|v| v.to_radians()).collect();
-        let p = &self.nominal.values;
-        self.chain.point_jacobian(p, &q_rad, OutputFrame::Rig, jac);
+        self.point_jacobian(&q_rad, jac);
         let t = jac.point;
         let ws = self.workspace;
         // The strings: in range, off the anchors' plane, well spread.

@@ -6,10 +6,9 @@ use nalgebra::{DMatrix, Vector3};
 
 use super::payload::Entries;
 use super::{Candidate, PlanOptions, PredictedParam, PredictionAtN, Scene, design};
-use crate::error::Result;
 use crate::identify::{IdentifyOptions, geometric::candidates as free_candidates, identifiability};
 use crate::kinematics::JointParam;
-use crate::kinematics::chain::OutputFrame;
+use crate::kinematics::chain::PointJacobian;
 use crate::physics::Kind;
 use crate::physics::effects::{Basis, Context, PoseInput};
 use crate::report::FixedParam;
@@ -37,21 +36,67 @@ impl Columns {
 }
 
 /// The parameters the identification frees that the pool can determine,
-/// with their prior sizes, and the effects' coefficients.
+/// with their prior sizes, and the effects' coefficients (a plan builds
+/// them in steps, [`free_params`] and [`effect_columns`], to share them
+/// with the plan without its payload).
+#[cfg(test)]
 pub(super) fn columns(
     scene: &Scene,
     pool: &[Candidate],
     entries: &Entries,
     opts: &PlanOptions,
     noise: f64,
-) -> Result<Columns> {
+) -> crate::error::Result<Columns> {
+    let design = entries.of(pool);
+    let ctx = effect_context(scene, &design);
+    Ok(effect_columns(
+        scene,
+        &free_params(scene, pool),
+        &ctx,
+        &design,
+        opts,
+        noise,
+    ))
+}
+
+/// The parameters the identification frees that the pool can determine:
+/// its structural selection over the whole pool (which no payload
+/// changes), with their prior sizes, and what it holds at nominal.
+pub(super) struct FreeParams {
+    /// Parameter indices, identification priority order.
+    params: Vec<usize>,
+    /// Prior size of each (mm or rad).
+    scale: Vec<f64>,
+    /// What no pose of this rig can separate.
+    aliased: Vec<FixedParam>,
+}
+
+/// The pool's [`FreeParams`].
+pub(super) fn free_params(scene: &Scene, pool: &[Candidate]) -> FreeParams {
     let l = scene.chain.layout;
     let cand = free_candidates(l, &IdentifyOptions::default());
     let jtj = normal_matrix(scene, pool, &cand);
     let sel = identifiability::select(&jtj, &cand, &l, identifiability::DEFAULT_TOLERANCE);
-    let param_scale = sel.free.iter().map(|&i| prior_size(l, i)).collect();
-    let design = entries.of(pool);
-    let ctx = effect_context(scene, &design);
+    FreeParams {
+        scale: sel.free.iter().map(|&i| prior_size(l, i)).collect(),
+        params: sel.free,
+        aliased: sel.fixed,
+    }
+}
+
+/// The columns of a design over `design` (the entries' candidates with
+/// their payloads, pose `i` of `ctx` being entry `i`; `ctx` may hold more
+/// poses after them): the `free` parameters, then the effects asked for,
+/// each coefficient with its prior size over these entries.
+pub(super) fn effect_columns(
+    scene: &Scene,
+    free: &FreeParams,
+    ctx: &Context,
+    design: &[(&Candidate, Option<f64>)],
+    opts: &PlanOptions,
+    noise: f64,
+) -> Columns {
+    let l = scene.chain.layout;
     let mut effects = Vec::new();
     let n = scene.robot.dof();
     for e in &opts.effects {
@@ -91,34 +136,45 @@ pub(super) fn columns(
         }
     }
     let mut cols = Columns {
-        params: sel.free,
-        aliased: sel.fixed,
-        param_scale,
+        params: free.params.clone(),
+        aliased: free.aliased.clone(),
+        param_scale: free.scale.clone(),
         effects,
         effect_scale: vec![],
     };
     // An effect coefficient's prior: the size at which it moves the
-    // readings by three times their noise (RMS over the candidates).
+    // readings by three times their noise (RMS over the entries). One
+    // Jacobian per entry serves every effect; each effect's sums run over
+    // the entries in order.
     let mut buf = Basis::default();
-    let mut scales = Vec::new();
-    for (kind, _) in &cols.effects {
-        let nc = kind.n_coef();
-        let mut sq = vec![0.0; nc];
+    let mut jac = scene.chain.new_jacobian();
+    let mut sq: Vec<Vec<f64>> = cols
+        .effects
+        .iter()
+        .map(|(kind, _)| vec![0.0; kind.n_coef()])
+        .collect();
+    if !cols.effects.is_empty() {
         for (i, (c, _)) in design.iter().enumerate() {
-            let rows = effect_rows(scene, &ctx, kind, i, c, &mut buf);
-            let per = rows.len() / nc;
-            for (k, r) in rows.iter().enumerate() {
-                sq[k / per] += r * r;
+            scene.point_jacobian(&c.q_rad, &mut jac);
+            for ((kind, _), sq) in cols.effects.iter().zip(sq.iter_mut()) {
+                let rows = effect_rows(scene, ctx, kind, i, c, &jac, &mut buf);
+                let per = rows.len() / kind.n_coef();
+                for (k, r) in rows.iter().enumerate() {
+                    sq[k / per] += r * r;
+                }
             }
         }
-        let rows_per = (scene.rig.n_strings().max(3) * design.len()) as f64;
-        for s in sq {
-            let rms = (s / rows_per).sqrt();
-            scales.push(if rms > 0.0 { 3.0 * noise / rms } else { 0.0 });
-        }
     }
-    cols.effect_scale = scales;
-    Ok(cols)
+    let rows_per = (scene.rig.n_strings().max(3) * design.len()) as f64;
+    cols.effect_scale = sq
+        .into_iter()
+        .flatten()
+        .map(|s| {
+            let rms = (s / rows_per).sqrt();
+            if rms > 0.0 { 3.0 * noise / rms } else { 0.0 }
+        })
+        .collect();
+    cols
 }
 
 /// Prior size of parameter `i`: a manufacturing tolerance (the
@@ -144,16 +200,15 @@ pub(super) fn normal_matrix(scene: &Scene, pool: &[Candidate], cand: &[usize]) -
     let mut jac = scene.chain.new_jacobian();
     let mut row = vec![0.0; p];
     for c in pool {
-        scene
-            .chain
-            .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
+        scene.point_jacobian(&c.q_rad, &mut jac);
         for dir in reading_directions(scene, &c.t_rig) {
             for (k, &i) in cand.iter().enumerate() {
                 row[k] = dir.dot(&jac.d_params[i]);
             }
-            for a in 0..p {
-                for b in 0..p {
-                    jtj[(a, b)] += row[a] * row[b];
+            // Column b (column-major) gains row · row[b].
+            for (col, &rb) in jtj.as_mut_slice().chunks_exact_mut(p).zip(&row) {
+                for (x, &ra) in col.iter_mut().zip(&row) {
+                    *x += ra * rb;
                 }
             }
         }
@@ -176,7 +231,7 @@ pub(super) fn reading_directions(scene: &Scene, t: &Vector3<f64>) -> Vec<Vector3
 }
 
 /// The effects' context of candidates with their payloads (kg at T).
-fn effect_context(scene: &Scene, poses: &[(&Candidate, Option<f64>)]) -> Context {
+pub(super) fn effect_context(scene: &Scene, poses: &[(&Candidate, Option<f64>)]) -> Context {
     let inputs: Vec<PoseInput> = poses
         .iter()
         .map(|(c, payload_kg)| PoseInput {
@@ -197,18 +252,20 @@ fn effect_context(scene: &Scene, poses: &[(&Candidate, Option<f64>)]) -> Context
     )
 }
 
-/// An effect's reading rows at candidate `i` (per coefficient, per
-/// reading, coefficient-major): the joint changes through T, plus the
-/// readings' own change.
+/// An effect's reading rows at candidate `c`, pose `i` of `ctx`, whose
+/// point Jacobian is `jac` (per coefficient, per reading,
+/// coefficient-major): the joint changes through T, plus the readings' own
+/// change.
 fn effect_rows(
     scene: &Scene,
     ctx: &Context,
     kind: &Kind,
     i: usize,
     c: &Candidate,
+    jac: &PointJacobian,
     buf: &mut Basis,
 ) -> Vec<f64> {
-    let (dt, dl) = effect_displacement(scene, ctx, kind, i, c, buf);
+    let (dt, dl) = effect_displacement(scene, ctx, kind, i, jac, buf);
     let dirs = reading_directions(scene, &c.t_rig);
     let nc = kind.n_coef();
     let mut out = Vec::with_capacity(nc * dirs.len());
@@ -226,22 +283,19 @@ fn effect_rows(
 }
 
 /// Per coefficient: T's displacement (rig frame, mm) and the readings'
-/// change (mm, `n_coef × m`).
+/// change (mm, `n_coef × m`), at pose `i` of `ctx` whose point Jacobian is
+/// `jac`.
 fn effect_displacement(
     scene: &Scene,
     ctx: &Context,
     kind: &Kind,
     i: usize,
-    c: &Candidate,
+    jac: &PointJacobian,
     buf: &mut Basis,
 ) -> (Vec<Vector3<f64>>, Vec<f64>) {
     ctx.basis(kind, i, buf);
     let n = scene.robot.dof();
     let l = scene.chain.layout;
-    let mut jac = scene.chain.new_jacobian();
-    scene
-        .chain
-        .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
     let nc = kind.n_coef();
     let dt = (0..nc)
         .map(|k| {
@@ -265,8 +319,25 @@ pub(super) fn design_pool(
     validation: &[Candidate],
     noise: f64,
 ) -> design::Pool {
+    let design = entries.of(pool);
+    let ctx = effect_context(scene, &design);
+    design_pool_in(scene, cols, &ctx, &design, entries, validation, noise)
+}
+
+/// [`design_pool`] with the entries' effect context `ctx` given (pose `i`
+/// of `ctx` is entry `i` of `design`, the `entries`' candidates with their
+/// payloads; it may hold more poses after them).
+pub(super) fn design_pool_in(
+    scene: &Scene,
+    cols: &Columns,
+    ctx: &Context,
+    design: &[(&Candidate, Option<f64>)],
+    entries: &Entries,
+    validation: &[Candidate],
+    noise: f64,
+) -> design::Pool {
     let m = scene.anchors().len().max(3);
-    let rows = design_rows(scene, cols, &entries.of(pool), noise);
+    let rows = design_rows_in(scene, cols, ctx, design, noise);
     let loads: Vec<Option<f64>> = match entries.payload.last() {
         Some(Some(p)) => vec![Some(0.0), Some(*p)],
         _ => vec![None],
@@ -293,18 +364,29 @@ pub(super) fn design_rows(
     entries: &[(&Candidate, Option<f64>)],
     noise: f64,
 ) -> Vec<Vec<f64>> {
+    let ctx = effect_context(scene, entries);
+    design_rows_in(scene, cols, &ctx, entries, noise)
+}
+
+/// [`design_rows`] with the entries' effect context given (as for
+/// [`design_pool_in`]): one Jacobian per entry serves the parameters and
+/// every effect.
+fn design_rows_in(
+    scene: &Scene,
+    cols: &Columns,
+    ctx: &Context,
+    entries: &[(&Candidate, Option<f64>)],
+    noise: f64,
+) -> Vec<Vec<f64>> {
     let p = cols.len();
     let m = scene.anchors().len().max(3);
     let mut jac = scene.chain.new_jacobian();
     let mut buf = Basis::default();
-    let ctx = effect_context(scene, entries);
     entries
         .iter()
         .enumerate()
         .map(|(i, (c, _))| {
-            scene
-                .chain
-                .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
+            scene.point_jacobian(&c.q_rad, &mut jac);
             let dirs = reading_directions(scene, &c.t_rig);
             let mut r = vec![0.0; m * p];
             for (s, u) in dirs.iter().enumerate() {
@@ -314,7 +396,7 @@ pub(super) fn design_rows(
             }
             let mut k0 = cols.params.len();
             for (kind, _) in &cols.effects {
-                let er = effect_rows(scene, &ctx, kind, i, c, &mut buf);
+                let er = effect_rows(scene, ctx, kind, i, c, &jac, &mut buf);
                 let nc = kind.n_coef();
                 for k in 0..nc {
                     for s in 0..m {
@@ -341,9 +423,7 @@ fn prediction_weight(
     let vctx = effect_context(scene, poses);
     let mut w = DMatrix::zeros(p, p);
     for (i, (c, _)) in poses.iter().enumerate() {
-        scene
-            .chain
-            .point_jacobian(&scene.nominal.values, &c.q_rad, OutputFrame::Rig, &mut jac);
+        scene.point_jacobian(&c.q_rad, &mut jac);
         let mut jt = DMatrix::zeros(3, p);
         for (k, (&pi, sc)) in cols.params.iter().zip(&cols.param_scale).enumerate() {
             for a in 0..3 {
@@ -352,7 +432,7 @@ fn prediction_weight(
         }
         let mut k0 = cols.params.len();
         for (kind, _) in &cols.effects {
-            let (dt, _) = effect_displacement(scene, &vctx, kind, i, c, &mut buf);
+            let (dt, _) = effect_displacement(scene, &vctx, kind, i, &jac, &mut buf);
             for (k, d) in dt.iter().enumerate() {
                 for a in 0..3 {
                     jt[(a, k0 + k)] = d[a] * cols.effect_scale[k0 - cols.params.len() + k];
@@ -381,14 +461,25 @@ pub(super) fn information(pool: &design::Pool, set: &[usize]) -> DMatrix<f64> {
     mm
 }
 
+/// What least squares on the poses `set` predicts: the model's RMS error
+/// at random valid poses and the held-out RMS. Infinite where the set does
+/// not determine every column (fewer readings than columns, or columns its
+/// poses cannot tell apart: the information is then not positive
+/// definite), rather than the number the rounding makes of a singular
+/// inverse.
 pub(super) fn prediction(
     pool: &design::Pool,
     set: &[usize],
     point_noise_rms_mm: f64,
 ) -> PredictionAtN {
-    let model = information(pool, set)
-        .try_inverse()
-        .map_or(f64::INFINITY, |inv| (&pool.w * inv).trace().max(0.0));
+    let info = information(pool, set);
+    let model = if info.clone().cholesky().is_none() {
+        f64::INFINITY
+    } else {
+        info.try_inverse()
+            .map_or(f64::INFINITY, |inv| (&pool.w * inv).trace())
+    };
+    let model = if model > 0.0 { model } else { f64::INFINITY };
     PredictionAtN {
         n_poses: set.len(),
         model_rms_mm: model.sqrt(),

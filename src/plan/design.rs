@@ -21,6 +21,10 @@
 
 use nalgebra::DMatrix;
 
+mod kernel;
+
+use kernel::{rows_times, transpose};
+
 /// Candidates' scaled rows and the prediction weight.
 pub struct Pool {
     /// Rows per candidate.
@@ -60,26 +64,33 @@ struct State<'a> {
     active: Vec<usize>,
 }
 
+/// What a rank-`m` change of `M⁻¹` takes to every kept `G_i` and `H_i`
+/// (see [`State::update`]): per parameter `k`, `U`'s and `R`'s rows side
+/// by side (`p × 2m`), `S⁻¹` and `S⁻¹ UᵀWU S⁻¹` (`m × m`), row-major.
+struct Change {
+    ur: Vec<f64>,
+    sinv: Vec<f64>,
+    core: Vec<f64>,
+}
+
 impl<'a> State<'a> {
     fn new(pool: &'a Pool) -> Self {
         let (m, p) = (pool.m, pool.p);
         let mut g = Vec::with_capacity(pool.rows.len());
         let mut h = Vec::with_capacity(pool.rows.len());
+        // Row a of wj: W J_aᵀ (W column-major: its k-th column's entries
+        // side by side, as `rows_times` takes them).
+        let mut wj = vec![0.0; m * p];
+        let mut t = vec![0.0; p * m];
         for j in &pool.rows {
             let mut gi = vec![0.0; m * m];
             let mut hi = vec![0.0; m * m];
-            let mut wj = vec![0.0; p];
-            for a in 0..m {
-                let ja = &j[a * p..(a + 1) * p];
-                for (c, v) in wj.iter_mut().enumerate() {
-                    *v = (0..p).map(|k| pool.w[(c, k)] * ja[k]).sum();
-                }
-                for b in 0..m {
-                    let jb = &j[b * p..(b + 1) * p];
-                    gi[a * m + b] = dot(ja, jb);
-                    hi[b * m + a] = dot(jb, &wj);
-                }
-            }
+            rows_times(j, p, pool.w.as_slice(), p, &mut wj);
+            // G = J Jᵀ; H = J W Jᵀ (row b, column a: J_b · W J_aᵀ).
+            transpose(j, p, &mut t);
+            rows_times(j, p, &t, m, &mut gi);
+            transpose(&wj, p, &mut t);
+            rows_times(j, p, &t, m, &mut hi);
             g.push(gi);
             h.push(hi);
         }
@@ -101,28 +112,20 @@ impl<'a> State<'a> {
     /// refresh their rounding reorders the late gains.
     fn refresh(&mut self) {
         let (m, p) = (self.pool.m, self.pool.p);
-        // Row-major M⁻¹ and M⁻¹ W M⁻¹ (both symmetric).
+        // M⁻¹ and M⁻¹ W M⁻¹, column-major: the k-th entries of every row
+        // side by side, as `rows_times` takes them.
         let a = &self.minv * &self.pool.w * &self.minv;
-        let minv: Vec<f64> = (0..p * p).map(|k| self.minv[(k / p, k % p)]).collect();
-        let a: Vec<f64> = (0..p * p).map(|k| a[(k / p, k % p)]).collect();
         let mut x = vec![0.0; m * p];
         let mut y = vec![0.0; m * p];
+        let mut jt = vec![0.0; p * m];
         for &i in &self.active {
             let rows = &self.pool.rows[i];
-            for r in 0..m {
-                let jr = &rows[r * p..(r + 1) * p];
-                for c in 0..p {
-                    x[r * p + c] = dot(jr, &minv[c * p..(c + 1) * p]);
-                    y[r * p + c] = dot(jr, &a[c * p..(c + 1) * p]);
-                }
-            }
-            for r in 0..m {
-                for c in 0..m {
-                    let jc = &rows[c * p..(c + 1) * p];
-                    self.g[i][r * m + c] = dot(&x[r * p..(r + 1) * p], jc);
-                    self.h[i][r * m + c] = dot(&y[r * p..(r + 1) * p], jc);
-                }
-            }
+            // x = J M⁻¹, y = J M⁻¹ W M⁻¹ (both symmetric on the right).
+            rows_times(rows, p, self.minv.as_slice(), p, &mut x);
+            rows_times(rows, p, a.as_slice(), p, &mut y);
+            transpose(rows, p, &mut jt);
+            rows_times(&x, p, &jt, m, &mut self.g[i]);
+            rows_times(&y, p, &jt, m, &mut self.h[i]);
         }
     }
 
@@ -153,6 +156,18 @@ impl<'a> State<'a> {
     /// so that the greedy steps do not pick it again and again.
     #[must_use]
     fn update(&mut self, s: usize, sign: f64) -> bool {
+        let Some(change) = self.change(s, sign) else {
+            return false;
+        };
+        self.update_kept(&change);
+        true
+    }
+
+    /// The part of [`State::update`] that is not every kept `G_i` and
+    /// `H_i`: `M⁻¹`, the objective and the chosen set, and the terms the
+    /// kept ones then take ([`State::update_kept`]); `None` as `update`'s
+    /// false.
+    fn change(&mut self, s: usize, sign: f64) -> Option<Change> {
         let (m, p) = (self.pool.m, self.pool.p);
         let js = DMatrix::from_row_slice(m, p, &self.pool.rows[s]);
         let u = &self.minv * js.transpose(); // p × m
@@ -163,7 +178,7 @@ impl<'a> State<'a> {
             if sign > 0.0 {
                 self.active.retain(|&i| i != s);
             }
-            return false;
+            return None;
         };
         let wu = &self.pool.w * &u;
         let r = &self.minv * &wu; // p × m
@@ -171,37 +186,54 @@ impl<'a> State<'a> {
         let core = &sinv * &uwu * &sinv;
         self.objective -= (&sinv * &uwu).trace();
         self.minv -= &u * &sinv * u.transpose();
-        // Row-major copies: the loop below runs over every candidate.
-        let ut: Vec<f64> = (0..m)
-            .flat_map(|b| (0..p).map(move |k| (b, k)))
-            .map(|(b, k)| u[(k, b)])
-            .collect();
-        let rt: Vec<f64> = (0..m)
-            .flat_map(|b| (0..p).map(move |k| (b, k)))
-            .map(|(b, k)| r[(k, b)])
-            .collect();
-        let sinv: Vec<f64> = (0..m * m).map(|k| sinv[(k / m, k % m)]).collect();
-        let core: Vec<f64> = (0..m * m).map(|k| core[(k / m, k % m)]).collect();
-        let mut pm = vec![0.0; m * m];
-        let mut qm = vec![0.0; m * m];
+        self.chosen[s] = sign > 0.0;
+        // Per parameter k, u's and r's rows side by side (`rows_times`):
+        // the kept terms' loop runs over every candidate.
+        let mut ur = vec![0.0; p * 2 * m];
+        for (k, row) in ur.chunks_exact_mut(2 * m).enumerate() {
+            for b in 0..m {
+                row[b] = u[(k, b)];
+                row[m + b] = r[(k, b)];
+            }
+        }
+        Some(Change {
+            ur,
+            sinv: (0..m * m).map(|k| sinv[(k / m, k % m)]).collect(),
+            core: (0..m * m).map(|k| core[(k / m, k % m)]).collect(),
+        })
+    }
+
+    /// Every compared candidate's `G_i` and `H_i` after `change`, the
+    /// usual numbers of rows as constants so that the small loops unroll
+    /// (the same operations in the same order).
+    fn update_kept(&mut self, change: &Change) {
+        let (m, p) = (self.pool.m, self.pool.p);
+        match m {
+            3 => self.update_kept_m(3, p, change),
+            4 => self.update_kept_m(4, p, change),
+            _ => self.update_kept_m(m, p, change),
+        }
+    }
+
+    /// [`State::update_kept`] for `m` rows.
+    #[inline(always)]
+    fn update_kept_m(&mut self, m: usize, p: usize, change: &Change) {
+        let Change { ur, sinv, core } = change;
+        // P = J_i U and Q = J_i R side by side: row a of P is
+        // pq[a·2m..a·2m + m], of Q the m after.
+        let mut pq = vec![0.0; m * 2 * m];
         let mut ps = vec![0.0; m * m];
         let mut pc = vec![0.0; m * m];
+        let w = 2 * m;
         for &i in &self.active {
-            let j = &self.pool.rows[i];
-            for a in 0..m {
-                let ja = &j[a * p..(a + 1) * p];
-                for b in 0..m {
-                    pm[a * m + b] = dot(ja, &ut[b * p..(b + 1) * p]);
-                    qm[a * m + b] = dot(ja, &rt[b * p..(b + 1) * p]);
-                }
-            }
+            rows_times(&self.pool.rows[i], p, ur, w, &mut pq);
             // ps = P Sinv, pc = P core.
             for a in 0..m {
                 for b in 0..m {
                     let (mut x, mut y) = (0.0, 0.0);
                     for k in 0..m {
-                        x += pm[a * m + k] * sinv[k * m + b];
-                        y += pm[a * m + k] * core[k * m + b];
+                        x += pq[a * w + k] * sinv[k * m + b];
+                        y += pq[a * w + k] * core[k * m + b];
                     }
                     ps[a * m + b] = x;
                     pc[a * m + b] = y;
@@ -213,17 +245,15 @@ impl<'a> State<'a> {
                     let (mut dg, mut dh, mut quad) = (0.0, 0.0, 0.0);
                     for k in 0..m {
                         // P Sinv Pᵀ; P Sinv Qᵀ + Q Sinv Pᵀ; P core Pᵀ.
-                        dg += ps[a * m + k] * pm[b * m + k];
-                        dh += ps[a * m + k] * qm[b * m + k] + ps[b * m + k] * qm[a * m + k];
-                        quad += pc[a * m + k] * pm[b * m + k];
+                        dg += ps[a * m + k] * pq[b * w + k];
+                        dh += ps[a * m + k] * pq[b * w + m + k] + ps[b * m + k] * pq[a * w + m + k];
+                        quad += pc[a * m + k] * pq[b * w + k];
                     }
                     gi[a * m + b] -= dg;
                     hi[a * m + b] += quad - dh;
                 }
             }
         }
-        self.chosen[s] = sign > 0.0;
-        true
     }
 
     /// Add the best candidate left, refreshing the bookkeeping when the
@@ -233,12 +263,16 @@ impl<'a> State<'a> {
         loop {
             let (i, _) = self.best()?;
             // A candidate that does not solve left the pool: try the next.
-            if !self.update(i, 1.0) {
+            let Some(change) = self.change(i, 1.0) else {
                 continue;
-            }
+            };
             if self.objective < REFRESH_DROP * *refreshed_at {
+                // The refresh recomputes every kept G_i and H_i from M⁻¹
+                // alone: the change to them would be overwritten.
                 self.refresh();
                 *refreshed_at = self.objective;
+            } else {
+                self.update_kept(&change);
             }
             return Some(i);
         }
@@ -257,51 +291,64 @@ impl<'a> State<'a> {
 }
 
 /// `trace((I + sign·G)⁻¹ H)` for `m × m` row-major `g` and `h` by an
-/// in-place Cholesky factorisation (no allocation up to 8 rows); `None`
-/// when `I + sign·G` is not positive definite.
+/// in-place Cholesky factorisation (no allocation, unrolled for each `m`
+/// up to 8); `None` when `I + sign·G` is not positive definite.
 fn trace_solve(g: &[f64], h: &[f64], m: usize, sign: f64) -> Option<f64> {
-    if m > 8 {
-        let s = DMatrix::from_fn(m, m, |a, b| {
-            sign * g[a * m + b] + if a == b { 1.0 } else { 0.0 }
-        });
-        return s
-            .cholesky()
-            .map(|c| c.solve(&DMatrix::from_row_slice(m, m, h)).trace());
+    match m {
+        1 => trace_solve_m::<1>(g, h, sign),
+        2 => trace_solve_m::<2>(g, h, sign),
+        3 => trace_solve_m::<3>(g, h, sign),
+        4 => trace_solve_m::<4>(g, h, sign),
+        5 => trace_solve_m::<5>(g, h, sign),
+        6 => trace_solve_m::<6>(g, h, sign),
+        7 => trace_solve_m::<7>(g, h, sign),
+        8 => trace_solve_m::<8>(g, h, sign),
+        _ => {
+            let s = DMatrix::from_fn(m, m, |a, b| {
+                sign * g[a * m + b] + if a == b { 1.0 } else { 0.0 }
+            });
+            s.cholesky()
+                .map(|c| c.solve(&DMatrix::from_row_slice(m, m, h)).trace())
+        }
     }
-    let mut l = [0.0; 64];
-    for a in 0..m {
+}
+
+/// [`trace_solve`] for `M` rows.
+fn trace_solve_m<const M: usize>(g: &[f64], h: &[f64], sign: f64) -> Option<f64> {
+    let mut l = [[0.0; M]; M];
+    for a in 0..M {
         for b in 0..=a {
-            let mut v = sign * g[a * m + b] + if a == b { 1.0 } else { 0.0 };
+            let mut v = sign * g[a * M + b] + if a == b { 1.0 } else { 0.0 };
             for k in 0..b {
-                v -= l[a * 8 + k] * l[b * 8 + k];
+                v -= l[a][k] * l[b][k];
             }
             if a == b {
                 if v <= 0.0 {
                     return None;
                 }
-                l[a * 8 + a] = v.sqrt();
+                l[a][a] = v.sqrt();
             } else {
-                l[a * 8 + b] = v / l[b * 8 + b];
+                l[a][b] = v / l[b][b];
             }
         }
     }
     // trace(S⁻¹ H) = Σ_c (S⁻¹ H)[c][c]: solve L Lᵀ x = H e_c per column c.
     let mut total = 0.0;
-    let mut x = [0.0; 8];
-    for c in 0..m {
-        for a in 0..m {
-            let mut v = h[a * m + c];
+    let mut x = [0.0; M];
+    for c in 0..M {
+        for a in 0..M {
+            let mut v = h[a * M + c];
             for k in 0..a {
-                v -= l[a * 8 + k] * x[k];
+                v -= l[a][k] * x[k];
             }
-            x[a] = v / l[a * 8 + a];
+            x[a] = v / l[a][a];
         }
-        for a in (0..m).rev() {
+        for a in (0..M).rev() {
             let mut v = x[a];
-            for k in a + 1..m {
-                v -= l[k * 8 + a] * x[k];
+            for k in a + 1..M {
+                v -= l[k][a] * x[k];
             }
-            x[a] = v / l[a * 8 + a];
+            x[a] = v / l[a][a];
         }
         total += x[c];
     }
@@ -361,10 +408,6 @@ fn log_det(g: &[f64], m: usize, sign: f64) -> Option<f64> {
     });
     s.cholesky()
         .map(|c| 2.0 * c.l().diagonal().iter().map(|v| v.ln()).sum::<f64>())
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// Candidates (besides the chosen) the exchange compares.

@@ -54,11 +54,17 @@ pub use report::{
     ApproachBalance, PLAN_FORMAT, Plan, PlanReport, PlannedPose, PredictedParam, PredictionAtN,
 };
 
+use crate::physics::effects::Context;
 use backlash::{backlash_note, backlash_params};
-use columns::{columns, design_pool, point_noise_rms, predicted_sigmas, prediction};
+use columns::{
+    FreeParams, design_pool_in, effect_columns, effect_context, free_params, point_noise_rms,
+    predicted_sigmas, prediction,
+};
 use options::{check_options, default_noise, home_pose};
-use payload::{Entries, compliance_sigmas, with_payload_report};
-use visits::{Toured, visits};
+use payload::{
+    Entries, add_payload_report, compliance_sigmas, compliance_without_payload, has_masses,
+};
+use visits::{Toured, VisitSpec, visits};
 
 /// Valid random poses drawn before giving up on finding enough, per pose
 /// asked for.
@@ -105,8 +111,7 @@ pub fn plan(robot: &Robot, rig: &Rig, opts: &PlanOptions) -> Result<Plan> {
 
 /// [`plan`] with the selection made as `tuning` says.
 pub fn plan_tuned(robot: &Robot, rig: &Rig, opts: &PlanOptions, tuning: &Tuning) -> Result<Plan> {
-    let made = plan_inner(robot, rig, opts, tuning, false)?;
-    Ok(with_payload_report(robot, rig, opts, tuning, made)?.plan)
+    Ok(plan_inner(robot, rig, opts, tuning, false)?.plan)
 }
 
 /// How well any `n_poses` of a plan's candidates could do, in the plan's
@@ -131,16 +136,13 @@ pub fn plan_with_bound(
     tuning: &Tuning,
 ) -> Result<(Plan, DesignBound)> {
     let made = plan_inner(robot, rig, opts, tuning, true)?;
-    let made = with_payload_report(robot, rig, opts, tuning, made)?;
     Ok((made.plan, made.bound.expect("asked for")))
 }
 
-/// What [`plan_inner`] makes: the plan, the bound when asked, and each
-/// joint's compliance 1-sigma (deg per the coefficient's unit, the unit).
+/// What [`plan_inner`] makes: the plan and the bound when asked.
 struct Made {
     plan: Plan,
     bound: Option<DesignBound>,
-    compliance: Vec<(usize, f64, &'static str)>,
 }
 
 fn plan_inner(
@@ -166,36 +168,33 @@ fn plan_inner(
         )));
     }
     let validation: Vec<Candidate> = pool.split_off(pool.len() - PREDICTION_POSES);
+    // A payload plan reports the plan the same options make without the
+    // payload beside its own: it starts from the same draws.
+    let after_draws = rng.clone();
     let entries = Entries::new(pool.len(), opts.payload_kg);
-    let cols = columns(&scene, &pool, &entries, opts, noise)?;
-    let design_pool = design_pool(&scene, &cols, &pool, &entries, &validation, noise);
+    let design = entries.of(&pool);
+    let ctx = effect_context(&scene, &design);
+    let free = free_params(&scene, &pool);
+    let cols = effect_columns(&scene, &free, &ctx, &design, opts, noise);
+    let design_pool = design_pool_in(&scene, &cols, &ctx, &design, &entries, &validation, noise);
     let n_greedy = (2 * opts.n_poses).min(entries.len() - n_check);
-    let sel = design::select_by(
-        &design_pool,
-        opts.n_poses,
-        n_greedy,
-        tuning.exchange_passes,
-        tuning.criterion,
-    );
-
-    // Check poses: random valid poses not chosen.
-    let chosen_poses: Vec<usize> = sel.chosen.iter().map(|&e| entries.cand[e]).collect();
-    let mut rest: Vec<usize> = (0..pool.len())
-        .filter(|i| !chosen_poses.contains(i))
-        .collect();
-    rng.shuffle(&mut rest);
-    let home = home_pose(robot, opts);
-    let visits = visits(&entries, &sel.chosen, &rest[..n_check]);
-    let toured = Toured::new(
+    let Chosen {
+        sel,
+        visits,
+        toured,
+    } = choose(
         &scene,
         &design_pool,
         &pool,
-        &visits,
-        &home,
-        &sel.chosen,
+        &entries,
         opts,
+        tuning,
+        n_greedy,
+        n_check,
+        &mut rng,
         noise,
     );
+    let home = home_pose(robot, opts);
     let poses = toured.poses(&pool, &visits);
     let toured_q: Vec<&[f64]> = poses.iter().map(|p| p.q_deg.as_slice()).collect();
     let tour_travel_deg = tour::path_travel_deg(&home, &toured_q);
@@ -212,7 +211,7 @@ fn plan_inner(
         predicted_sigmas(&toured.covariance(&design_pool, &sel.chosen), &cols, &scene);
     let backlash = toured.report(robot.dof());
     parameters.extend(backlash_params(backlash.as_ref()));
-    let compliance = compliance_sigmas(&cols, &parameters, robot.dof());
+    let compliance = compliance_sigmas(&cols, &parameters, robot);
     let bound = with_bound.then(|| {
         let (phi, lower) = design::continuous_bound(&design_pool, 300);
         let n = opts.n_poses as f64;
@@ -226,7 +225,7 @@ fn plan_inner(
     } else {
         vec![]
     };
-    let notes = notes(opts, &approach, backlash.as_ref());
+    let notes = notes(robot, opts, &approach, backlash.as_ref());
     let report = PlanReport {
         format: PLAN_FORMAT.into(),
         robot: robot.name.clone(),
@@ -258,11 +257,98 @@ fn plan_inner(
         backlash,
         payload: None,
     };
-    Ok(Made {
-        plan: Plan { poses, report },
-        bound,
-        compliance,
-    })
+    let mut plan = Plan { poses, report };
+    if let Some(payload_kg) = opts.payload_kg {
+        // Without link masses no plan without a payload determines a
+        // compliance: there is nothing to set beside this one's.
+        let without = has_masses(robot).then(|| {
+            compliance_without_payload(
+                &Drawn {
+                    scene: &scene,
+                    pool: &pool,
+                    validation: &validation,
+                    free: &free,
+                    ctx: &ctx,
+                    n_check,
+                    noise,
+                },
+                opts,
+                tuning,
+                after_draws,
+            )
+        });
+        add_payload_report(
+            &mut plan,
+            robot,
+            payload_kg,
+            &compliance,
+            without.as_deref(),
+        );
+    }
+    Ok(Made { plan, bound })
+}
+
+/// What every design of a plan is built from: the scene, the candidates
+/// drawn and the prediction poses, the parameters the identification
+/// frees over them, and the effects' context of the plan's entries (the
+/// candidates unloaded first: a design without the payload takes the
+/// first poses).
+struct Drawn<'a> {
+    scene: &'a Scene<'a>,
+    pool: &'a [Candidate],
+    validation: &'a [Candidate],
+    free: &'a FreeParams,
+    ctx: &'a Context,
+    n_check: usize,
+    noise: f64,
+}
+
+/// A design's choice: the selection, the poses to record (the chosen,
+/// then check poses drawn from the candidates not chosen) and their
+/// visiting order.
+struct Chosen {
+    sel: design::Selection,
+    visits: Vec<VisitSpec>,
+    toured: Toured,
+}
+
+/// Select `opts.n_poses` of `dpool`'s entries (greedily up to `n_greedy`,
+/// then by exchanges), draw the check poses with `rng` and order the
+/// visits.
+#[allow(clippy::too_many_arguments)]
+fn choose(
+    scene: &Scene,
+    dpool: &design::Pool,
+    pool: &[Candidate],
+    entries: &Entries,
+    opts: &PlanOptions,
+    tuning: &Tuning,
+    n_greedy: usize,
+    n_check: usize,
+    rng: &mut Rng,
+    noise: f64,
+) -> Chosen {
+    let sel = design::select_by(
+        dpool,
+        opts.n_poses,
+        n_greedy,
+        tuning.exchange_passes,
+        tuning.criterion,
+    );
+    // Check poses: random valid poses not chosen.
+    let chosen_poses: Vec<usize> = sel.chosen.iter().map(|&e| entries.cand[e]).collect();
+    let mut rest: Vec<usize> = (0..pool.len())
+        .filter(|i| !chosen_poses.contains(i))
+        .collect();
+    rng.shuffle(&mut rest);
+    let home = home_pose(scene.robot, opts);
+    let visits = visits(entries, &sel.chosen, &rest[..n_check]);
+    let toured = Toured::new(scene, dpool, pool, &visits, &home, &sel.chosen, opts, noise);
+    Chosen {
+        sel,
+        visits,
+        toured,
+    }
 }
 
 /// What least squares will give (without the prior): the chosen poses,
@@ -301,13 +387,18 @@ fn predictions(
 
 /// What the user should know about the effects planned for.
 fn notes(
+    robot: &Robot,
     opts: &PlanOptions,
     approach: &[ApproachBalance],
     backlash: Option<&BacklashTour>,
 ) -> Vec<String> {
     let mut notes = Vec::new();
     if opts.effects.iter().any(|e| e == "joint_compliance") && opts.payload_kg.is_none() {
-        notes.push("compliance is planned with the robot's own link masses; a payload changed part-way (payload_kg) separates it further".into());
+        notes.push(if has_masses(robot) {
+            "compliance is planned with the robot's own link masses; a payload changed part-way (payload_kg) separates it further".into()
+        } else {
+            "robot.json has no link masses: without a payload the compliance is planned as lumped terms (the compliance times the links' unknown masses), which predict the deflection under the arm's own weight but do not determine the compliance itself; a payload changed part-way (payload_kg) determines it".into()
+        });
     }
     if let Some(b) = approach
         .iter()

@@ -4,13 +4,15 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::columns::Columns;
+use super::columns::{Columns, design_pool_in, effect_columns, predicted_sigmas};
 use super::{
-    Candidate, MAX_PAYLOAD_KG, Made, PlanOptions, PlannedPose, PredictedParam, Tuning, plan_inner,
+    Candidate, Drawn, MAX_PAYLOAD_KG, Plan, PlanOptions, PlannedPose, PredictedParam, Tuning,
+    choose,
 };
 use crate::error::{Error, Result};
-use crate::model::{Rig, Robot};
+use crate::model::Robot;
 use crate::physics::Kind;
+use crate::rng::Rng;
 
 /// A joint's compliance with and without the payload.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -18,13 +20,18 @@ pub struct ComplianceSigma {
     /// Joint (1-based).
     pub joint: usize,
     /// Predicted 1-sigma with this plan (the payload carried where it
-    /// chose).
+    /// chose). With link masses, of the joint's one compliance
+    /// coefficient; without them, of the payload's coefficient divided by
+    /// g: the payload's gravity torque is then the only one known, and its
+    /// coefficient is the compliance times g.
     pub sigma_with_payload: f64,
     /// Predicted 1-sigma of the plan the same options make without a
+    /// payload; `None` (`null`) where that plan does not determine the
+    /// compliance: always for a robot without link masses, where only the
+    /// compliance times the links' unknown masses can be fitted without a
     /// payload.
-    pub sigma_without_payload: f64,
-    /// `deg/(N·m)` with link masses; without them the coefficient of a
-    /// unit mass at T, `deg/m`.
+    pub sigma_without_payload: Option<f64>,
+    /// `deg/(N·m)`.
     pub unit: String,
 }
 
@@ -86,62 +93,119 @@ impl Entries {
     }
 }
 
-/// With a payload planned, the report's [`PayloadPlan`]: the loaded and
-/// unloaded poses and the compliance with and without the payload (from
-/// the plan the same options make without it).
-pub(super) fn with_payload_report(
-    robot: &Robot,
-    rig: &Rig,
+/// The compliance 1-sigma per joint (deg/(N·m)) of the plan the same
+/// options make without the payload (what [`add_payload_report`] sets
+/// beside the plan's own), made from the payload plan's draws: the same candidates
+/// and prediction poses, the same parameters freed, and the draws'
+/// random state `after_draws` for its check poses. The candidates
+/// unloaded are the payload plan's first entries, so their effect context
+/// is `drawn.ctx`'s first poses. It is the plan `plan` makes without
+/// `payload_kg`, but for its curve over N (the greedy steps past N, which
+/// change none of its poses, are not taken) and its report.
+pub(super) fn compliance_without_payload(
+    drawn: &Drawn,
     opts: &PlanOptions,
     tuning: &Tuning,
-    mut made: Made,
-) -> Result<Made> {
-    let Some(payload_kg) = opts.payload_kg else {
-        return Ok(made);
+    mut after_draws: Rng,
+) -> Vec<(usize, f64)> {
+    let opts = PlanOptions {
+        payload_kg: None,
+        ..opts.clone()
     };
-    let without = plan_inner(
-        robot,
-        rig,
-        &PlanOptions {
-            payload_kg: None,
-            ..opts.clone()
-        },
+    let scene = drawn.scene;
+    let entries = Entries::new(drawn.pool.len(), None);
+    let design = entries.of(drawn.pool);
+    let cols = effect_columns(scene, drawn.free, drawn.ctx, &design, &opts, drawn.noise);
+    let dpool = design_pool_in(
+        scene,
+        &cols,
+        drawn.ctx,
+        &design,
+        &entries,
+        drawn.validation,
+        drawn.noise,
+    );
+    let chosen = choose(
+        scene,
+        &dpool,
+        drawn.pool,
+        &entries,
+        &opts,
         tuning,
-        false,
-    )?;
-    let compliance = made
-        .compliance
+        opts.n_poses,
+        drawn.n_check,
+        &mut after_draws,
+        drawn.noise,
+    );
+    let params = predicted_sigmas(
+        &chosen.toured.covariance(&dpool, &chosen.sel.chosen),
+        &cols,
+        scene,
+    );
+    compliance_sigmas(&cols, &params, scene.robot)
+}
+
+/// The report's [`PayloadPlan`] and its notes: the loaded and unloaded
+/// poses of `plan`, and per joint its compliance 1-sigma (`with`,
+/// deg/(N·m)) beside the plan's without the payload (`without`; `None`
+/// when no plan without a payload determines it, for a robot without link
+/// masses).
+pub(super) fn add_payload_report(
+    plan: &mut Plan,
+    robot: &Robot,
+    payload_kg: f64,
+    with: &[(usize, f64)],
+    without: Option<&[(usize, f64)]>,
+) {
+    let compliance = with
         .iter()
-        .filter_map(|&(j, with, unit)| {
-            let &(_, w, _) = without.compliance.iter().find(|c| c.0 == j)?;
-            Some(ComplianceSigma {
-                joint: j + 1,
-                sigma_with_payload: with,
-                sigma_without_payload: w,
-                unit: unit.into(),
-            })
+        .map(|&(j, with)| ComplianceSigma {
+            joint: j + 1,
+            sigma_with_payload: with,
+            sigma_without_payload: without
+                .and_then(|w| w.iter().find(|c| c.0 == j))
+                .map(|c| c.1),
+            unit: COMPLIANCE_UNIT.into(),
         })
         .collect();
-    let train: Vec<&PlannedPose> = made
-        .plan
-        .poses
-        .iter()
-        .filter(|p| p.split == "train")
-        .collect();
+    let train: Vec<&PlannedPose> = plan.poses.iter().filter(|p| p.split == "train").collect();
     let loaded = train.iter().filter(|p| p.payload_kg > Some(0.0)).count();
-    let changes = made
-        .plan
+    let changes = plan
         .poses
         .windows(2)
         .filter(|w| w[0].payload_kg != w[1].payload_kg)
         .count();
-    let r = &mut made.plan.report;
+    let r = &mut plan.report;
     r.notes.push(payload_note(
         payload_kg,
         loaded,
         train.len() - loaded,
         changes,
     ));
+    let seen: Vec<usize> = with.iter().map(|c| c.0).collect();
+    let unseen: Vec<String> = (0..robot.dof())
+        .filter(|j| !seen.contains(j))
+        .map(|j| (j + 1).to_string())
+        .collect();
+    if !has_masses(robot) {
+        r.notes.push(format!(
+            "robot.json has no link masses: {}; the arm's own weight enters as lumped terms (the compliance times the links' unknown masses), which no plan without a payload separates from the compliance",
+            if seen.is_empty() {
+                "no joint's compliance is determined, which takes poses both with and without the payload whose torque on the joint differs".to_string()
+            } else {
+                format!(
+                    "the compliance of joint(s) {} (deg/(N·m)) is determined by the payload alone, from the poses with it against those without",
+                    seen.iter().map(|j| (j + 1).to_string()).collect::<Vec<_>>().join(", ")
+                )
+            }
+        ));
+    }
+    if !unseen.is_empty() && !seen.is_empty() {
+        r.notes.push(format!(
+            "the compliance of joint(s) {} is not determined: the gravity torques on it are nil or too small over these poses, or its turn does not move the measured point",
+            unseen.join(", ")
+        ));
+    }
     r.payload = Some(PayloadPlan {
         payload_kg,
         loaded_poses: loaded,
@@ -149,7 +213,23 @@ pub(super) fn with_payload_report(
         payload_changes: changes,
         compliance,
     });
-    Ok(made)
+}
+
+/// The unit of a compliance's 1-sigma in a plan's payload report.
+const COMPLIANCE_UNIT: &str = "deg/(N·m)";
+
+/// True when `robot` has a mass for every link (the gravity torques are
+/// then known, and a compliance has one coefficient).
+pub(super) fn has_masses(robot: &Robot) -> bool {
+    robot.links.as_ref().is_some_and(|l| l.len() == robot.dof())
+}
+
+/// The size of gravity for `robot` (m/s²: its `gravity_in_base`, or
+/// 9.81).
+fn gravity(robot: &Robot) -> f64 {
+    robot
+        .gravity_in_base
+        .map_or(9.81, |g| (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt())
 }
 
 /// The payload plan in words.
@@ -167,17 +247,21 @@ fn payload_note(payload_kg: f64, loaded: usize, unloaded: usize, changes: usize)
     }
 }
 
-/// Per joint planned for compliance whose coefficient the readings see and
+/// Per joint planned for compliance whose compliance the readings see and
 /// the poses determine (a 1-sigma below the coefficient's prior size: the
 /// size at which it moves the readings by three times their noise): the
-/// 1-sigma (with link
-/// masses its only coefficient, deg/(N·m); without, its unit mass at T,
-/// deg/m) and the unit.
+/// 1-sigma of its compliance (deg/(N·m)). With link masses that is its one
+/// coefficient's. Without them the payload's gravity torque at T is the
+/// only one known, and its coefficient is the compliance times g: its
+/// 1-sigma over g; a joint without that coefficient (no payload planned,
+/// or the payload's torque on it nil or following the tool's) is not
+/// listed.
 pub(super) fn compliance_sigmas(
     cols: &Columns,
     params: &[PredictedParam],
-    n: usize,
-) -> Vec<(usize, f64, &'static str)> {
+    robot: &Robot,
+) -> Vec<(usize, f64)> {
+    let payload_regressor = robot.dof() + 1;
     let mut k0 = 0;
     let mut out = Vec::new();
     for (kind, name) in &cols.effects {
@@ -190,13 +274,19 @@ pub(super) fn compliance_sigmas(
         else {
             continue;
         };
-        let (c, wanted, unit) = if regressors.is_empty() {
-            (0, name.clone(), "deg/(N·m)")
+        let (c, per) = if regressors.is_empty() {
+            (0, 1.0)
         } else {
-            let Some(c) = regressors.iter().position(|&r| r == n) else {
+            let Some(c) = regressors.iter().position(|&r| r == payload_regressor) else {
                 continue;
             };
-            (c, format!("{name}[{c}]"), "deg/m (a unit mass at T)")
+            (c, gravity(robot))
+        };
+        // As `predicted_sigmas` names the coefficients.
+        let wanted = if kind.n_coef() > 1 {
+            format!("{name}[{c}]")
+        } else {
+            name.clone()
         };
         // A coefficient that must reach a radian per unit before the
         // readings notice it (a wrist joint whose turn does not move T) is
@@ -204,7 +294,7 @@ pub(super) fn compliance_sigmas(
         let prior = cols.effect_scale[first + c];
         let seen = |p: &&PredictedParam| p.sigma > 0.0 && p.sigma < prior && prior < 1.0;
         if let Some(p) = params.iter().find(|p| p.name == wanted).filter(seen) {
-            out.push((*joint_index, p.sigma.to_degrees(), unit));
+            out.push((*joint_index, p.sigma.to_degrees() / per));
         }
     }
     out

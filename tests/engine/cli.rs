@@ -1124,6 +1124,65 @@ fn the_held_out_line_gives_the_geometric_figure_beside_a_correction() {
     assert!(geometric > 2.0 * after, "{line}");
 }
 
+/// `drawcal plan --payload-kg` for a robot.json without link masses (the
+/// UR5's, its `links` taken out): the summary and the report give each
+/// joint's compliance in deg/(N·m) with the payload and "not determined"
+/// (`null`) without it, and a note says why; without `--payload-kg` the
+/// note says the payload is what would determine it.
+#[test]
+fn plan_a_payload_for_a_robot_without_link_masses() {
+    let dir = scratch("plan-payload-massless");
+    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/ur5_geometric");
+    let mut robot: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("robot.json")).unwrap()).unwrap();
+    robot.as_object_mut().unwrap().remove("links").unwrap();
+    std::fs::write(dir.join("robot.json"), robot.to_string()).unwrap();
+    let plan = |extra: &[&str]| {
+        let out = bin()
+            .arg("plan")
+            .arg("--robot")
+            .arg(dir.join("robot.json"))
+            .arg("--rig")
+            .arg(d.join("rig.json"))
+            .args(["--n", "20", "--candidates", "1000", "--effects"])
+            .arg("joint_compliance")
+            .arg("--out")
+            .arg(dir.join("planned.csv"))
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).to_string()
+    };
+    let text = plan(&["--payload-kg", "10"]);
+    assert!(
+        text.contains("compliance 1-sigma with / without it: j2 ")
+            && text.contains(" / not determined deg/(N·m)")
+            && text.contains("robot.json has no link masses"),
+        "{text}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("planned.plan.json")).unwrap())
+            .unwrap();
+    let compliance = report["payload"]["compliance"].as_array().unwrap();
+    assert!(!compliance.is_empty(), "{report}");
+    for c in compliance {
+        assert!(c["sigma_without_payload"].is_null(), "{c}");
+        assert!(c["sigma_with_payload"].as_f64().unwrap() > 0.0, "{c}");
+        assert_eq!(c["unit"], "deg/(N·m)");
+    }
+    let text = plan(&[]);
+    assert!(
+        text.contains("robot.json has no link masses") && text.contains("payload_kg"),
+        "{text}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// `drawcal plan --payload-kg` with a compliance and backlash: the summary
 /// gives the dead bands and the compliance with and without the payload;
 /// targets.csv's payload_kg goes into `drawcal simulate --targets`'s

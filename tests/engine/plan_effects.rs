@@ -2,8 +2,9 @@
 //! predicted from the tour's approach directions and checked against the
 //! spread of identified ones over simulated sessions; a payload the plan
 //! places on some poses, carried by the simulator into poses.csv and
-//! recovered by the identification; and, without either, the same
-//! targets.csv as the code before them wrote.
+//! recovered by the identification, set beside the plan without it, and
+//! on a robot without link masses the only known torque; and, without
+//! either, the same targets.csv as the code before them wrote.
 
 use drawcal::identify::lm::{self, LmSettings};
 use drawcal::identify::{IdentifyOptions, NoProgress, Observations, geometric};
@@ -66,6 +67,19 @@ fn without_backlash_or_a_payload_a_plan_writes_the_same_targets() {
     }
 }
 
+/// `plan`'s poses as the simulator takes them.
+fn given_poses(p: &Plan) -> Vec<GivenPose> {
+    p.poses
+        .iter()
+        .map(|q| GivenPose {
+            id: q.id.clone(),
+            q_deg: q.q_deg.clone(),
+            test: Some(q.split == "test"),
+            payload_kg: q.payload_kg,
+        })
+        .collect()
+}
+
 /// Record `plan`'s poses for the preset with `effects` as the truth.
 fn simulate_plan(
     p: &Plan,
@@ -77,20 +91,10 @@ fn simulate_plan(
         "robot": preset, "seed": seed, "effects": effects
     }))
     .unwrap();
-    let poses = p
-        .poses
-        .iter()
-        .map(|q| GivenPose {
-            id: q.id.clone(),
-            q_deg: q.q_deg.clone(),
-            test: Some(q.split == "test"),
-            payload_kg: q.payload_kg,
-        })
-        .collect();
     simulate::generate_with(
         &spec,
         SpecFiles {
-            poses: Some(poses),
+            poses: Some(given_poses(p)),
             ..Default::default()
         },
     )
@@ -207,7 +211,11 @@ fn a_payload_plan_determines_compliance_and_the_session_carries_it() {
         loads
     );
     let j2 = pay.compliance.iter().find(|c| c.joint == 2).unwrap();
-    assert!(j2.sigma_with_payload < j2.sigma_without_payload, "{j2:?}");
+    assert!(
+        j2.sigma_without_payload
+            .is_some_and(|w| j2.sigma_with_payload < w),
+        "{j2:?}"
+    );
     println!("{pay:?}");
 
     // Simulated with a compliance of joint 2, each pose with its payload.
@@ -245,6 +253,234 @@ fn a_payload_plan_determines_compliance_and_the_session_carries_it() {
         f.magnitude,
         j2.sigma_with_payload
     );
+}
+
+/// The compliance a payload plan sets beside its own is that of the plan
+/// the same options make without the payload, to the bit: the payload
+/// plan builds it from its own draws, columns and effect context instead
+/// of planning again, and must come to the same poses, check poses and
+/// tour.
+#[test]
+fn a_payload_plan_sets_beside_it_the_plan_without_the_payload() {
+    let (robot, rig) = files("er3a_paper_like");
+    let mut opts = PlanOptions::new(20);
+    opts.candidates = 1000;
+    opts.seed = 4;
+    opts.effects = vec!["backlash".into(), "joint_compliance".into()];
+    opts.payload_kg = Some(5.0);
+    let with = plan::plan(&robot, &rig, &opts).unwrap();
+    let without = plan::plan(
+        &robot,
+        &rig,
+        &PlanOptions {
+            payload_kg: None,
+            ..opts.clone()
+        },
+    )
+    .unwrap();
+    let pay = with.report.payload.as_ref().unwrap();
+    assert!(pay.compliance.len() >= 3, "{pay:?}");
+    for c in &pay.compliance {
+        let p = without
+            .report
+            .parameters
+            .iter()
+            .find(|p| p.name == format!("j{}.compliance", c.joint))
+            .unwrap();
+        assert_eq!(
+            c.sigma_without_payload,
+            Some(p.sigma.to_degrees()),
+            "joint {}",
+            c.joint
+        );
+    }
+}
+
+/// The compliance coefficients (regressors, coefficients) identify fits
+/// beside the geometry on a session, for the joints `joints` (0-based),
+/// with `robot` (its link masses or none).
+fn fitted_compliance(
+    sim: &simulate::Simulated,
+    robot: &Robot,
+    joints: &[usize],
+) -> Vec<(Vec<usize>, Vec<f64>)> {
+    let opts = IdentifyOptions::default();
+    let s = Observations::new(robot, &sim.rig, &sim.dataset, &opts).unwrap();
+    let g = geometric(&s, &opts, &NoProgress).unwrap();
+    let ctx = physics::effect_context(&s, &g.after);
+    let effects: Vec<EffectModel> = joints
+        .iter()
+        .map(|&j| {
+            let regressors = ctx.compliance_regressors(j, &s.train);
+            let coef = vec![0.0; regressors.len().max(1)];
+            EffectModel {
+                kind: Kind::JointCompliance {
+                    joint_index: j,
+                    regressors,
+                },
+                coef,
+            }
+        })
+        .collect();
+    let problem = EffectProblem::of_observations(
+        &s,
+        &ctx,
+        s.train.clone(),
+        &g.after.values,
+        g.selection.free.clone(),
+        effects,
+    );
+    let res = lm::minimize(&problem, &problem.x0(), &LmSettings::default(), |_, _| true).unwrap();
+    let (_, fitted) = problem.unpack(&res.x);
+    fitted
+        .into_iter()
+        .map(|e| match e.kind {
+            Kind::JointCompliance { regressors, .. } => (regressors, e.coef),
+            _ => unreachable!(),
+        })
+        .collect()
+}
+
+/// A payload plan for a robot without link masses (the UR5 preset's,
+/// taken out): the payload's gravity torque at T is then the only one
+/// known, so the compliance itself (deg/(N·m)) comes from the poses with
+/// the payload against those without; the arm's own weight is lumped
+/// terms, and no plan without a payload determines the compliance (the
+/// report says so, as `null`). The predicted 1-sigma is the spread of the
+/// compliance identified (the payload's coefficient over g) on sessions
+/// simulated at the planned poses, the true arm's own weight negligible
+/// (a gram per link) and a true compliance of joint 2: within 30 %, and
+/// unbiased (60 sessions: spread over predicted 0.97 on joint 2, 0.78-0.90
+/// on joints 3-5, where the prediction is on the safe side).
+#[test]
+fn without_link_masses_the_payload_alone_determines_the_compliance() {
+    let (mut robot, rig, _) = simulate::preset("ur5").unwrap();
+    let masses = robot.links.take().unwrap();
+    let mut opts = PlanOptions::new(20);
+    opts.candidates = 2000;
+    opts.effects = vec!["joint_compliance".into()];
+    opts.payload_kg = Some(10.0);
+    let p = plan::plan(&robot, &rig, &opts).unwrap();
+    let pay = p.report.payload.as_ref().unwrap();
+    println!("{pay:?}\n{:#?}", p.report.notes);
+    assert!(
+        pay.loaded_poses > 0 && pay.unloaded_poses > 0 && pay.payload_changes == 1,
+        "{pay:?}"
+    );
+    assert!(
+        pay.compliance
+            .iter()
+            .all(|c| c.sigma_without_payload.is_none() && c.unit == "deg/(N·m)"),
+        "{pay:?}"
+    );
+    assert!(
+        p.report
+            .notes
+            .iter()
+            .any(|n| n.contains("no link masses") && n.contains("payload alone")),
+        "{:?}",
+        p.report.notes
+    );
+    let without = plan::plan(
+        &robot,
+        &rig,
+        &PlanOptions {
+            payload_kg: None,
+            ..opts.clone()
+        },
+    )
+    .unwrap();
+    assert!(
+        without
+            .report
+            .notes
+            .iter()
+            .any(|n| n.contains("no link masses") && n.contains("payload_kg")),
+        "{:?}",
+        without.report.notes
+    );
+    // The curve over N leaves out the sets that do not determine every
+    // column (fewer readings than columns: the lumped terms add many),
+    // rather than print the rounding's 0 mm.
+    assert!(
+        p.report
+            .by_n
+            .iter()
+            .all(|b| b.model_rms_mm > 0.0 && b.model_rms_mm < 1.0),
+        "{:?}",
+        p.report.by_n
+    );
+    let seen: Vec<(usize, f64)> = pay
+        .compliance
+        .iter()
+        .map(|c| (c.joint - 1, c.sigma_with_payload))
+        .collect();
+    assert!(seen.iter().any(|s| s.0 == 1), "{pay:?}");
+    let joints: Vec<usize> = seen.iter().map(|s| s.0).collect();
+
+    // The truth: the same arm, a gram per link, a compliance of joint 2.
+    let mut truth_robot = robot.clone();
+    truth_robot.links = Some(
+        masses
+            .iter()
+            .map(|l| drawcal::model::LinkMass {
+                mass_kg: 1e-3,
+                ..l.clone()
+            })
+            .collect(),
+    );
+    let truth_deg = 2e-4; // deg/(N·m)
+    let g = 9.81;
+    let n = robot.dof();
+    let runs: usize = std::env::var("PLAN_COMPLIANCE_RUNS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(60);
+    let fits: Vec<Vec<f64>> = (0..runs as u64)
+        .map(|seed| {
+            let spec: Spec = serde_json::from_value(serde_json::json!({
+                "robot": "robot.json", "rig": "rig.json", "seed": 200 + seed,
+                "effects": [{"effect": "joint_compliance", "joint": 2, "magnitude": truth_deg}]
+            }))
+            .unwrap();
+            let sim = simulate::generate_with(
+                &spec,
+                SpecFiles {
+                    robot: Some(truth_robot.clone()),
+                    rig: Some(rig.clone()),
+                    poses: Some(given_poses(&p)),
+                },
+            )
+            .unwrap();
+            fitted_compliance(&sim, &robot, &joints)
+                .iter()
+                .map(|(regressors, coef)| {
+                    let c = regressors.iter().position(|&r| r == n + 1).unwrap();
+                    (coef[c] / g).to_degrees()
+                })
+                .collect()
+        })
+        .collect();
+    for (k, &(j, predicted)) in seen.iter().enumerate() {
+        let truth = if j == 1 { truth_deg } else { 0.0 };
+        let v: Vec<f64> = fits.iter().map(|f| f[k]).collect();
+        let mean = v.iter().sum::<f64>() / runs as f64;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (runs - 1) as f64).sqrt();
+        println!(
+            "joint {}: predicted {predicted:.3e}, spread {sd:.3e}, mean {mean:.3e} (truth {truth}) deg/(N·m)",
+            j + 1
+        );
+        assert!(
+            (0.7..1.3).contains(&(sd / predicted)),
+            "joint {}: spread {sd} against predicted {predicted}",
+            j + 1
+        );
+        assert!(
+            (mean - truth).abs() < 4.0 * sd / (runs as f64).sqrt(),
+            "joint {}: mean {mean} against {truth}",
+            j + 1
+        );
+    }
 }
 
 /// A payload is refused with the field named: not positive, too heavy,
