@@ -113,6 +113,15 @@ pub fn run(a: PlanArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// `0.1234 mm`, or words where the poses do not determine the model.
+fn mm_or_undetermined(x_mm: f64) -> String {
+    if x_mm.is_finite() {
+        format!("{x_mm:.4} mm")
+    } else {
+        "not determined by these poses".into()
+    }
+}
+
 /// The terminal summary of a plan.
 pub fn summary(r: &plan::PlanReport) -> String {
     let mut s = String::new();
@@ -120,20 +129,32 @@ pub fn summary(r: &plan::PlanReport) -> String {
         "plan: {} poses from {} valid candidates ({} drawn)\n",
         r.n_poses, r.candidates_kept, r.candidates_drawn
     );
+    if r.predicted.is_determined() && r.random.is_determined() {
+        s += &format!(
+            "predicted model error at random valid poses: {:.4} mm RMS (random poses: {:.4} mm, {:.2}x)\n",
+            r.predicted.model_rms_mm,
+            r.random.model_rms_mm,
+            r.predicted.model_rms_mm / r.random.model_rms_mm
+        );
+    } else {
+        s += &format!(
+            "predicted model error at random valid poses: {} (random poses: {})\n",
+            mm_or_undetermined(r.predicted.model_rms_mm),
+            mm_or_undetermined(r.random.model_rms_mm)
+        );
+    }
     s += &format!(
-        "predicted model error at random valid poses: {:.4} mm RMS (random poses: {:.4} mm, {:.2}x)\n",
-        r.predicted.model_rms_mm,
-        r.random.model_rms_mm,
-        r.predicted.model_rms_mm / r.random.model_rms_mm
-    );
-    s += &format!(
-        "predicted held-out RMS: {:.4} mm (the located point's noise alone: {:.4} mm)\n",
-        r.predicted.holdout_rms_mm, r.point_noise_rms_mm
+        "predicted held-out RMS: {} (the located point's noise alone: {:.4} mm)\n",
+        mm_or_undetermined(r.predicted.holdout_rms_mm),
+        r.point_noise_rms_mm
     );
     let curve: Vec<String> = r
         .by_n
         .iter()
-        .map(|p| format!("{}: {:.4}", p.n_poses, p.model_rms_mm))
+        .map(|p| match p.is_determined() {
+            true => format!("{}: {:.4}", p.n_poses, p.model_rms_mm),
+            false => format!("{}: not determined", p.n_poses),
+        })
         .collect();
     s += &format!("model error by N (mm): {}\n", curve.join(", "));
     if let Some(worst) = r

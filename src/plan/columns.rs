@@ -461,6 +461,14 @@ pub(super) fn information(pool: &design::Pool, set: &[usize]) -> DMatrix<f64> {
     mm
 }
 
+/// The inverse of an information matrix, where it determines every column:
+/// `None` where it is not positive definite (a plain inverse of a singular
+/// information returns whatever the rounding makes of it).
+pub(super) fn determined_inverse(info: DMatrix<f64>) -> Option<DMatrix<f64>> {
+    info.clone().cholesky()?;
+    info.try_inverse()
+}
+
 /// What least squares on the poses `set` predicts: the model's RMS error
 /// at random valid poses and the held-out RMS. Infinite where the set does
 /// not determine every column (fewer readings than columns, or columns its
@@ -472,13 +480,8 @@ pub(super) fn prediction(
     set: &[usize],
     point_noise_rms_mm: f64,
 ) -> PredictionAtN {
-    let info = information(pool, set);
-    let model = if info.clone().cholesky().is_none() {
-        f64::INFINITY
-    } else {
-        info.try_inverse()
-            .map_or(f64::INFINITY, |inv| (&pool.w * inv).trace())
-    };
+    let model = determined_inverse(information(pool, set))
+        .map_or(f64::INFINITY, |inv| (&pool.w * inv).trace());
     let model = if model > 0.0 { model } else { f64::INFINITY };
     PredictionAtN {
         n_poses: set.len(),

@@ -225,7 +225,8 @@ fn plan_inner(
     } else {
         vec![]
     };
-    let notes = notes(robot, opts, &approach, backlash.as_ref());
+    let mut notes = notes(robot, opts, &approach, backlash.as_ref());
+    notes.extend(undetermined_note(&predicted, &by_n));
     let report = PlanReport {
         format: PLAN_FORMAT.into(),
         robot: robot.name.clone(),
@@ -411,6 +412,24 @@ fn notes(
     }
     notes.extend(backlash.map(backlash_note));
     notes
+}
+
+/// Where the chosen poses do not determine every parameter, say so and
+/// which N of the curve does: the predictions for N are then `null`.
+fn undetermined_note(predicted: &PredictionAtN, by_n: &[PredictionAtN]) -> Option<String> {
+    if predicted.is_determined() {
+        return None;
+    }
+    let enough = by_n
+        .iter()
+        .find(|p| p.is_determined() && p.n_poses > predicted.n_poses)
+        .map_or("more poses are needed".to_string(), |p| {
+            format!("{} poses do", p.n_poses)
+        });
+    Some(format!(
+        "{} poses do not determine every parameter this rig can determine (their readings' information is singular), so their predictions are null; {enough}",
+        predicted.n_poses
+    ))
 }
 
 fn rejection_words(rejected: &BTreeMap<Rejection, usize>) -> String {

@@ -37,16 +37,33 @@ pub struct PredictedParam {
     pub unit: String,
 }
 
-/// The prediction for a number of poses.
+/// The prediction for a number of poses. Both figures are infinite where
+/// the poses do not determine every parameter (JSON has no infinity:
+/// serde_json writes `null`, read back as infinite).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PredictionAtN {
     /// Poses.
     pub n_poses: usize,
     /// RMS error of the calibrated model's T at random valid poses (mm).
+    #[serde(deserialize_with = "infinite_if_null")]
     pub model_rms_mm: f64,
     /// Predicted held-out RMS: the model's error and the located point's
     /// noise together (mm).
+    #[serde(deserialize_with = "infinite_if_null")]
     pub holdout_rms_mm: f64,
+}
+
+impl PredictionAtN {
+    /// Whether the poses determine every parameter (the figures are finite).
+    pub fn is_determined(&self) -> bool {
+        self.model_rms_mm.is_finite()
+    }
+}
+
+/// A prediction this crate wrote as `null` was an undetermined (infinite)
+/// one; a stored plan must read back as it was written.
+fn infinite_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
 }
 
 /// Approach directions of a joint over the tour (for backlash).

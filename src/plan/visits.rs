@@ -8,7 +8,7 @@ use super::backlash::{
     self, BACKLASH_SEARCH_BUDGET, BACKLASH_TRAVEL_BOUND, BacklashDesign, BacklashSigma,
     BacklashTour, backlash_design,
 };
-use super::columns::information;
+use super::columns::{determined_inverse, information};
 use super::payload::Entries;
 use super::tour::{self, grouped_tour};
 use super::{Candidate, PlanOptions, PlannedPose, Scene, design};
@@ -168,7 +168,7 @@ impl Toured {
     ) -> Option<DMatrix<f64>> {
         let a = information(dpool, chosen);
         let Some(b) = &self.backlash else {
-            return a.try_inverse();
+            return determined_inverse(a);
         };
         let (bb, cc) = b.blocks(&self.order);
         let (p, k) = (a.nrows(), cc.nrows());
@@ -177,8 +177,7 @@ impl Toured {
         full.view_mut((0, p), (p, k)).copy_from(&bb);
         full.view_mut((p, 0), (k, p)).copy_from(&bb.transpose());
         full.view_mut((p, p), (k, k)).copy_from(&cc);
-        full.try_inverse()
-            .map(|inv| inv.view((0, 0), (p, p)).into_owned())
+        determined_inverse(full).map(|inv| inv.view((0, 0), (p, p)).into_owned())
     }
 
     /// The dead bands' report, when backlash is planned for.

@@ -11,9 +11,10 @@ use crate::openapi::validate_response;
 
 const DS: &str = "er3a_paper_like";
 
-/// Small enough to plan in a moment in a test build.
+/// Small enough to plan in a moment in a test build, and enough poses to
+/// determine every parameter of the er3a on its rig.
 fn small(extra: Value) -> Value {
-    let mut body = json!({"n_poses": 8, "n_check": 3, "candidates": 400, "seed": 3});
+    let mut body = json!({"n_poses": 12, "n_check": 3, "candidates": 400, "seed": 3});
     for (k, v) in extra.as_object().unwrap() {
         body[k] = v.clone();
     }
@@ -58,11 +59,11 @@ async fn a_plan_from_a_stored_model_and_rig_in_the_clis_form() {
     assert_eq!(report["format"], "drawcal plan v1", "{report}");
     assert_eq!(
         (report["n_poses"].as_u64(), report["n_check"].as_u64()),
-        (Some(8), Some(3))
+        (Some(12), Some(3))
     );
     assert!(report["predicted"]["holdout_rms_mm"].as_f64().unwrap() > 0.0);
     let poses = done["poses"].as_array().unwrap();
-    assert_eq!(poses.len(), 11);
+    assert_eq!(poses.len(), 15);
     assert!(
         poses
             .iter()
@@ -82,9 +83,9 @@ async fn a_plan_from_a_stored_model_and_rig_in_the_clis_form() {
         Some("target,q1_deg,q2_deg,q3_deg,q4_deg,q5_deg,q6_deg,split")
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    assert_eq!(rows.len(), 11, "{csv}");
+    assert_eq!(rows.len(), 15, "{csv}");
     let split = |s: &str| rows.iter().filter(|r| r[7] == s).count();
-    assert_eq!((split("train"), split("test")), (8, 3), "{csv}");
+    assert_eq!((split("train"), split("test")), (12, 3), "{csv}");
     for (row, pose) in rows.iter().zip(poses) {
         assert_eq!(row[0], pose["id"].as_str().unwrap());
     }
@@ -110,6 +111,51 @@ async fn a_plan_from_a_stored_model_and_rig_in_the_clis_form() {
             .iter()
             .any(|a| a["action"] == "create_plan" && a["target"] == format!("plan {id}")),
         "{audit}"
+    );
+    app.stop().await;
+}
+
+/// Too few poses to determine the model: the plan still succeeds, its
+/// predictions for N are `null` (not a number the rounding made of a
+/// singular inverse, and not a 500 when the stored plan is read back) and a
+/// note says which N of the curve does determine it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_plan_too_small_to_determine_the_model_says_so() {
+    let app = TestApp::spawn("plans-undetermined").await;
+    let (model, _, rig, _) = app.setup(DS, "PLAN-U").await;
+    let body = small(json!({"model_id": model, "rig_id": rig, "n_poses": 8}));
+    let queued = ok_json(app.post_json("/plans", &body).await, 202).await;
+    let id = queued["id"].as_i64().unwrap();
+    assert_eq!(wait_plan(&app, id).await["state"], "succeeded");
+    let done =
+        validate_response("get", "/plans/{id}", app.get(&format!("/plans/{id}")).await).await;
+    let report = &done["report"];
+    assert!(report["predicted"]["holdout_rms_mm"].is_null(), "{report}");
+    assert!(report["predicted"]["model_rms_mm"].is_null(), "{report}");
+    let notes: Vec<&str> = report["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    let note = notes
+        .iter()
+        .find(|n| n.starts_with("8 poses do not determine every parameter"))
+        .unwrap_or_else(|| panic!("{notes:?}"));
+    // The N it names is one of the curve's, with a finite prediction.
+    let enough: u64 = note
+        .rsplit("; ")
+        .next()
+        .and_then(|t| t.strip_suffix(" poses do"))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{note}"));
+    assert!(
+        report["by_n"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p["n_poses"] == enough && p["model_rms_mm"].as_f64().is_some()),
+        "{report}"
     );
     app.stop().await;
 }
