@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Every cross-check set (gen3.py ... gen9.py) with one binary, and their
+# Every cross-check set (gen3.py ... gen10.py) with one binary, and their
 # aggregate lines only (the held-back halves stay blind: no per-recording
 # lines are printed). Usage:
 #   tests/crosscheck/run_all.sh BIN OUT
@@ -13,7 +13,7 @@ BIN=$(realpath "$1")
 OUT=$2
 HERE=$(cd "$(dirname "$0")" && pwd)
 NAME=$(basename "$BIN")
-for g in 3 4 5 6 7 8 9; do
+for g in 3 4 5 6 7 8 9 10; do
   [ -f "$HERE/gen$g.py" ] || continue
   plan="$OUT/plan/gen$g"
   if [ ! -f "$plan/plan.json" ]; then
