@@ -155,6 +155,9 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
         CorrectionTarget::ReadingScale => {
             "every string's scale (each reads its length times it more)".into()
         }
+        CorrectionTarget::RigShape => {
+            "the string frame's shape (each anchor moved by a linear function of where it sits about the anchors' centroid)".into()
+        }
     }
 }
 
@@ -318,6 +321,67 @@ pub fn hat_weights(knots: &[f64], period: Option<f64>, x: f64) -> [(usize, f64);
     [(s - 1, 1.0 - t), (s, t)]
 }
 
+/// A session's values of one driver, sorted, with their running sums: the
+/// mean of each knot's hat weight over the session in `O(knots log poses)`
+/// rather than a pass over the poses for every pose (a correction centred
+/// on the session, [`CorrectionTarget::RigShape`]).
+#[derive(Debug, Clone, Default)]
+pub struct SortedValues {
+    values: Vec<f64>,
+    /// `sums[i]` is the sum of the `i` smallest values.
+    sums: Vec<f64>,
+}
+
+impl SortedValues {
+    /// The values, in any order (NaN sorts last).
+    pub fn new(values: impl IntoIterator<Item = f64>) -> Self {
+        let mut values: Vec<f64> = values.into_iter().collect();
+        values.sort_by(f64::total_cmp);
+        let mut sums = Vec::with_capacity(values.len() + 1);
+        sums.push(0.0);
+        for v in &values {
+            sums.push(sums.last().copied().unwrap_or(0.0) + v);
+        }
+        SortedValues { values, sums }
+    }
+
+    /// The mean over the values of each knot's [`hat_weights`] (no
+    /// period): a value below the first knot weighs 1 on it, one past the
+    /// last 1 on that, one between knots `a` and `b` `(x - a) / (b - a)` on
+    /// `b` and the rest on `a`.
+    ///
+    /// ```
+    /// use drawcal::physics::effects::SortedValues;
+    /// let v = SortedValues::new([-1.0, 2.5, 7.5, 12.0]);
+    /// assert_eq!(v.mean_hat_weights(&[0.0, 10.0]), vec![0.5, 0.5]);
+    /// ```
+    pub fn mean_hat_weights(&self, knots: &[f64]) -> Vec<f64> {
+        let k = knots.len();
+        let mut out = vec![0.0; k];
+        let count = self.values.len();
+        if k == 0 || count == 0 {
+            return out;
+        }
+        // How many values lie below v.
+        let below = |v: f64| self.values.partition_point(|&x| x < v);
+        let first = below(knots[0]);
+        out[0] += first as f64;
+        let mut lo = first;
+        for s in 1..k {
+            let (a, b) = (knots[s - 1], knots[s]);
+            let hi = below(b);
+            let n = (hi - lo) as f64;
+            let t = (self.sums[hi] - self.sums[lo] - n * a) / (b - a);
+            out[s - 1] += n - t;
+            out[s] += t;
+            lo = hi;
+        }
+        out[k - 1] += (count - lo) as f64;
+        out.iter_mut().for_each(|w| *w /= count as f64);
+        out
+    }
+}
+
 /// What the effects need to know about one pose.
 #[derive(Debug, Clone)]
 pub struct PoseContext {
@@ -400,6 +464,11 @@ pub struct Context {
     pub centre_rig: Vector3<f64>,
     /// Per pose, in visiting order.
     pub poses: Vec<PoseContext>,
+    /// The poses' clock ([`CorrectionDriver::Time`]'s values), sorted.
+    pub sorted_time_s: SortedValues,
+    /// The poses' temperature ([`CorrectionDriver::Temperature`]'s
+    /// values), sorted.
+    pub sorted_temp_c: SortedValues,
 }
 
 /// Input for building a [`Context`]: one pose in visiting order.
@@ -682,7 +751,7 @@ impl Context {
             .iter()
             .fold(Vector3::zeros(), |acc, p| acc + p.point_rig)
             / poses.len().max(1) as f64;
-        Context {
+        let mut ctx = Context {
             n_joints: n,
             anchors,
             r_mm,
@@ -695,7 +764,21 @@ impl Context {
             payload_ref_kg,
             centre_rig,
             poses: ctx_poses,
-        }
+            sorted_time_s: SortedValues::default(),
+            sorted_temp_c: SortedValues::default(),
+        };
+        let values = |driver| {
+            SortedValues::new(
+                ctx.poses
+                    .iter()
+                    .map(|p| ctx.driver_value(p, driver, None, None)),
+            )
+        };
+        (ctx.sorted_time_s, ctx.sorted_temp_c) = (
+            values(CorrectionDriver::Time),
+            values(CorrectionDriver::Temperature),
+        );
+        ctx
     }
 
     /// A change point `t0_s` (seconds, or a row index without `time_s`)
@@ -875,6 +958,10 @@ impl Context {
                 .map_or(Vector3::zeros(), |l| pc.d_lengths[l]),
             _ => Vector3::zeros(),
         };
+        if *target == CorrectionTarget::RigShape {
+            self.rig_shape_basis(knots, *period, *driver, *driver_index, x, pc, out);
+            return;
+        }
         for (k, w) in hat_weights(knots, *period, x) {
             if w == 0.0 {
                 continue;
@@ -914,6 +1001,8 @@ impl Context {
                         out.dl[k * m + s] += w * (pc.point_rig - a).norm();
                     }
                 }
+                // Every knot at once, before the loop.
+                CorrectionTarget::RigShape => {}
                 CorrectionTarget::InstrumentScale if m == 0 => {
                     for r in 0..3 {
                         out.dp[k * 3 + r] += w * pc.point_rig[r];
@@ -938,6 +1027,59 @@ impl Context {
                         for r in 0..3 {
                             out.dp[(3 * k + c) * 3 + r] += w * dir[r];
                         }
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`Self::correction_basis`] of [`CorrectionTarget::RigShape`] at a
+    /// pose whose driver is `x`: knot `k`'s weight less its mean over the
+    /// session's poses (the correction centred: a constant shape is where
+    /// rig.json put the anchors, not a change), times how string `s`'s
+    /// reading follows `D[r][c]`: `-u_s[r] (A_s - centroid)[c]`.
+    #[allow(clippy::too_many_arguments)]
+    fn rig_shape_basis(
+        &self,
+        knots: &[f64],
+        period: Option<f64>,
+        driver: CorrectionDriver,
+        driver_index: Option<usize>,
+        x: f64,
+        pc: &PoseContext,
+        out: &mut Basis,
+    ) {
+        let m = self.anchors.len();
+        if m == 0 || self.poses.is_empty() {
+            return;
+        }
+        let mut weight: Vec<f64> = match (driver, period) {
+            (CorrectionDriver::Time, None) => self.sorted_time_s.mean_hat_weights(knots),
+            (CorrectionDriver::Temperature, None) => self.sorted_temp_c.mean_hat_weights(knots),
+            // Not a shape's driver (`Kind::check` refuses it): one pass.
+            _ => {
+                let mut mean = vec![0.0; knots.len()];
+                for p in &self.poses {
+                    let xp = self.driver_value(p, driver, driver_index, None);
+                    for (k, w) in hat_weights(knots, period, xp) {
+                        mean[k] += w / self.poses.len() as f64;
+                    }
+                }
+                mean
+            }
+        };
+        weight.iter_mut().for_each(|w| *w = -*w);
+        for (k, w) in hat_weights(knots, period, x) {
+            weight[k] += w;
+        }
+        let centroid = self.anchors.iter().sum::<Vector3<f64>>() / m as f64;
+        for (s, a) in self.anchors.iter().enumerate() {
+            let u = (pc.point_rig - a).try_normalize(0.0).unwrap_or_default();
+            let arm = a - centroid;
+            for (k, w) in weight.iter().enumerate() {
+                for r in 0..3 {
+                    for c in 0..3 {
+                        out.dl[(9 * k + 3 * r + c) * m + s] -= w * u[r] * arm[c];
                     }
                 }
             }
@@ -1268,6 +1410,121 @@ mod tests {
                     (fd - col).norm() < 1e-6,
                     "pose {i} axis {c}: {fd:?} vs {col:?}"
                 );
+            }
+        }
+    }
+
+    /// The session means of the hat weights from the sorted values equal a
+    /// pass over the values, on and between knots, below and past them.
+    #[test]
+    fn mean_hat_weights_equal_a_pass_over_the_values() {
+        let values: Vec<f64> = (0..200)
+            .map(|i| ((i * 37 % 101) as f64) * 0.7 - 10.0)
+            .chain([0.0, 5.0, 12.5, 30.0, 30.0])
+            .collect();
+        let sorted = SortedValues::new(values.iter().copied());
+        for knots in [
+            vec![5.0],
+            vec![0.0, 30.0],
+            vec![0.0, 5.0, 12.5, 30.0],
+            vec![-20.0, 100.0],
+        ] {
+            let mut direct = vec![0.0; knots.len()];
+            for &x in &values {
+                for (k, w) in hat_weights(&knots, None, x) {
+                    direct[k] += w / values.len() as f64;
+                }
+            }
+            let fast = sorted.mean_hat_weights(&knots);
+            for (a, b) in direct.iter().zip(&fast) {
+                assert!((a - b).abs() < 1e-12, "{knots:?}: {direct:?} vs {fast:?}");
+            }
+        }
+    }
+
+    /// A correction of the frame's shape against the exact readings of a
+    /// frame deformed by it: each anchor moved by `D (A - centroid)`, `D`
+    /// the knots' matrices weighted by the centred hat weights; and a
+    /// shape constant over the session (rig.json's anchors off, not a
+    /// change) corrects nothing.
+    #[test]
+    fn rig_shape_basis_matches_the_readings_of_a_deformed_frame() {
+        let robot = crate::model::Robot::from_json(include_str!(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/real_ur10_ipa_random/robot.json"
+        )))
+        .unwrap();
+        let anchors = vec![
+            Vector3::new(-900.0, -800.0, 1500.0),
+            Vector3::new(1100.0, -700.0, 1600.0),
+            Vector3::new(1000.0, 1200.0, 200.0),
+            Vector3::new(-800.0, 1000.0, 1700.0),
+        ];
+        let points = [
+            Vector3::new(300.0, 100.0, 400.0),
+            Vector3::new(-200.0, 350.0, 650.0),
+            Vector3::new(150.0, -300.0, 900.0),
+        ];
+        let q = [0.0; 6];
+        let poses: Vec<PoseInput> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| PoseInput {
+                q_rad: &q,
+                time_s: Some(100.0 * i as f64),
+                temp_c: None,
+                payload_kg: None,
+                point_rig: *p,
+            })
+            .collect();
+        let ctx = Context::new(
+            &robot,
+            anchors.clone(),
+            0.0,
+            &nalgebra::Matrix3::identity(),
+            &poses,
+        );
+        let kind = Kind::DataDriven {
+            target: CorrectionTarget::RigShape,
+            target_index: None,
+            driver: CorrectionDriver::Time,
+            driver_index: None,
+            knots: vec![0.0, 100.0, 200.0],
+            period: None,
+            range: None,
+            axis: None,
+        };
+        assert_eq!(kind.n_coef(), 27);
+        let coef: Vec<f64> = (0..27)
+            .map(|c| 1e-6 * ((c * 7 % 11) as f64 - 5.0))
+            .collect();
+        let centroid = anchors.iter().sum::<Vector3<f64>>() / 4.0;
+        let mut buf = Basis::default();
+        for (i, t) in points.iter().enumerate() {
+            ctx.basis(&kind, i, &mut buf);
+            // Pose i sits on knot i: centred, its weights are 1 - 1/3 there
+            // and -1/3 at the other two knots.
+            let d = nalgebra::Matrix3::from_fn(|r, c| {
+                (0..3)
+                    .map(|k| {
+                        let w = if k == i { 2.0 / 3.0 } else { -1.0 / 3.0 };
+                        w * coef[9 * k + 3 * r + c]
+                    })
+                    .sum::<f64>()
+            });
+            for (s, a) in anchors.iter().enumerate() {
+                let moved = a + d * (a - centroid);
+                let exact = (t - moved).norm() - (t - a).norm();
+                let linear: f64 = (0..27).map(|c| coef[c] * buf.dl[c * 4 + s]).sum();
+                assert!(
+                    (exact - linear).abs() < 1e-3 * exact.abs().max(1e-5),
+                    "pose {i} string {s}: {exact} vs {linear}"
+                );
+            }
+            let constant: Vec<f64> = (0..27).map(|c| coef[c % 9]).collect();
+            for s in 0..4 {
+                let v: f64 = (0..27).map(|c| constant[c] * buf.dl[c * 4 + s]).sum();
+                assert!(v.abs() < 1e-12, "a constant shape read {v} on string {s}");
             }
         }
     }

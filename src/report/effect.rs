@@ -80,6 +80,19 @@ pub enum CorrectionTarget {
     /// wear), where the catalogue's backlash is one constant play, is such
     /// a correction in the clock.
     JointPlay,
+    /// The string frame's shape (dimensionless, nine coefficients per
+    /// knot, a 3x3 matrix `D` row by row): each anchor moves by `D (A - c)`,
+    /// `A` the anchor and `c` the anchors' centroid, so string `i` reads
+    /// `u_i · D (A_i - c)` less (`u_i` its direction from its anchor). The
+    /// correction is centred on the session (its mean over the poses is
+    /// zero): how the frame changed during the session, not where rig.json
+    /// put the anchors (that is `--rig-anchors`). A frame that racks, bows
+    /// or tilts as it warms or settles moves its anchors unequally, which
+    /// neither T moving relative to the rig nor the anchors spreading
+    /// evenly ([`InstrumentScale`](Self::InstrumentScale), one of its
+    /// shapes) can follow; with four anchors not in one plane any motion of
+    /// them is such a field with a move of T.
+    RigShape,
 }
 
 /// What drives a data-driven correction.
@@ -467,6 +480,11 @@ impl Kind {
                 knots,
                 ..
             } => 2 * knots.len(),
+            Kind::DataDriven {
+                target: CorrectionTarget::RigShape,
+                knots,
+                ..
+            } => 9 * knots.len(),
             Kind::DataDriven { knots, .. } => knots.len(),
             _ => 1,
         }
@@ -765,6 +783,18 @@ fn check_target(
                     .into(),
             );
     }
+    if target == CorrectionTarget::RigShape
+        && (target_index.is_some()
+            || !matches!(
+                driver,
+                CorrectionDriver::Time | CorrectionDriver::Temperature
+            ))
+    {
+        return Err(
+                "a correction of the string frame's shape has no target_index and follows the clock or the temperature"
+                    .into(),
+            );
+    }
     if target == CorrectionTarget::JointPlay
         && !matches!(
             driver,
@@ -783,6 +813,7 @@ fn check_target(
             | CorrectionTarget::InstrumentScale
             | CorrectionTarget::ReadingScale
             | CorrectionTarget::ToolPoint
+            | CorrectionTarget::RigShape
     ) && target_index.is_none()
     {
         return Err("a data-driven correction of a joint or string needs its target_index".into());

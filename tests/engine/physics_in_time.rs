@@ -1,7 +1,7 @@
 //! Structure in time or temperature that no named effect explains: a
 //! joint's zero that jumps, a rig knocked that springs back, a string frame
-//! that grows with the temperature, a probe that grows with the process's
-//! heat. Each is located in time (at the joint, for the joint's zero) and
+//! that grows with the temperature or tilts with it, a probe that grows
+//! with the process's heat. Each is located in time (at the joint, for the joint's zero) and
 //! modelled without a name; the rig moves or the arm's expansion a forward
 //! selection first fits to it are not reported.
 
@@ -149,5 +149,40 @@ fn a_probe_growing_in_time_is_located_along_the_flange_axis_on_three_strings() {
     assert_eq!(
         common::correction_slot(&report).0,
         CorrectionTarget::ToolPoint
+    );
+}
+
+/// A string frame that tilts about its feet as the cell warms moves its
+/// anchors unequally: the frame's shape by the temperature is kept beside
+/// T's move in time, and says so; nothing is named.
+#[test]
+fn a_frame_tilting_with_the_temperature_is_a_rig_shape_correction() {
+    let (report, _, _) = common::unnamed_near_the_twin(
+        "xcheck6_rig_thermal_tilt_std4",
+        |p| p.driver == "time" || p.driver == "temperature",
+        1.3,
+    );
+    let shape = report
+        .findings
+        .iter()
+        .find(|f| {
+            f.effect_model().is_some_and(|m| {
+                matches!(
+                    m.kind,
+                    drawcal::physics::Kind::DataDriven {
+                        target: CorrectionTarget::RigShape,
+                        driver: CorrectionDriver::Temperature,
+                        ..
+                    }
+                )
+            })
+        })
+        .unwrap_or_else(|| panic!("no frame shape by the temperature: {:#?}", report.findings));
+    assert!(
+        shape
+            .evidence
+            .contains("the string frame changed shape during the session with its temperature"),
+        "{}",
+        shape.evidence
     );
 }

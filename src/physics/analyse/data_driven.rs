@@ -52,6 +52,10 @@ const JOINT_KNOTS: [usize; 8] = [3, 4, 6, 8, 12, 16, 24, 32];
 /// session can drift through many states, so up to one knot per eight
 /// train poses.
 const CLOCK_KNOTS: [usize; 14] = [3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256];
+/// Knots of the string frame's shape in the clock or the temperature
+/// ([`CorrectionTarget::RigShape`], nine coefficients a knot): a frame
+/// bends and settles slowly.
+const RIG_SHAPE_KNOTS: [usize; 4] = [2, 3, 4, 6];
 /// Above this many columns a candidate's alias check is not run column by
 /// column (it costs the cube of the columns for each): its first knot's
 /// columns are left out instead, the only part a geometry holds (a constant
@@ -492,6 +496,9 @@ impl Slots<'_> {
         if m > 0 {
             out.push(self.clocked(CorrectionTarget::ReadingScale, None));
         }
+        // Or the frame's shape (a frame racking or bowing as it warms,
+        // settling unevenly): the anchors move unequally.
+        out.extend(self.rig_shape(CorrectionDriver::Time));
         // Or the tool point in the flange frame (a probe growing with the
         // process's heat, a tool slipping in its holder): T moves as the
         // flange turns, which no function of the clock moving T relative
@@ -522,11 +529,11 @@ impl Slots<'_> {
 
     /// At the temperature: T relative to the rig; or the instrument's scale
     /// (a string frame growing with the temperature, a tracker's range with
-    /// the air's), the tool point in the flange frame, or every string's
-    /// scale.
+    /// the air's), the tool point in the flange frame, every string's
+    /// scale, or the string frame's shape.
     fn at_temperature(&self) -> Vec<Vec<Kind>> {
         let readings = (!self.ctx.anchors.is_empty()).then_some(CorrectionTarget::ReadingScale);
-        [
+        let mut out: Vec<Vec<Kind>> = [
             CorrectionTarget::Point,
             CorrectionTarget::InstrumentScale,
             CorrectionTarget::ToolPoint,
@@ -542,7 +549,25 @@ impl Slots<'_> {
                 &CLOCK_KNOTS,
             )
         })
-        .collect()
+        .collect();
+        out.extend(self.rig_shape(CorrectionDriver::Temperature));
+        out
+    }
+
+    /// The string frame's shape by `driver` (the clock or the
+    /// temperature), on a rig of four strings or more (three cannot tell
+    /// the frame's shape from T's move), at [`RIG_SHAPE_KNOTS`]: nine
+    /// coefficients a knot, and a frame deforms slowly.
+    fn rig_shape(&self, driver: CorrectionDriver) -> Option<Vec<Kind>> {
+        (self.ctx.anchors.len() >= 4).then(|| {
+            self.knotted(
+                CorrectionTarget::RigShape,
+                None,
+                driver,
+                None,
+                &RIG_SHAPE_KNOTS,
+            )
+        })
     }
 
     /// Over the workspace: T's displacement as a function of one
@@ -967,6 +992,19 @@ fn compensation_words(kind: &Kind, point_data: bool) -> String {
         format!(
             "compensation does not need it: it corrects what string {} read, not where the robot went; its zero and its scale changed during the session, long lengths more than short ones (a cable creeping under its spring's pull, a drum or cable warming): let the string settle under tension before measuring, check its cable and drum, or log their temperature",
             s + 1
+        )
+    } else if let Kind::DataDriven {
+        target: CorrectionTarget::RigShape,
+        ..
+    } = kind
+    {
+        format!(
+            "compensation does not need it: it corrects what the strings read, not where the robot went; the string frame changed shape during the session with its {} (its anchors moved unequally: a frame racking, bowing or tilting as it warms, a post or a foot settling): brace the frame, let it reach the cell's temperature before measuring, and check its posts and feet",
+            if *driver == CorrectionDriver::Temperature {
+                "temperature"
+            } else {
+                "clock"
+            }
         )
     } else if *driver == CorrectionDriver::Motion {
         "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; T was measured before the arm settled: dwell longer at each pose or approach slower, and check the servo tuning".into()

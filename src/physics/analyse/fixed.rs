@@ -473,6 +473,8 @@ mod tests {
                 range: None,
                 axis: Some([0.0, 0.6, 0.8]),
             });
+            // The frame's shape by the clock (nine coefficients per knot).
+            kinds.push(by_clock(CorrectionTarget::RigShape, None));
             // Every string's scale by the clock.
             kinds.push(Kind::DataDriven {
                 target: CorrectionTarget::ReadingScale,

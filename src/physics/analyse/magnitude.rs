@@ -139,9 +139,17 @@ fn data_driven_size(
     if v <= 0.0 || poses.is_empty() {
         return (v * scale, 0.0);
     }
-    // u_i = B_i c per pose (1 or 3 values); d v / d c = Σ B_iᵀ (u_i - ū) / (N v).
+    // u_i = B_i c per pose (1, 3 or one per string); d v / d c = Σ B_iᵀ (u_i - ū) / (N v).
     let mut buf = effects::Basis::default();
     let (n, m) = (ctx.n_joints, ctx.anchors.len());
+    let rig_shape = matches!(
+        kind,
+        Kind::DataDriven {
+            target: CorrectionTarget::RigShape,
+            ..
+        }
+    );
+    let width = if rig_shape { m } else { 3 };
     let rows: Vec<Vec<(usize, usize, f64)>> = poses
         .iter()
         .map(|&i| {
@@ -186,6 +194,14 @@ fn data_driven_size(
                             nz.push((0, k, w));
                         }
                     }
+                    _ if rig_shape => {
+                        for s in 0..m {
+                            let w = buf.dl[k * m + s];
+                            if w != 0.0 {
+                                nz.push((s, k, w));
+                            }
+                        }
+                    }
                     _ => {
                         for r in 0..3 {
                             let w = buf.dp[k * 3 + r];
@@ -199,10 +215,10 @@ fn data_driven_size(
             nz
         })
         .collect();
-    let u: Vec<[f64; 3]> = rows
+    let u: Vec<Vec<f64>> = rows
         .iter()
         .map(|nz| {
-            let mut u = [0.0; 3];
+            let mut u = vec![0.0; width];
             for &(r, k, w) in nz {
                 u[r] += w * coef[k];
             }
@@ -210,9 +226,9 @@ fn data_driven_size(
         })
         .collect();
     let count = u.len() as f64;
-    let mut mean = [0.0; 3];
+    let mut mean = vec![0.0; width];
     for x in &u {
-        for r in 0..3 {
+        for r in 0..width {
             mean[r] += x[r] / count;
         }
     }
@@ -262,6 +278,11 @@ fn data_driven_spread(ctx: &Context, kind: &Kind, coef: &[f64], poses: &[usize])
                     target_index,
                     ..
                 } => vec![sum(&buf.dl, m, target_index.unwrap_or(0))],
+                // Every string's reading.
+                Kind::DataDriven {
+                    target: CorrectionTarget::RigShape,
+                    ..
+                } => (0..m).map(|s| sum(&buf.dl, m, s)).collect(),
                 Kind::DataDriven {
                     target:
                         CorrectionTarget::LinkLength

@@ -99,6 +99,14 @@ fn overlapping(state: &State) -> Vec<usize> {
                             ..
                         }
                 ),
+                // The frame's shape moves anchors, singly or together.
+                (CorrectionTarget::RigShape, _, other) => matches!(
+                    other,
+                    Kind::AnchorStep { .. }
+                        | Kind::SensorDrift { .. }
+                        | Kind::RigStep { .. }
+                        | Kind::RigDrift
+                ),
                 (CorrectionTarget::Point, CorrectionDriver::Temperature, other) => matches!(
                     other,
                     Kind::ThermalExpansion {
