@@ -351,3 +351,16 @@ fn a_target_read_off_its_centre_is_placed_by_the_line_of_sight() {
         d.evidence
     );
 }
+
+/// A frame swayed by its strings' pull, on three strings: the catalogue's
+/// string offsets and rig or anchor steps each improve the held-out
+/// readings a little but not the tool points, so none is named; the
+/// remainder is located in the workspace and corrected there.
+#[test]
+fn a_frame_swayed_by_its_strings_is_not_named_string_offsets_or_steps() {
+    common::unnamed_near_the_twin(
+        "xcheck5_frame_tension_sway_s3tilt",
+        |p| p.driver == "workspace",
+        1.45,
+    );
+}

@@ -236,6 +236,10 @@ pub(super) fn refitted(
     refit(obs, ctx, &state.p, free, trial).map_err(|_| Turned::rejected(None))
 }
 
+/// The least fraction of the held-out 3-D RMS a named effect must take
+/// away (see [`held_out`]).
+const NAMED_MIN_GAIN: f64 = 0.01;
+
 /// Held-out gate on what was measured (string readings or points): noise
 /// there is homogeneous, unlike located points. The 3-D held-out errors
 /// the report shows must not get worse beyond their noise (located points
@@ -255,7 +259,20 @@ pub(super) fn held_out(
     let gain_z = paired_gain_z_sums(&before.r, &r_after);
     let (rb, ra) = (rms_sums(&before.r), rms_sums(&r_after));
     let gain_z_3d = paired_gain_z(&before.e, &e_after);
+    // A name sends an engineer to a part: a named effect must also move
+    // the held-out tool points the report shows, not only the readings.
+    let named = cs.iter().all(|c| !c.kind.is_data_driven());
+    let moves_points = !named || test_after <= (1.0 - NAMED_MIN_GAIN) * before.test_rms;
     let held_out_gain = ra < rb && gain_z > HELD_OUT_Z && gain_z_3d > -HELD_OUT_Z;
+    if !obs.test.is_empty() && held_out_gain && !moves_points {
+        return Err(Turned::rejected(Some(format!(
+            "{} improved the held-out readings (RMS per reading {rb:.4} -> {ra:.4} mm, paired z = {gain_z:.1}) but not the held-out tool points by {:.0} % (3-D {:.4} -> {:.4} mm), which a named effect must: not kept",
+            names(cs),
+            100.0 * NAMED_MIN_GAIN,
+            before.test_rms,
+            test_after,
+        ))));
+    }
     if !obs.test.is_empty() && !held_out_gain {
         return Err(Turned::rejected(Some(format!(
             "{} {} significant on the train poses but did not improve the held-out error by more than noise explains (held-out RMS per reading {:.4} -> {:.4} mm, paired z = {:.1}, threshold {HELD_OUT_Z}; 3-D {:.4} -> {:.4} mm, paired z = {:.1}, must stay above -{HELD_OUT_Z}): not kept",
