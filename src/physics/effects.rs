@@ -767,18 +767,18 @@ impl Context {
             sorted_time_s: SortedValues::default(),
             sorted_temp_c: SortedValues::default(),
         };
-        let values = |driver| {
-            SortedValues::new(
-                ctx.poses
-                    .iter()
-                    .map(|p| ctx.driver_value(p, driver, None, None)),
-            )
-        };
-        (ctx.sorted_time_s, ctx.sorted_temp_c) = (
-            values(CorrectionDriver::Time),
-            values(CorrectionDriver::Temperature),
-        );
+        ctx.sorted_time_s = ctx.sorted(CorrectionDriver::Time);
+        ctx.sorted_temp_c = ctx.sorted(CorrectionDriver::Temperature);
         ctx
+    }
+
+    /// The poses' values of `driver` (no index), sorted.
+    fn sorted(&self, driver: CorrectionDriver) -> SortedValues {
+        SortedValues::new(
+            self.poses
+                .iter()
+                .map(|p| self.driver_value(p, driver, None, None)),
+        )
     }
 
     /// A change point `t0_s` (seconds, or a row index without `time_s`)

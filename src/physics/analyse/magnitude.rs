@@ -141,79 +141,16 @@ fn data_driven_size(
     }
     // u_i = B_i c per pose (1, 3 or one per string); d v / d c = Σ B_iᵀ (u_i - ū) / (N v).
     let mut buf = effects::Basis::default();
-    let (n, m) = (ctx.n_joints, ctx.anchors.len());
-    let rig_shape = matches!(
-        kind,
+    let width = match kind {
         Kind::DataDriven {
             target: CorrectionTarget::RigShape,
             ..
-        }
-    );
-    let width = if rig_shape { m } else { 3 };
+        } => ctx.anchors.len(),
+        _ => 3,
+    };
     let rows: Vec<Vec<(usize, usize, f64)>> = poses
         .iter()
-        .map(|&i| {
-            ctx.basis(kind, i, &mut buf);
-            let mut nz = Vec::new();
-            for k in 0..coef.len() {
-                match kind {
-                    Kind::DataDriven {
-                        target: CorrectionTarget::JointAngle,
-                        target_index,
-                        ..
-                    } => {
-                        let w = buf.dq[k * n + target_index.unwrap_or(0)];
-                        if w != 0.0 {
-                            nz.push((0, k, w));
-                        }
-                    }
-                    Kind::DataDriven {
-                        target: CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale,
-                        target_index,
-                        ..
-                    } => {
-                        let w = buf.dl[k * m + target_index.unwrap_or(0)];
-                        if w != 0.0 {
-                            nz.push((0, k, w));
-                        }
-                    }
-                    Kind::DataDriven {
-                        target:
-                            CorrectionTarget::LinkLength
-                            | CorrectionTarget::InstrumentScale
-                            | CorrectionTarget::ReadingScale,
-                        ..
-                    } => {
-                        let w: f64 = ctx
-                            .knot_weights(kind, i)
-                            .iter()
-                            .filter(|&&(at, _)| at == k)
-                            .map(|&(_, w)| w)
-                            .sum();
-                        if w != 0.0 {
-                            nz.push((0, k, w));
-                        }
-                    }
-                    _ if rig_shape => {
-                        for s in 0..m {
-                            let w = buf.dl[k * m + s];
-                            if w != 0.0 {
-                                nz.push((s, k, w));
-                            }
-                        }
-                    }
-                    _ => {
-                        for r in 0..3 {
-                            let w = buf.dp[k * 3 + r];
-                            if w != 0.0 {
-                                nz.push((r, k, w));
-                            }
-                        }
-                    }
-                }
-            }
-            nz
-        })
+        .map(|&i| basis_entries(ctx, kind, i, coef.len(), &mut buf))
         .collect();
     let u: Vec<Vec<f64>> = rows
         .iter()
@@ -249,6 +186,54 @@ fn data_driven_size(
         }
     }
     (v * scale, var.max(0.0).sqrt() * scale)
+}
+
+/// The nonzero entries `(row, coefficient, weight)` of a data-driven
+/// correction's basis at pose `i`: row 0 for a joint's angle, one
+/// string's reading or a scale's knot weight; each string's row for the
+/// frame's shape; x, y, z of T otherwise.
+fn basis_entries(
+    ctx: &Context,
+    kind: &Kind,
+    i: usize,
+    n_coef: usize,
+    buf: &mut effects::Basis,
+) -> Vec<(usize, usize, f64)> {
+    let (n, m) = (ctx.n_joints, ctx.anchors.len());
+    ctx.basis(kind, i, buf);
+    let mut nz = Vec::new();
+    let Kind::DataDriven {
+        target,
+        target_index,
+        ..
+    } = kind
+    else {
+        return nz;
+    };
+    let at = target_index.unwrap_or(0);
+    for k in 0..n_coef {
+        match target {
+            CorrectionTarget::JointAngle => nz.push((0, k, buf.dq[k * n + at])),
+            CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale => {
+                nz.push((0, k, buf.dl[k * m + at]))
+            }
+            CorrectionTarget::LinkLength
+            | CorrectionTarget::InstrumentScale
+            | CorrectionTarget::ReadingScale => {
+                let w: f64 = ctx
+                    .knot_weights(kind, i)
+                    .iter()
+                    .filter(|&&(at, _)| at == k)
+                    .map(|&(_, w)| w)
+                    .sum();
+                nz.push((0, k, w));
+            }
+            CorrectionTarget::RigShape => nz.extend((0..m).map(|s| (s, k, buf.dl[k * m + s]))),
+            _ => nz.extend((0..3).map(|r| (r, k, buf.dp[k * 3 + r]))),
+        }
+    }
+    nz.retain(|&(_, _, w)| w != 0.0);
+    nz
 }
 
 /// RMS of a data-driven correction's contribution over `poses` about its
