@@ -109,7 +109,7 @@ impl Kind {
                 ..
             } => format!(
                 "not a named physics: a data-driven correction of {} as a {} function of {} ({} knots{}, chosen by cross-validation), fitted where the analysis located structure the catalogue does not explain",
-                correction_target_words(*target, *target_index),
+                correction_target_words(*target, *target_index, ctx.anchors.is_empty()),
                 if period.is_some() { "periodic" } else { "smooth" },
                 correction_driver_words(*driver, *driver_index),
                 knots.len(),
@@ -136,7 +136,13 @@ pub fn reading_per_scale(
 }
 
 /// What a data-driven correction corrects, in words.
-pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -> String {
+/// (`point_data`: the session measured points, so the rig is the
+/// measuring instrument).
+pub fn correction_target_words(
+    target: CorrectionTarget,
+    index: Option<usize>,
+    point_data: bool,
+) -> String {
     let at = index.map_or(0, |i| i + 1);
     match target {
         CorrectionTarget::JointAngle => format!("joint {at}'s angle"),
@@ -154,6 +160,9 @@ pub fn correction_target_words(target: CorrectionTarget, index: Option<usize>) -
         CorrectionTarget::ToolPoint => "the tool point in the flange frame".into(),
         CorrectionTarget::ReadingScale => {
             "every string's scale (each reads its length times it more)".into()
+        }
+        CorrectionTarget::RigShape if point_data => {
+            "the measuring instrument's frame (each point read off by a linear function of where it is about the instrument's origin: the instrument turning, stretching or shearing its space)".into()
         }
         CorrectionTarget::RigShape => {
             "the string frame's shape (each anchor moved by a linear function of where it sits about the anchors' centroid)".into()
@@ -1037,7 +1046,8 @@ impl Context {
     /// pose whose driver is `x`: knot `k`'s weight less its mean over the
     /// session's poses (the correction centred: a constant shape is where
     /// rig.json put the anchors, not a change), times how string `s`'s
-    /// reading follows `D[r][c]`: `-u_s[r] (A_s - centroid)[c]`.
+    /// reading follows `D[r][c]`: `-u_s[r] (A_s - centroid)[c]`; with point
+    /// data, how T's coordinate `r` follows it: `T[c]`.
     #[allow(clippy::too_many_arguments)]
     fn rig_shape_basis(
         &self,
@@ -1050,7 +1060,7 @@ impl Context {
         out: &mut Basis,
     ) {
         let m = self.anchors.len();
-        if m == 0 || self.poses.is_empty() {
+        if self.poses.is_empty() {
             return;
         }
         let mut weight: Vec<f64> = match (driver, period) {
@@ -1071,6 +1081,17 @@ impl Context {
         weight.iter_mut().for_each(|w| *w = -*w);
         for (k, w) in hat_weights(knots, period, x) {
             weight[k] += w;
+        }
+        if m == 0 {
+            // Point data: T read `D T` off, about the instrument's origin.
+            for (k, w) in weight.iter().enumerate() {
+                for r in 0..3 {
+                    for c in 0..3 {
+                        out.dp[(9 * k + 3 * r + c) * 3 + r] += w * pc.point_rig[c];
+                    }
+                }
+            }
+            return;
         }
         let centroid = self.anchors.iter().sum::<Vector3<f64>>() / m as f64;
         for (s, a) in self.anchors.iter().enumerate() {

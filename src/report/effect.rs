@@ -91,7 +91,11 @@ pub enum CorrectionTarget {
     /// neither T moving relative to the rig nor the anchors spreading
     /// evenly ([`InstrumentScale`](Self::InstrumentScale), one of its
     /// shapes) can follow; with four anchors not in one plane any motion of
-    /// them is such a field with a move of T.
+    /// them is such a field with a move of T. With point data the rig is
+    /// the measuring instrument: T is read `D T` off (about the
+    /// instrument's origin), the instrument turning, stretching or
+    /// shearing its space during the session (a camera's mount or
+    /// extrinsics creeping: its depth error grows with the depth).
     RigShape,
 }
 
@@ -791,7 +795,7 @@ fn check_target(
             ))
     {
         return Err(
-                "a correction of the string frame's shape has no target_index and follows the clock or the temperature"
+                "a correction of the rig's shape has no target_index and follows the clock or the temperature"
                     .into(),
             );
     }

@@ -186,3 +186,36 @@ fn a_frame_tilting_with_the_temperature_is_a_rig_shape_correction() {
         shape.evidence
     );
 }
+
+/// A stereo camera whose mount creeps in yaw reads T off by an amount
+/// that grows with the depth and changes in time: neither neighbours in
+/// time nor in the workspace agree, poses close in both do. It is located
+/// in time and modelled as the instrument's frame changing in time
+/// (nothing was found before).
+#[test]
+fn a_camera_creeping_in_time_by_depth_is_located_and_corrected() {
+    let (report, d) = common::corrected_unnamed(
+        "xcheck10_stereo_camera_creep",
+        |p| p.driver == "time" && p.joint.is_none() && p.sensor.is_none(),
+        (
+            CorrectionTarget::RigShape,
+            None,
+            CorrectionDriver::Time,
+            None,
+        ),
+        0.92,
+    );
+    let place = common::place_where(&report, |p| p.driver == "time");
+    assert_eq!(place.side, "point", "{place:?}");
+    assert!(
+        d.evidence
+            .contains("the instrument's frame changed during the session"),
+        "{}",
+        d.evidence
+    );
+    assert!(
+        d.explanation.contains("the measuring instrument's frame"),
+        "{}",
+        d.explanation
+    );
+}

@@ -31,6 +31,7 @@
 use nalgebra::{DMatrix, Vector3};
 
 use super::candidates::Candidate;
+use super::compensation_use;
 use super::fixed::{FixedBase, with_candidate};
 use super::gates::{self, Before};
 use super::magnitude::magnitude;
@@ -556,10 +557,14 @@ impl Slots<'_> {
 
     /// The string frame's shape by `driver` (the clock or the
     /// temperature), on a rig of four strings or more (three cannot tell
-    /// the frame's shape from T's move), at [`RIG_SHAPE_KNOTS`]: nine
-    /// coefficients a knot, and a frame deforms slowly.
+    /// the frame's shape from T's move), or with point data the measuring
+    /// instrument's frame (a camera's extrinsics creeping, a tracker's
+    /// stand twisting: the error changes in time by where T is), at
+    /// [`RIG_SHAPE_KNOTS`]: nine coefficients a knot, and a frame deforms
+    /// slowly.
     fn rig_shape(&self, driver: CorrectionDriver) -> Option<Vec<Kind>> {
-        (self.ctx.anchors.len() >= 4).then(|| {
+        let m = self.ctx.anchors.len();
+        (m == 0 || m >= 4).then(|| {
             self.knotted(
                 CorrectionTarget::RigShape,
                 None,
@@ -846,174 +851,6 @@ pub(super) fn load_families(inputs: &Inputs, j: usize) -> Vec<Vec<Kind>> {
 /// Knot counts of a correction by a joint's last move: an odd, saturating
 /// shape (a stop short growing with the move, then bounded) needs few.
 const MOVE_KNOTS: [usize; 4] = [3, 4, 6, 8];
-
-/// Whether and where compensation can use a data-driven correction `kind`,
-/// in words (`point_data`: the session had no strings, so a field over
-/// the workspace cannot be told from the instrument's own distortion).
-fn compensation_words(kind: &Kind, point_data: bool) -> String {
-    let Kind::DataDriven { driver, knots, .. } = kind else {
-        return String::new();
-    };
-    let (lo, hi) = kind
-        .fitted_range()
-        .unwrap_or((knots[0], knots[knots.len() - 1]));
-    let beyond = kind.beyond_range();
-    let reading = matches!(
-        kind,
-        Kind::DataDriven {
-            target: CorrectionTarget::StringReading,
-            ..
-        }
-    );
-    if *driver == CorrectionDriver::Workspace && !reading {
-        let (lo, hi, unit) = match kind {
-            Kind::DataDriven {
-                driver_index: Some(3 | 4),
-                ..
-            } => (lo.to_degrees(), hi.to_degrees(), "deg"),
-            _ => (lo, hi, "mm"),
-        };
-        // Strings that agree place the displacement on the robot's side;
-        // one instrument's points cannot.
-        let caveat = if point_data {
-            "; with point data alone a distortion of the measuring instrument cannot be told from one of the robot: unless the targets were defined with this instrument, measure again from another instrument position before relying on it"
-        } else {
-            ""
-        };
-        format!(
-            "compensation applies it (a function of where T is), inside the region the poses covered ({lo:.1} to {hi:.1} {unit}; beyond it {beyond}, and compensation warns){caveat}"
-        )
-    } else if driver.usable_for_compensation() && !reading {
-        format!(
-            "compensation applies it (a function of joint angles), inside the range the poses covered ({:.1} to {:.1} deg; beyond it {beyond}, and compensation warns)",
-            lo.to_degrees(),
-            hi.to_degrees()
-        )
-    } else if let Kind::DataDriven {
-        target: CorrectionTarget::LinkLength,
-        target_index,
-        ..
-    } = kind
-    {
-        format!(
-            "compensation does not apply it: it follows this session's {} history; {} grew unlike the other lengths: check that link (its material, a motor or drive warming it, a loose joint in it), or calibrate at the temperature the robot works at",
-            if *driver == CorrectionDriver::Temperature {
-                "temperature"
-            } else {
-                "clock (a warm-up)"
-            },
-            crate::physics::effects::length_name(*target_index)
-        )
-    } else if let Kind::DataDriven {
-        target: CorrectionTarget::InstrumentScale,
-        ..
-    } = kind
-    {
-        "compensation does not need it: it corrects the measuring instrument's scale, not where the robot went; the rig's frame (or a tracker's range, with the air) changed with this session's conditions: hold the instrument's temperature steady, give a tracker the air's temperature and pressure, or measure the rig again at the temperature it is used at".into()
-    } else if let Kind::DataDriven {
-        target: CorrectionTarget::ReadingScale,
-        ..
-    } = kind
-    {
-        "compensation does not need it: it corrects what every string read, not where the robot went; all the strings' readings drifted in proportion with this session's conditions, as sensors sharing one reference do (a potentiometers' excitation voltage warming up or wandering, a counter's clock): check the sensors' common supply or reference, let it warm up before measuring, or log it".into()
-    } else if let Kind::DataDriven {
-        target: CorrectionTarget::ToolPoint,
-        ..
-    } = kind
-    {
-        format!(
-            "compensation cannot use it: the tool point changed with this session's {} (a probe growing with the heat of the process it carries, a tool slipping in its holder or re-seated), which a future target does not carry; check the tool's mounting and its temperature, then measure the tool point again (or re-calibrate) under the conditions it works in",
-            if *driver == CorrectionDriver::Temperature {
-                "temperature"
-            } else {
-                "clock"
-            }
-        )
-    } else if *driver == CorrectionDriver::LineOfSight {
-        "compensation does not apply it: it follows how the target faces the instrument, which a target read off its centre by an amount that turns with it gives (a reflector whose vertex is off its sphere's centre, a photogrammetric target seen at steep angles), and which point data alone cannot tell from an error of the robot's that follows the flange's orientation towards the instrument; check the target (replace or characterise it, keep it facing the instrument) and, if the correction stays, measure with another target".into()
-    } else if let Kind::DataDriven {
-        target: CorrectionTarget::StringReading,
-        target_index: Some(s),
-        driver: CorrectionDriver::GravityTorque,
-        driver_index: Some(j),
-        ..
-    } = kind
-    {
-        format!(
-            "compensation does not need it: it corrects what string {} read, not where the robot went; the reading follows joint {}'s load, as interference from that joint's motor in the string's signal would (it grows with the current that holds the load): route and shield the string's cable away from that motor's, and check its grounding",
-            s + 1,
-            j + 1
-        )
-    } else if *driver == CorrectionDriver::GravityTorque && !reading {
-        "compensation does not apply it: it follows the joint's gravity load at the target (its angles and the payload), which compensation does not yet evaluate for a data-driven correction; the joint's error is not in proportion to its load as an elastic joint's is: check it for play that gravity takes up or a stiffness that changes with the load".into()
-    } else if *driver == CorrectionDriver::MoveDirection {
-        "compensation cannot use it: it depends on the moves that lead to a target, which the program that visits it decides, not the target; the joint's error follows the way it and its neighbour last moved together, as the play or friction of a drive that turns both would (a parallelogram's rod or belt, a coupled wrist): check that drive, or approach every target the same way".into()
-    } else if *driver == CorrectionDriver::GravityTorqueChange {
-        "compensation cannot use it: it depends on the load the joint carried at the pose before a target, which the program that visits it decides, not the target; the joint lags the change of its load as a drive that creeps or winds up under load would (a harmonic drive's flexspline relaxing during the dwell, friction holding part of its deflection): dwell longer before measuring, check the drive, or approach every target from the same load".into()
-    } else if *driver == CorrectionDriver::JointMove {
-        "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; the joint stops short by an amount that grows with the move: check its drive for friction or elastic wind-up (a brake dragging, a worn or preloaded gear, a soft coupling), or approach every target with the same move".into()
-    } else if let Kind::DataDriven {
-        target: CorrectionTarget::JointPlay,
-        target_index: Some(t),
-        ..
-    } = kind
-    {
-        format!(
-            "compensation cannot use it: joint {}'s play changed with this session's {} (grease thinning as the drive warmed up, wear), which a future target does not carry; check that joint's drive for play and wear, warm the robot up before calibrating and before precise work, or approach every target from the same side",
-            t + 1,
-            if *driver == CorrectionDriver::Temperature {
-                "temperature"
-            } else {
-                "clock"
-            }
-        )
-    } else if let Kind::DataDriven {
-        target: CorrectionTarget::JointAngle,
-        target_index: Some(t),
-        ..
-    } = kind
-    {
-        format!(
-            "compensation cannot use it: joint {}'s zero changed with this session's {} (a re-homing, a lost encoder count, a drive warming up), which a future target does not carry; check that joint's homing and encoder, then re-reference its zero or re-calibrate",
-            t + 1,
-            if *driver == CorrectionDriver::Temperature {
-                "temperature"
-            } else {
-                "clock"
-            }
-        )
-    } else if let Kind::DataDriven {
-        target: CorrectionTarget::StringZeroScale,
-        target_index: Some(s),
-        driver: CorrectionDriver::Time,
-        ..
-    } = kind
-    {
-        format!(
-            "compensation does not need it: it corrects what string {} read, not where the robot went; its zero and its scale changed during the session, long lengths more than short ones (a cable creeping under its spring's pull, a drum or cable warming): let the string settle under tension before measuring, check its cable and drum, or log their temperature",
-            s + 1
-        )
-    } else if let Kind::DataDriven {
-        target: CorrectionTarget::RigShape,
-        ..
-    } = kind
-    {
-        format!(
-            "compensation does not need it: it corrects what the strings read, not where the robot went; the string frame changed shape during the session with its {} (its anchors moved unequally: a frame racking, bowing or tilting as it warms, a post or a foot settling): brace the frame, let it reach the cell's temperature before measuring, and check its posts and feet",
-            if *driver == CorrectionDriver::Temperature {
-                "temperature"
-            } else {
-                "clock"
-            }
-        )
-    } else if *driver == CorrectionDriver::Motion {
-        "compensation cannot use it: it depends on the move that leads to a target, which the program that visits it decides, not the target; T was measured before the arm settled: dwell longer at each pose or approach slower, and check the servo tuning".into()
-    } else if kind.robot_side() {
-        "compensation cannot use it: it is a function of this session's clock or temperature history, not of a future target; find what changed during the session (the stand, the tracker, the temperature of the cell), keep it constant, or re-calibrate when it has settled".into()
-    } else {
-        "compensation does not need it: it corrects what a string read, not where the robot went; check that string (its drum, its exit, its mounting)".into()
-    }
-}
 
 /// Knots per period of the periodic corrections scanned over their period;
 /// the best few periods are tried again at [`PERIODIC_KNOTS`].
@@ -1334,7 +1171,7 @@ pub(super) fn try_place(
     let Kind::DataDriven { driver, knots, .. } = &e.kind else {
         return false;
     };
-    let usable = compensation_words(&e.kind, ctx.anchors.is_empty());
+    let usable = compensation_use::words(&e.kind, ctx.anchors.is_empty());
     let shape = match e.kind {
         Kind::DataDriven {
             period: Some(_),

@@ -419,6 +419,9 @@ mod tests {
         };
         kinds.push(by_clock(CorrectionTarget::ToolPoint, None));
         kinds.push(by_clock(CorrectionTarget::InstrumentScale, None));
+        // The frame's shape (the strings' or the instrument's; nine
+        // coefficients per knot).
+        kinds.push(by_clock(CorrectionTarget::RigShape, None));
         kinds.push(by_clock(CorrectionTarget::JointAngle, Some(1)));
         kinds.push(Kind::DataDriven {
             target: CorrectionTarget::JointAngle,
@@ -473,8 +476,6 @@ mod tests {
                 range: None,
                 axis: Some([0.0, 0.6, 0.8]),
             });
-            // The frame's shape by the clock (nine coefficients per knot).
-            kinds.push(by_clock(CorrectionTarget::RigShape, None));
             // Every string's scale by the clock.
             kinds.push(Kind::DataDriven {
                 target: CorrectionTarget::ReadingScale,

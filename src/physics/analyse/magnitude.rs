@@ -145,7 +145,7 @@ fn data_driven_size(
         Kind::DataDriven {
             target: CorrectionTarget::RigShape,
             ..
-        } => ctx.anchors.len(),
+        } if !ctx.anchors.is_empty() => ctx.anchors.len(),
         _ => 3,
     };
     let rows: Vec<Vec<(usize, usize, f64)>> = poses
@@ -228,7 +228,9 @@ fn basis_entries(
                     .sum();
                 nz.push((0, k, w));
             }
-            CorrectionTarget::RigShape => nz.extend((0..m).map(|s| (s, k, buf.dl[k * m + s]))),
+            CorrectionTarget::RigShape if m > 0 => {
+                nz.extend((0..m).map(|s| (s, k, buf.dl[k * m + s])))
+            }
             _ => nz.extend((0..3).map(|r| (r, k, buf.dp[k * 3 + r]))),
         }
     }
@@ -267,7 +269,7 @@ fn data_driven_spread(ctx: &Context, kind: &Kind, coef: &[f64], poses: &[usize])
                 Kind::DataDriven {
                     target: CorrectionTarget::RigShape,
                     ..
-                } => (0..m).map(|s| sum(&buf.dl, m, s)).collect(),
+                } if m > 0 => (0..m).map(|s| sum(&buf.dl, m, s)).collect(),
                 Kind::DataDriven {
                     target:
                         CorrectionTarget::LinkLength
@@ -311,6 +313,11 @@ fn unit_of(ctx: &Context, kind: &Kind) -> String {
             ),
         },
         Kind::SensorDrift { .. } if !ctx.timed => "mm per 1000 rows".into(),
+        // Point data: the instrument's frame moves T itself.
+        Kind::DataDriven {
+            target: CorrectionTarget::RigShape,
+            ..
+        } if ctx.anchors.is_empty() => "mm (RMS displacement of T over the train poses)".into(),
         other => fixed_unit(other).into(),
     }
 }

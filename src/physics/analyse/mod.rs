@@ -35,6 +35,7 @@
 //! findings restated, cancelling terms, the unexplained remainder).
 
 mod candidates;
+mod compensation_use;
 mod data_driven;
 mod findings;
 mod finish;

@@ -26,7 +26,7 @@ pub(in crate::physics) use robot_side::robot_side_share;
 use confined::{Concentrated, concentrated};
 use located::{located, worst_region};
 use neighbours::{Along, neighbours};
-use orderings::orderings;
+use orderings::{orderings, time_and_workspace_at};
 use robot_side::{
     Excess, Motion, flange_components, joint_components, motion_test, robot_side_excess,
 };
@@ -124,7 +124,8 @@ pub(super) fn unexplained(
         excess.as_ref(),
         motion.as_ref(),
     );
-    // The evidence plot knows the plain orderings up to the configuration.
+    // The evidence plot knows the plain orderings up to the configuration
+    // (time and T's position together: the clock's).
     let plot_len = ctx.n_joints + 2 + usize::from(with_temp);
     let (ordering, z) = match winner {
         w if w < pairings.len() => (pairings[w].0.clone(), nb.zs[w]),
@@ -154,7 +155,11 @@ pub(super) fn unexplained(
         ctx,
         p,
         effects,
-        winner.min(plot_len - 1),
+        if winner == time_and_workspace_at(ctx.n_joints, with_temp) {
+            ctx.n_joints
+        } else {
+            winner.min(plot_len - 1)
+        },
         &nb.zs[..plot_len],
     );
     let rms_res = (res.iter().map(|r| r * r).sum::<f64>() / res.len().max(1) as f64).sqrt();

@@ -31,6 +31,38 @@ pub(super) fn nearest_in_workspace(ctx: &Context, train: &[usize]) -> Vec<(usize
     )
 }
 
+/// Each train pose paired with its nearest other train pose in time and
+/// T's position at once: the clock and each coordinate (rig frame) over
+/// its own spread, so an hour and the workspace's size weigh alike. An
+/// error that changes during the session by an amount that depends on
+/// where T is (an instrument turning, a camera's extrinsics creeping:
+/// its depth error grows with the depth) changes sign across the workspace
+/// and across the session, so neither poses neighbouring in time nor in
+/// the workspace share it; poses close in both do.
+pub(super) fn nearest_in_time_and_workspace(ctx: &Context, train: &[usize]) -> Vec<(usize, usize)> {
+    let spread = |v: &dyn Fn(usize) -> f64| {
+        let n = train.len().max(1) as f64;
+        let mean = (0..train.len()).map(v).sum::<f64>() / n;
+        let var = (0..train.len()).map(|a| (v(a) - mean).powi(2)).sum::<f64>() / n;
+        if var > 0.0 { var.sqrt() } else { 1.0 }
+    };
+    let t = |a: usize| ctx.poses[train[a]].time_s;
+    let p = |a: usize| ctx.poses[train[a]].point_rig;
+    let scale = [
+        spread(&t),
+        spread(&|a| p(a).x),
+        spread(&|a| p(a).y),
+        spread(&|a| p(a).z),
+    ];
+    let coord = |a: usize, c: usize| {
+        let v = if c == 0 { t(a) } else { p(a)[c - 1] };
+        v / scale[c]
+    };
+    nearest_pairs(train.len(), 4, coord, |a, b| {
+        (0..4).map(|c| (coord(a, c) - coord(b, c)).powi(2)).sum()
+    })
+}
+
 /// Each of `n` items (every `stride`-th above 12,000) paired with its
 /// nearest other by `dist` (a sum of squared differences of the `dim`
 /// coordinates `coord`; among equals the first in order), each pair once.

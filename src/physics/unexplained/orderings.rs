@@ -3,15 +3,15 @@
 //! the workspace.
 
 use super::has_temperature;
-use super::nearest::{nearest_in_joint_space, nearest_in_workspace};
+use super::nearest::{nearest_in_joint_space, nearest_in_time_and_workspace, nearest_in_workspace};
 use crate::identify::Observations;
 use crate::physics::effects::{Context, CorrectionDriver};
 
 /// The orderings whose neighbours are compared, each a name and its pairs
 /// of train poses (positions in `obs.train`): by each joint angle, by time,
-/// by temperature when every pose has one, and last each pose with its
-/// nearest neighbour in joint space (the layout [`unexplained_plot`]
-/// reads).
+/// by temperature when every pose has one, each pose with its nearest
+/// neighbour in joint space (the layout [`unexplained_plot`] reads up to
+/// here), in the workspace, and in time and the workspace at once.
 ///
 /// [`unexplained_plot`]: crate::physics::evidence::unexplained_plot
 pub(super) fn orderings(obs: &Observations, ctx: &Context) -> Vec<(String, Vec<(usize, usize)>)> {
@@ -68,13 +68,18 @@ pub(super) fn orderings(obs: &Observations, ctx: &Context) -> Vec<(String, Vec<(
         "T's position (nearest pose in the workspace)".into(),
         nearest_in_workspace(ctx, &obs.train),
     ));
+    // And both: an error changing in time by where T is.
+    pairings.push((
+        "time and T's position (nearest pose in both)".into(),
+        nearest_in_time_and_workspace(ctx, &obs.train),
+    ));
     pairings
 }
 
 /// What the plain ordering `pk` of [`orderings`] follows, as a place's
 /// driver and joint (1-based). The layout: one per joint, time,
 /// temperature when recorded (`with_temp`), the configuration, T's
-/// position.
+/// position, time and T's position together.
 pub(super) fn driver_of(pk: usize, n: usize, with_temp: bool) -> (&'static str, Option<usize>) {
     let t = usize::from(with_temp);
     match pk {
@@ -82,8 +87,15 @@ pub(super) fn driver_of(pk: usize, n: usize, with_temp: bool) -> (&'static str, 
         j if j == n => ("time", None),
         j if with_temp && j == n + 1 => ("temperature", None),
         j if j == n + 1 + t => ("configuration", None),
+        j if j == time_and_workspace_at(n, with_temp) => ("time", None),
         _ => ("workspace", None),
     }
+}
+
+/// Where [`orderings`] puts the pairs nearest in time and T's position
+/// (after T's position alone): `n` joints, `with_temp` a temperature.
+pub(super) fn time_and_workspace_at(n: usize, with_temp: bool) -> usize {
+    n + 3 + usize::from(with_temp)
 }
 
 /// The train poses (positions in `obs.train`) sorted by the value of a
