@@ -647,28 +647,28 @@ fn base_tilt(
     (moment.cross(tool), moment.norm())
 }
 
-impl Context {
-    /// Build the contexts. `base_rotation` is the rotation of the robot base
-    /// in the rig frame (for the direction of gravity in the rig); the
-    /// nominal geometry and masses come from `robot`. Without
-    /// `gravity_in_base` gravity is taken as -z of the base (upright arm).
-    pub fn new(
-        robot: &Robot,
-        anchors: Vec<Vector3<f64>>,
-        r_mm: f64,
-        base_rotation: &nalgebra::Matrix3<f64>,
-        poses: &[PoseInput],
-    ) -> Self {
+/// What every pose's context is built from: the robot's nominal chain
+/// and masses, gravity, and the session's clock and temperature
+/// ([`Context::new`]).
+struct Session<'r> {
+    n_joints: usize,
+    chain: Chain,
+    nominal: Params,
+    base_rotation: nalgebra::Matrix3<f64>,
+    /// Gravity in the robot's base frame (m/s^2).
+    g_base: Vector3<f64>,
+    masses: Option<&'r Vec<crate::model::LinkMass>>,
+    lengths: Vec<(usize, f64)>,
+    thermal_driver: ThermalDriver,
+    timed: bool,
+    /// The first pose's temperature and time: the thermal driver's zero.
+    temp_ref: f64,
+    t_ref: f64,
+}
+
+impl<'r> Session<'r> {
+    fn of(robot: &'r Robot, base_rotation: &nalgebra::Matrix3<f64>, poses: &[PoseInput]) -> Self {
         let n = robot.dof();
-        let nominal = Params::of_robot(robot);
-        let chain = Chain::new(robot.convention, n, 0);
-        let g_base = robot
-            .gravity_in_base
-            .map(|g| Vector3::new(g[0], g[1], g[2]))
-            .unwrap_or(Vector3::new(0.0, 0.0, -9.81));
-        let g_unit = g_base.normalize();
-        let gravity_rig = base_rotation * g_unit;
-        let masses = robot.links.as_ref().filter(|l| l.len() == n);
         let temps: Vec<f64> = poses.iter().filter_map(|p| p.temp_c).collect();
         let temp_range = temps.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
             - temps.iter().cloned().fold(f64::INFINITY, f64::min);
@@ -683,76 +683,111 @@ impl Context {
         } else {
             ThermalDriver::Order
         };
-        let temp_ref = poses.first().and_then(|p| p.temp_c).unwrap_or(0.0);
-        let t_ref = poses.first().and_then(|p| p.time_s).unwrap_or(0.0);
+        Session {
+            n_joints: n,
+            chain: Chain::new(robot.convention, n, 0),
+            nominal: Params::of_robot(robot),
+            base_rotation: *base_rotation,
+            g_base: robot
+                .gravity_in_base
+                .map(|g| Vector3::new(g[0], g[1], g[2]))
+                .unwrap_or(Vector3::new(0.0, 0.0, -9.81)),
+            masses: robot.links.as_ref().filter(|l| l.len() == n),
+            lengths: nominal_lengths(robot),
+            thermal_driver,
+            timed,
+            temp_ref: poses.first().and_then(|p| p.temp_c).unwrap_or(0.0),
+            t_ref: poses.first().and_then(|p| p.time_s).unwrap_or(0.0),
+        }
+    }
+
+    /// The context of pose `i`, `p` (`before`: the pose recorded before
+    /// it), arriving from `direction`; `jac` is scratch.
+    fn pose(
+        &self,
+        i: usize,
+        p: &PoseInput,
+        before: Option<&PoseInput>,
+        direction: Vec<f64>,
+        jac: &mut crate::kinematics::chain::PointJacobian,
+    ) -> PoseContext {
+        let (chain, values, rot) = (&self.chain, &self.nominal.values, &self.base_rotation);
+        let frames = chain.link_frames(values, p.q_rad, OutputFrame::Base);
+        let axes = chain.joint_axes(values, p.q_rad, OutputFrame::Base);
+        let (flange, tool) = chain.point(values, p.q_rad, OutputFrame::Base);
+        let payload = p.payload_kg.unwrap_or(0.0);
+        let torque = gravity_torques(&frames, &axes, &tool, self.masses, self.g_base, payload);
+        let (tilt, base_moment_nm) = match self.masses {
+            Some(ms) => {
+                let (tilt, moment) = base_tilt(&frames, &tool, ms, self.g_base, payload);
+                (rot * tilt, moment)
+            }
+            None => (Vector3::zeros(), 0.0),
+        };
+        chain.point_jacobian(values, p.q_rad, OutputFrame::Base, jac);
+        let thermal = match self.thermal_driver {
+            ThermalDriver::Temperature => p.temp_c.unwrap_or(self.temp_ref) - self.temp_ref,
+            ThermalDriver::Time => (p.time_s.unwrap_or(self.t_ref) - self.t_ref) / 3600.0,
+            ThermalDriver::Order => i as f64 / 1000.0,
+        };
+        PoseContext {
+            q_rad: p.q_rad.to_vec(),
+            direction,
+            move_q_rad: match before {
+                None => vec![0.0; p.q_rad.len()],
+                Some(b) => p.q_rad.iter().zip(b.q_rad).map(|(q, r)| q - r).collect(),
+            },
+            // A partly filled time_s column is no clock: the row index
+            // stands in throughout, never mixed with seconds.
+            time_s: match p.time_s {
+                Some(t) if self.timed => t,
+                _ => i as f64,
+            },
+            thermal,
+            temp_c: p.temp_c,
+            point_rig: p.point_rig,
+            move_rig: before.map_or(Vector3::zeros(), |b| p.point_rig - b.point_rig),
+            torque,
+            torque_change_nm: vec![0.0; self.n_joints],
+            move_direction_rad: vec![0.0; self.n_joints.saturating_sub(1)],
+            tilt,
+            base_moment_nm,
+            d_lengths: self
+                .lengths
+                .iter()
+                .map(|&(k, _)| rot * jac.d_params[k])
+                .collect(),
+            flange_axes_rig: [0, 1, 2].map(|c| rot * flange.r.column(c)),
+        }
+    }
+}
+
+impl Context {
+    /// Build the contexts. `base_rotation` is the rotation of the robot base
+    /// in the rig frame (for the direction of gravity in the rig); the
+    /// nominal geometry and masses come from `robot`. Without
+    /// `gravity_in_base` gravity is taken as -z of the base (upright arm).
+    pub fn new(
+        robot: &Robot,
+        anchors: Vec<Vector3<f64>>,
+        r_mm: f64,
+        base_rotation: &nalgebra::Matrix3<f64>,
+        poses: &[PoseInput],
+    ) -> Self {
+        let n = robot.dof();
+        let session = Session::of(robot, base_rotation, poses);
         let qs: Vec<&[f64]> = poses.iter().map(|p| p.q_rad).collect();
-        let dirs = approach_directions(&qs);
-        let lengths = nominal_lengths(robot);
-        let mut jac = chain.new_jacobian();
+        let mut jac = session.chain.new_jacobian();
         let mut ctx_poses: Vec<PoseContext> = poses
             .iter()
-            .zip(dirs)
+            .zip(approach_directions(&qs))
             .enumerate()
             .map(|(i, (p, direction))| {
-                let frames = chain.link_frames(&nominal.values, p.q_rad, OutputFrame::Base);
-                let axes = chain.joint_axes(&nominal.values, p.q_rad, OutputFrame::Base);
-                let (flange, tool) = chain.point(&nominal.values, p.q_rad, OutputFrame::Base);
-                let flange_axes_rig = [0, 1, 2].map(|c| base_rotation * flange.r.column(c));
-                let payload = p.payload_kg.unwrap_or(0.0);
-                let torque = gravity_torques(&frames, &axes, &tool, masses, g_base, payload);
-                let (tilt, base_moment_nm) = match masses {
-                    Some(ms) => {
-                        let (tilt, moment) = base_tilt(&frames, &tool, ms, g_base, payload);
-                        (base_rotation * tilt, moment)
-                    }
-                    None => (Vector3::zeros(), 0.0),
-                };
-                chain.point_jacobian(&nominal.values, p.q_rad, OutputFrame::Base, &mut jac);
-                let d_lengths = lengths
-                    .iter()
-                    .map(|&(k, _)| base_rotation * jac.d_params[k])
-                    .collect();
-                let thermal = match thermal_driver {
-                    ThermalDriver::Temperature => p.temp_c.unwrap_or(temp_ref) - temp_ref,
-                    ThermalDriver::Time => (p.time_s.unwrap_or(t_ref) - t_ref) / 3600.0,
-                    ThermalDriver::Order => i as f64 / 1000.0,
-                };
-                PoseContext {
-                    q_rad: p.q_rad.to_vec(),
-                    direction,
-                    move_q_rad: match i {
-                        0 => vec![0.0; p.q_rad.len()],
-                        _ => p
-                            .q_rad
-                            .iter()
-                            .zip(poses[i - 1].q_rad)
-                            .map(|(q, r)| q - r)
-                            .collect(),
-                    },
-                    // A partly filled time_s column is no clock: the row
-                    // index stands in throughout, never mixed with seconds.
-                    time_s: match p.time_s {
-                        Some(t) if timed => t,
-                        _ => i as f64,
-                    },
-                    thermal,
-                    temp_c: p.temp_c,
-                    point_rig: p.point_rig,
-                    move_rig: match i {
-                        0 => Vector3::zeros(),
-                        _ => p.point_rig - poses[i - 1].point_rig,
-                    },
-                    torque,
-                    torque_change_nm: vec![0.0; n],
-                    move_direction_rad: vec![0.0; n.saturating_sub(1)],
-                    tilt,
-                    base_moment_nm,
-                    d_lengths,
-                    flange_axes_rig,
-                }
+                let before = i.checked_sub(1).map(|k| &poses[k]);
+                session.pose(i, p, before, direction, &mut jac)
             })
             .collect();
-        fill_changes(&mut ctx_poses, n, masses.is_some());
+        fill_changes(&mut ctx_poses, n, session.masses.is_some());
         let mut payloads: Vec<f64> = poses.iter().filter_map(|p| p.payload_kg).collect();
         payloads.sort_by(f64::total_cmp);
         let payload_ref_kg = (!payloads.is_empty()).then(|| payloads[payloads.len() / 2]);
@@ -764,14 +799,15 @@ impl Context {
             n_joints: n,
             anchors,
             r_mm,
-            gravity_rig,
-            has_masses: masses.is_some(),
-            thermal_driver,
-            lengths,
-            temp_ref_c: use_temp.then_some(temp_ref),
-            timed,
+            gravity_rig: base_rotation * session.g_base.normalize(),
+            has_masses: session.masses.is_some(),
+            thermal_driver: session.thermal_driver,
+            temp_ref_c: (session.thermal_driver == ThermalDriver::Temperature)
+                .then_some(session.temp_ref),
+            timed: session.timed,
             payload_ref_kg,
             centre_rig,
+            lengths: session.lengths,
             poses: ctx_poses,
             sorted_time_s: SortedValues::default(),
             sorted_temp_c: SortedValues::default(),
