@@ -1586,6 +1586,76 @@ mod tests {
         }
     }
 
+    /// With point data the rig's shape is the instrument's frame: T moves
+    /// by `D T` about the instrument's origin, `D` the knots' matrices
+    /// weighted and centred on the session; a constant `D` moves nothing.
+    #[test]
+    fn rig_shape_basis_with_point_data_moves_t_by_the_frame() {
+        let robot = crate::model::Robot::from_json(include_str!(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/real_ur10_ipa_random/robot.json"
+        )))
+        .unwrap();
+        let points = [
+            Vector3::new(2300.0, 100.0, 400.0),
+            Vector3::new(1800.0, 350.0, 650.0),
+            Vector3::new(2150.0, -300.0, 900.0),
+        ];
+        let q = [0.0; 6];
+        let poses: Vec<PoseInput> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| PoseInput {
+                q_rad: &q,
+                time_s: Some(100.0 * i as f64),
+                temp_c: None,
+                payload_kg: None,
+                point_rig: *p,
+            })
+            .collect();
+        let ctx = Context::new(&robot, vec![], 0.0, &nalgebra::Matrix3::identity(), &poses);
+        let kind = Kind::DataDriven {
+            target: CorrectionTarget::RigShape,
+            target_index: None,
+            driver: CorrectionDriver::Time,
+            driver_index: None,
+            knots: vec![0.0, 100.0, 200.0],
+            period: None,
+            range: None,
+            axis: None,
+        };
+        let coef: Vec<f64> = (0..27)
+            .map(|c| 1e-6 * ((c * 5 % 13) as f64 - 6.0))
+            .collect();
+        let mut buf = Basis::default();
+        for (i, t) in points.iter().enumerate() {
+            ctx.basis(&kind, i, &mut buf);
+            let d = nalgebra::Matrix3::from_fn(|r, c| {
+                (0..3)
+                    .map(|k| {
+                        let w = if k == i { 2.0 / 3.0 } else { -1.0 / 3.0 };
+                        w * coef[9 * k + 3 * r + c]
+                    })
+                    .sum::<f64>()
+            });
+            let want = d * t;
+            for r in 0..3 {
+                let got: f64 = (0..27).map(|c| coef[c] * buf.dp[c * 3 + r]).sum();
+                assert!(
+                    (got - want[r]).abs() < 1e-12 * want.norm().max(1.0),
+                    "pose {i} axis {r}: {got} vs {}",
+                    want[r]
+                );
+            }
+            assert!(buf.dl.iter().all(|&v| v == 0.0), "no strings to read");
+            let constant: Vec<f64> = (0..27).map(|c| coef[c % 9]).collect();
+            for r in 0..3 {
+                let v: f64 = (0..27).map(|c| constant[c] * buf.dp[c * 3 + r]).sum();
+                assert!(v.abs() < 1e-12, "a constant frame moved T by {v} along {r}");
+            }
+        }
+    }
+
     /// The spherical frame's directions against finite differences of the
     /// spherical coordinates: a step along the azimuth direction changes
     /// the azimuth by the step, and so on, each leaving the other two.

@@ -285,14 +285,15 @@ pub fn evidence_plot(
         .collect();
     let n = obs.data.poses.len();
     let m = ctx.anchors.len();
-    // The instrument's scale moves a tracker's points (there are no
-    // strings to plot): plotted as T's displacement.
+    // The instrument's scale or frame moves a tracker's or a camera's
+    // points (there are no strings to plot): plotted as T's displacement.
     let robot = e.kind.robot_side()
         || (m == 0
             && matches!(
                 e.kind,
                 Kind::DataDriven {
-                    target: crate::physics::effects::CorrectionTarget::InstrumentScale,
+                    target: crate::physics::effects::CorrectionTarget::InstrumentScale
+                        | crate::physics::effects::CorrectionTarget::RigShape,
                     ..
                 }
             ));

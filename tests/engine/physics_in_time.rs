@@ -218,4 +218,6 @@ fn a_camera_creeping_in_time_by_depth_is_located_and_corrected() {
         "{}",
         d.explanation
     );
+    // Plotted as T's displacement: there are no strings to plot.
+    assert!(d.evidence_plot.is_some(), "no evidence plot");
 }

@@ -53,7 +53,8 @@ const JOINT_KNOTS: [usize; 8] = [3, 4, 6, 8, 12, 16, 24, 32];
 /// session can drift through many states, so up to one knot per eight
 /// train poses.
 const CLOCK_KNOTS: [usize; 14] = [3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256];
-/// Knots of the string frame's shape in the clock or the temperature
+/// Knots of the rig's shape (the string frame's, or with point data the
+/// instrument's frame) in the clock or the temperature
 /// ([`CorrectionTarget::RigShape`], nine coefficients a knot): a frame
 /// bends and settles slowly.
 const RIG_SHAPE_KNOTS: [usize; 4] = [2, 3, 4, 6];
@@ -498,7 +499,8 @@ impl Slots<'_> {
             out.push(self.clocked(CorrectionTarget::ReadingScale, None));
         }
         // Or the frame's shape (a frame racking or bowing as it warms,
-        // settling unevenly): the anchors move unequally.
+        // settling unevenly: the anchors move unequally; an instrument
+        // turning or stretching its space).
         out.extend(self.rig_shape(CorrectionDriver::Time));
         // Or the tool point in the flange frame (a probe growing with the
         // process's heat, a tool slipping in its holder): T moves as the
@@ -531,7 +533,7 @@ impl Slots<'_> {
     /// At the temperature: T relative to the rig; or the instrument's scale
     /// (a string frame growing with the temperature, a tracker's range with
     /// the air's), the tool point in the flange frame, every string's
-    /// scale, or the string frame's shape.
+    /// scale, or the string frame's (the instrument's) shape.
     fn at_temperature(&self) -> Vec<Vec<Kind>> {
         let readings = (!self.ctx.anchors.is_empty()).then_some(CorrectionTarget::ReadingScale);
         let mut out: Vec<Vec<Kind>> = [

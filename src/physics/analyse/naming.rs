@@ -99,7 +99,9 @@ fn overlapping(state: &State) -> Vec<usize> {
                             ..
                         }
                 ),
-                // The frame's shape moves anchors, singly or together.
+                // The frame's shape moves anchors, singly or together (or,
+                // with point data, turns the instrument's space as a rig
+                // move does).
                 (CorrectionTarget::RigShape, _, other) => matches!(
                     other,
                     Kind::AnchorStep { .. }

@@ -29,7 +29,8 @@ pub(super) fn located(
             .max_by(|a, b| a.1.total_cmp(b.1))
             .map_or((0, f64::NAN), |(w, z)| (w, *z))
     };
-    let zcrit = nb.zcrit;
+    // The bar the winning test passed.
+    let zcrit = nb.winner_threshold;
     Some(match (&nb.best, excess, nb.winner_at) {
         // A confined mismatch is the most specific place: the poses far
         // off the rest also pull the geometry, and what that leaves

@@ -43,10 +43,14 @@ const BOTH_MARGIN: f64 = 1.5;
 /// What the neighbour test found over every ordering (see [`neighbours`]).
 pub(super) struct Neighbours {
     /// The z the agreement of neighbours must pass (Bonferroni over the
-    /// orderings tested).
+    /// orderings tested); time and T's position together must also pass
+    /// [`BOTH_MARGIN`] above each alone.
     pub(super) zcrit: f64,
-    /// The strongest agreement past `zcrit`: its z and what it ran along.
+    /// The strongest agreement past its bar: its z and what it ran along.
     pub(super) best: Option<(f64, String)>,
+    /// The bar the winning test passed (`zcrit`, or higher for time and
+    /// T's position together).
+    pub(super) winner_threshold: f64,
     /// Per ordering of the pairings (the plot's layout), the larger of the
     /// raw and the along-the-joint z for the joints (NaN: none).
     pub(super) zs: Vec<f64>,
@@ -54,7 +58,7 @@ pub(super) struct Neighbours {
     /// or (index at or past the pairings) a string's own test,
     /// `pairings.len() + k` for `extra[k]`.
     pub(super) winner_at: Option<(usize, Along)>,
-    /// Every test past `zcrit`, strongest first.
+    /// Every test past its bar, strongest first.
     pub(super) places: Vec<Place>,
 }
 
@@ -93,6 +97,7 @@ pub(super) fn neighbours(
     let mut best: Option<(f64, String)> = None;
     let mut zs = vec![f64::NAN; n_plain];
     let mut winner_at: Option<(usize, Along)> = None;
+    let mut winner_threshold = zcrit;
     let mut places: Vec<Place> = Vec::new();
     let place = |driver: &str, joint, sensor, side: &str, z| Place {
         driver: driver.into(),
@@ -139,12 +144,14 @@ pub(super) fn neighbours(
                 if best.as_ref().is_none_or(|b| z > b.0) {
                     best = Some((z, on.label(name, pk)));
                     winner_at = Some((pk, on));
+                    winner_threshold = bar;
                 }
             }
         }
-        // It is then the clock's place (one per driver), at its z.
+        // It is then the clock's place on the whole residual (one such
+        // place per driver), at its z.
         if pk == both_at && strongest.is_some() {
-            places.retain(|q| !(q.driver == "time" && q.joint.is_none()));
+            places.retain(|q| !(q.driver == "time" && q.joint.is_none() && q.side == whole));
         }
         places.extend(strongest);
     }
@@ -169,6 +176,7 @@ pub(super) fn neighbours(
             if best.as_ref().is_none_or(|b| z > b.0) {
                 best = Some((z, t.name.clone()));
                 winner_at = Some((n_plain + k, Along::Raw));
+                winner_threshold = zcrit;
             }
         }
     }
@@ -176,6 +184,7 @@ pub(super) fn neighbours(
     Neighbours {
         zcrit,
         best,
+        winner_threshold,
         zs,
         winner_at,
         places,
