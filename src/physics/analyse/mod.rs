@@ -31,8 +31,11 @@
 //! order), `gates` (cross-validation, the held-out paired test, the
 //! magnitude, a pair's members), `findings` (what a kept proposal
 //! reports), `refit` (the nonlinear refit and its covariance),
-//! `magnitude` (an effect's reported size) and `finish` (earlier
-//! findings restated, cancelling terms, the unexplained remainder).
+//! `magnitude` (an effect's reported size), `finish` (earlier
+//! findings restated, cancelling terms, the unexplained remainder);
+//! beyond the catalogue, `data_driven` (the corrections without a name),
+//! `compensation_use` (whether compensation can use one, in words) and
+//! `naming` (named effects re-examined beside a correction).
 
 mod candidates;
 mod compensation_use;
