@@ -1499,29 +1499,15 @@ mod tests {
         }
     }
 
-    /// A correction of the frame's shape against the exact readings of a
-    /// frame deformed by it: each anchor moved by `D (A - centroid)`, `D`
-    /// the knots' matrices weighted by the centred hat weights; and a
-    /// shape constant over the session (rig.json's anchors off, not a
-    /// change) corrects nothing.
-    #[test]
-    fn rig_shape_basis_matches_the_readings_of_a_deformed_frame() {
+    /// The UR10's context at `points` (rig frame, 100 s apart, the joints
+    /// at zero) with `anchors` (none: point data), and the rig's shape by
+    /// the clock with a knot at each pose.
+    fn shape_by_clock(anchors: Vec<Vector3<f64>>, points: &[Vector3<f64>]) -> (Context, Kind) {
         let robot = crate::model::Robot::from_json(include_str!(concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/tests/data/real_ur10_ipa_random/robot.json"
         )))
         .unwrap();
-        let anchors = vec![
-            Vector3::new(-900.0, -800.0, 1500.0),
-            Vector3::new(1100.0, -700.0, 1600.0),
-            Vector3::new(1000.0, 1200.0, 200.0),
-            Vector3::new(-800.0, 1000.0, 1700.0),
-        ];
-        let points = [
-            Vector3::new(300.0, 100.0, 400.0),
-            Vector3::new(-200.0, 350.0, 650.0),
-            Vector3::new(150.0, -300.0, 900.0),
-        ];
         let q = [0.0; 6];
         let poses: Vec<PoseInput> = points
             .iter()
@@ -1534,23 +1520,39 @@ mod tests {
                 point_rig: *p,
             })
             .collect();
-        let ctx = Context::new(
-            &robot,
-            anchors.clone(),
-            0.0,
-            &nalgebra::Matrix3::identity(),
-            &poses,
-        );
+        let ctx = Context::new(&robot, anchors, 0.0, &nalgebra::Matrix3::identity(), &poses);
         let kind = Kind::DataDriven {
             target: CorrectionTarget::RigShape,
             target_index: None,
             driver: CorrectionDriver::Time,
             driver_index: None,
-            knots: vec![0.0, 100.0, 200.0],
+            knots: (0..points.len()).map(|i| 100.0 * i as f64).collect(),
             period: None,
             range: None,
             axis: None,
         };
+        (ctx, kind)
+    }
+
+    /// A correction of the frame's shape against the exact readings of a
+    /// frame deformed by it: each anchor moved by `D (A - centroid)`, `D`
+    /// the knots' matrices weighted by the centred hat weights; and a
+    /// shape constant over the session (rig.json's anchors off, not a
+    /// change) corrects nothing.
+    #[test]
+    fn rig_shape_basis_matches_the_readings_of_a_deformed_frame() {
+        let anchors = vec![
+            Vector3::new(-900.0, -800.0, 1500.0),
+            Vector3::new(1100.0, -700.0, 1600.0),
+            Vector3::new(1000.0, 1200.0, 200.0),
+            Vector3::new(-800.0, 1000.0, 1700.0),
+        ];
+        let points = [
+            Vector3::new(300.0, 100.0, 400.0),
+            Vector3::new(-200.0, 350.0, 650.0),
+            Vector3::new(150.0, -300.0, 900.0),
+        ];
+        let (ctx, kind) = shape_by_clock(anchors.clone(), &points);
         assert_eq!(kind.n_coef(), 27);
         let coef: Vec<f64> = (0..27)
             .map(|c| 1e-6 * ((c * 7 % 11) as f64 - 5.0))
@@ -1591,39 +1593,12 @@ mod tests {
     /// weighted and centred on the session; a constant `D` moves nothing.
     #[test]
     fn rig_shape_basis_with_point_data_moves_t_by_the_frame() {
-        let robot = crate::model::Robot::from_json(include_str!(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/data/real_ur10_ipa_random/robot.json"
-        )))
-        .unwrap();
         let points = [
             Vector3::new(2300.0, 100.0, 400.0),
             Vector3::new(1800.0, 350.0, 650.0),
             Vector3::new(2150.0, -300.0, 900.0),
         ];
-        let q = [0.0; 6];
-        let poses: Vec<PoseInput> = points
-            .iter()
-            .enumerate()
-            .map(|(i, p)| PoseInput {
-                q_rad: &q,
-                time_s: Some(100.0 * i as f64),
-                temp_c: None,
-                payload_kg: None,
-                point_rig: *p,
-            })
-            .collect();
-        let ctx = Context::new(&robot, vec![], 0.0, &nalgebra::Matrix3::identity(), &poses);
-        let kind = Kind::DataDriven {
-            target: CorrectionTarget::RigShape,
-            target_index: None,
-            driver: CorrectionDriver::Time,
-            driver_index: None,
-            knots: vec![0.0, 100.0, 200.0],
-            period: None,
-            range: None,
-            axis: None,
-        };
+        let (ctx, kind) = shape_by_clock(vec![], &points);
         let coef: Vec<f64> = (0..27)
             .map(|c| 1e-6 * ((c * 5 % 13) as f64 - 6.0))
             .collect();

@@ -91,17 +91,7 @@ pub(super) fn unexplained(
     let n_params = n_free + effects.iter().map(|e| e.kind.n_coef()).sum::<usize>();
     let excess = robot_side_excess(obs, ctx, &res, rpp, n_params);
     let motion = motion_test(obs, ctx, &res, rpp, nb.zcrit).filter(|m| m.z > m.threshold);
-    let confined = {
-        let train: Vec<f64> = res
-            .chunks(rpp)
-            .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
-            .collect();
-        let test: Vec<f64> = reading_errors(obs, ctx, p, effects)
-            .iter()
-            .map(|&(ss, n)| (ss / n.max(1) as f64).sqrt())
-            .collect();
-        concentrated(obs, ctx, &train, &test, 1e-3)
-    };
+    let confined = confined_stretch(obs, ctx, (p, effects), &res, rpp);
     let (winner, located) = located(
         &nb,
         excess,
@@ -172,6 +162,27 @@ pub(super) fn unexplained(
         format!("{located}{region}"),
         plot,
     ))
+}
+
+/// A mismatch confined to a stretch of one joint's range
+/// ([`concentrated`]), from each train pose's residual RMS (`res`, `rpp`
+/// per pose) and each held-out pose's under the model `(p, effects)`.
+fn confined_stretch(
+    obs: &Observations,
+    ctx: &Context,
+    (p, effects): (&[f64], &[EffectModel]),
+    res: &[f64],
+    rpp: usize,
+) -> Option<Concentrated> {
+    let train: Vec<f64> = res
+        .chunks(rpp)
+        .map(|c| (c.iter().map(|v| v * v).sum::<f64>() / rpp as f64).sqrt())
+        .collect();
+    let test: Vec<f64> = reading_errors(obs, ctx, p, effects)
+        .iter()
+        .map(|&(ss, n)| (ss / n.max(1) as f64).sqrt())
+        .collect();
+    concentrated(obs, ctx, &train, &test, 1e-3)
 }
 
 /// An `unexplained` finding at one `place` that a shape test located
