@@ -100,6 +100,13 @@ impl Kind {
                 "the measuring rig (anchors or tracker) crept steadily relative to the robot base during the session (a settling stand, a floor or a tracker drifting)".into()
             }
             Kind::DataDriven {
+                target: CorrectionTarget::FrameDeflection,
+                ..
+            } => format!(
+                "not a named physics: a data-driven correction of {} (a symmetric compliance between the anchors), fitted where the analysis located structure the catalogue does not explain",
+                correction_target_words(CorrectionTarget::FrameDeflection, None, false),
+            ),
+            Kind::DataDriven {
                 target,
                 target_index,
                 driver,
@@ -120,6 +127,18 @@ impl Kind {
             ),
         }
     }
+}
+
+/// The unit normal of the plane that best fits `anchors` (the direction
+/// in which they spread least about their centroid).
+pub fn plane_normal(anchors: &[Vector3<f64>]) -> Vector3<f64> {
+    let c = anchors.iter().sum::<Vector3<f64>>() / anchors.len().max(1) as f64;
+    let cov = anchors.iter().fold(nalgebra::Matrix3::zeros(), |acc, a| {
+        acc + (a - c) * (a - c).transpose()
+    });
+    let eig = cov.symmetric_eigen();
+    let k = eig.eigenvalues.imin();
+    eig.eigenvectors.column(k).into_owned()
 }
 
 /// How much more a string from `anchor` to `point` reads per unit of the
@@ -166,6 +185,9 @@ pub fn correction_target_words(
         }
         CorrectionTarget::RigShape => {
             "the string frame's shape (each anchor moved by a linear function of where it sits about the anchors' centroid)".into()
+        }
+        CorrectionTarget::FrameDeflection => {
+            "the string frame's deflection out of its plane by the strings' pull (each anchor moved along the plane's normal in proportion to every string's pull along it)".into()
         }
     }
 }
@@ -1007,6 +1029,10 @@ impl Context {
             self.rig_shape_basis(knots, *period, *driver, *driver_index, x, pc, out);
             return;
         }
+        if *target == CorrectionTarget::FrameDeflection {
+            self.frame_deflection_basis(knots.len(), pc, out);
+            return;
+        }
         for (k, w) in hat_weights(knots, *period, x) {
             if w == 0.0 {
                 continue;
@@ -1047,7 +1073,7 @@ impl Context {
                     }
                 }
                 // Every knot at once, before the loop.
-                CorrectionTarget::RigShape => {}
+                CorrectionTarget::RigShape | CorrectionTarget::FrameDeflection => {}
                 CorrectionTarget::InstrumentScale if m == 0 => {
                     for r in 0..3 {
                         out.dp[k * 3 + r] += w * pc.point_rig[r];
@@ -1139,6 +1165,40 @@ impl Context {
                         out.dl[(9 * k + 3 * r + c) * m + s] -= w * u[r] * arm[c];
                     }
                 }
+            }
+        }
+    }
+
+    /// [`Self::correction_basis`] of [`CorrectionTarget::FrameDeflection`]
+    /// for `k` anchors: coefficient `C[a][i]` (`a <= i`, the upper triangle
+    /// row by row) moves anchor `a` along the anchors' plane normal `n` by
+    /// `C (u_i · n)` and, off the diagonal, anchor `i` by `C (u_a · n)`;
+    /// string `s` reads its anchor's move times `u_s · n` less. Nothing
+    /// when the rig has not `k` anchors (a report read against another
+    /// rig).
+    fn frame_deflection_basis(&self, k: usize, pc: &PoseContext, out: &mut Basis) {
+        let m = self.anchors.len();
+        if m != k || m < 3 {
+            return;
+        }
+        let n = plane_normal(&self.anchors);
+        let pull: Vec<f64> = self
+            .anchors
+            .iter()
+            .map(|a| {
+                (pc.point_rig - a)
+                    .try_normalize(0.0)
+                    .map_or(0.0, |u| u.dot(&n))
+            })
+            .collect();
+        let mut c = 0;
+        for a in 0..m {
+            for i in a..m {
+                out.dl[c * m + a] -= pull[a] * pull[i];
+                if i != a {
+                    out.dl[c * m + i] -= pull[i] * pull[a];
+                }
+                c += 1;
             }
         }
     }
@@ -1585,6 +1645,85 @@ mod tests {
                 let v: f64 = (0..27).map(|c| constant[c] * buf.dl[c * 4 + s]).sum();
                 assert!(v.abs() < 1e-12, "a constant shape read {v} on string {s}");
             }
+        }
+    }
+
+    /// A frame's deflection against the exact readings of a frame deflected
+    /// by it: each anchor `a` moved along the anchors' plane normal by
+    /// `Σ_i C[a][i] (u_i · n)`, `C` symmetric, from the upper triangle the
+    /// coefficients hold; four anchors in one plane twisting (A and D
+    /// against B and C) is one such deflection.
+    #[test]
+    fn frame_deflection_basis_matches_the_readings_of_a_deflected_frame() {
+        let anchors = vec![
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(0.0, 900.0, 0.0),
+            Vector3::new(1200.0, 0.0, 0.0),
+            Vector3::new(1200.0, 900.0, 0.0),
+        ];
+        let n = plane_normal(&anchors);
+        assert!((n.z.abs() - 1.0).abs() < 1e-12, "{n:?}");
+        let points = [
+            Vector3::new(300.0, 100.0, -400.0),
+            Vector3::new(800.0, 350.0, -650.0),
+            Vector3::new(550.0, 700.0, -250.0),
+        ];
+        let (ctx, _) = shape_by_clock(anchors.clone(), &points);
+        let deflection = |knots: Vec<f64>, driver_index| Kind::DataDriven {
+            target: CorrectionTarget::FrameDeflection,
+            target_index: None,
+            driver: CorrectionDriver::Workspace,
+            driver_index,
+            knots,
+            period: None,
+            range: None,
+            axis: None,
+        };
+        let kind = deflection(vec![0.0, 1.0, 2.0, 3.0], None);
+        assert_eq!(kind.n_coef(), 10);
+        let coef: Vec<f64> = (0..10)
+            .map(|c| 1e-3 * ((c * 7 % 11) as f64 - 5.0))
+            .collect();
+        let checked = |kind: &Kind| {
+            EffectModel {
+                kind: kind.clone(),
+                coef: vec![0.0; kind.n_coef()],
+            }
+            .check(6, false)
+        };
+        assert!(checked(&kind).is_ok(), "{:?}", checked(&kind));
+        let mut cm = nalgebra::Matrix4::zeros();
+        let mut c = 0;
+        for a in 0..4 {
+            for i in a..4 {
+                cm[(a, i)] = coef[c];
+                cm[(i, a)] = coef[c];
+                c += 1;
+            }
+        }
+        let mut buf = Basis::default();
+        for (k, t) in points.iter().enumerate() {
+            ctx.basis(&kind, k, &mut buf);
+            let pull: Vec<f64> = anchors
+                .iter()
+                .map(|a| (t - a).normalize().dot(&n))
+                .collect();
+            for (s, a) in anchors.iter().enumerate() {
+                let along: f64 = (0..4).map(|i| cm[(s, i)] * pull[i]).sum();
+                let exact = (t - (a + n * along)).norm() - (t - a).norm();
+                let linear: f64 = (0..10).map(|c| coef[c] * buf.dl[c * 4 + s]).sum();
+                assert!(
+                    (exact - linear).abs() < 1e-3 * exact.abs().max(1e-6),
+                    "pose {k} string {s}: {exact} vs {linear}"
+                );
+            }
+        }
+        // Knots that are not the anchors' indices, or a coordinate: refused.
+        for bad in [
+            deflection(vec![0.0, 2.0, 3.0], None),
+            deflection(vec![0.0, 1.0, 2.0, 3.0], Some(0)),
+        ] {
+            assert!(checked(&bad).is_err(), "{bad:?}");
         }
     }
 

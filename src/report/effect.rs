@@ -97,6 +97,22 @@ pub enum CorrectionTarget {
     /// shearing its space during the session (a camera's mount or
     /// extrinsics creeping: its depth error grows with the depth).
     RigShape,
+    /// The string frame deflected out of its plane by the strings' pull
+    /// (mm per unit pull): a symmetric compliance `C` between the anchors,
+    /// row by row its upper triangle (`m (m + 1) / 2` coefficients for `m`
+    /// anchors), anchor `a` moving along the anchors' plane normal `n` by
+    /// `Σ_i C[a][i] (u_i · n)`, `u_i` string `i`'s direction from its
+    /// anchor to T (each string pulls its anchor towards T with about the
+    /// same tension, and a frame is softest out of its plane). String `a`
+    /// reads that move times `u_a · n` less. Its `knots` are the anchors'
+    /// indices, 0 to the number of strings less one; its driver is
+    /// `workspace` without a `driver_index` (where T is sets the pulls). A
+    /// frame that bends or twists under the strings, or stands on soft
+    /// legs, moves its anchors unequally and by where T is, which no
+    /// function of one coordinate and no shape in time
+    /// ([`RigShape`](Self::RigShape), affine in the anchors: it cannot
+    /// twist four anchors in one plane) follows.
+    FrameDeflection,
 }
 
 /// What drives a data-driven correction.
@@ -489,6 +505,11 @@ impl Kind {
                 knots,
                 ..
             } => 9 * knots.len(),
+            Kind::DataDriven {
+                target: CorrectionTarget::FrameDeflection,
+                knots,
+                ..
+            } => knots.len() * (knots.len() + 1) / 2,
             Kind::DataDriven { knots, .. } => knots.len(),
             _ => 1,
         }
@@ -605,6 +626,14 @@ fn check_correction(kind: &Kind) -> std::result::Result<(), String> {
         return Ok(());
     };
     check_knots(*driver, knots, *period, *range, axis.as_ref())?;
+    if *target == CorrectionTarget::FrameDeflection
+        && (period.is_some() || knots.iter().enumerate().any(|(a, &k)| k != a as f64))
+    {
+        return Err(
+                "a frame's deflection lists the anchors as its knots: 0, 1, ... up to the number of strings less one, and has no period"
+                    .into(),
+            );
+    }
     check_driver(*target, *target_index, *driver, *driver_index)?;
     check_target(*target, *target_index, *driver, *driver_index)
 }
@@ -649,6 +678,23 @@ fn check_knots(
     Ok(())
 }
 
+/// A frame's deflection by where T is: linear in all three of T's
+/// coordinates (no `driver_index`), of every anchor at once (no
+/// `target_index`).
+fn check_frame_deflection(
+    target_index: Option<usize>,
+    driver: CorrectionDriver,
+    driver_index: Option<usize>,
+) -> std::result::Result<(), String> {
+    if target_index.is_some() || driver != CorrectionDriver::Workspace || driver_index.is_some() {
+        return Err(
+                "a frame's deflection moves every anchor by the strings' pull, which where T is sets: its driver is workspace, with no driver_index and no target_index"
+                    .into(),
+            );
+    }
+    Ok(())
+}
+
 /// What each driver may correct, and which of its values it needs.
 fn check_driver(
     target: CorrectionTarget,
@@ -656,6 +702,9 @@ fn check_driver(
     driver: CorrectionDriver,
     driver_index: Option<usize>,
 ) -> std::result::Result<(), String> {
+    if target == CorrectionTarget::FrameDeflection {
+        return check_frame_deflection(target_index, driver, driver_index);
+    }
     if driver == CorrectionDriver::Workspace
         && driver_index.is_none_or(|d| d >= WORKSPACE_COORDINATES)
     {
@@ -818,6 +867,7 @@ fn check_target(
             | CorrectionTarget::ReadingScale
             | CorrectionTarget::ToolPoint
             | CorrectionTarget::RigShape
+            | CorrectionTarget::FrameDeflection
     ) && target_index.is_none()
     {
         return Err("a data-driven correction of a joint or string needs its target_index".into());

@@ -193,4 +193,13 @@ fn a_play_changing_during_the_session_is_placed_at_its_motion_and_corrected() {
         "{}",
         d.evidence
     );
+    // The play's size is read through the side each pose arrived from: the
+    // simulator's play is a few hundredths of a degree at the start.
+    assert!(
+        d.magnitude > 3.0 * d.sigma && d.magnitude > 1e-3 && d.magnitude < 0.2,
+        "{} +- {} {}",
+        d.magnitude,
+        d.sigma,
+        d.unit
+    );
 }

@@ -364,3 +364,50 @@ fn a_frame_swayed_by_its_strings_is_not_named_string_offsets_or_steps() {
         1.45,
     );
 }
+
+/// A four-corner string frame that twists under the strings' pull moves
+/// its corners along its normal by an amount set by where T is, which no
+/// catalogue effect and no function of one coordinate follows: nothing is
+/// named, the remainder is placed over the workspace, and the frame's
+/// deflection out of its plane (a compliance between the anchors, loaded
+/// by the strings' pulls along the normal) brings the held-out RMS near
+/// the twin's; compensation does not need it (the robot went where it
+/// went).
+#[test]
+fn a_frame_twisting_under_the_strings_is_its_deflection_by_their_pull() {
+    let (report, _, _) =
+        common::unnamed_near_the_twin("xcheck8_frame_twist_std4", |p| p.driver == "workspace", 1.3);
+    let deflection = report
+        .findings
+        .iter()
+        .find(|f| {
+            f.effect_model().is_some_and(|m| {
+                matches!(
+                    m.kind,
+                    Kind::DataDriven {
+                        target: CorrectionTarget::FrameDeflection,
+                        driver: CorrectionDriver::Workspace,
+                        ..
+                    }
+                )
+            })
+        })
+        .unwrap_or_else(|| panic!("no frame deflection: {:#?}", report.findings));
+    assert!(
+        deflection.test_rms_after_mm < 0.5 * deflection.test_rms_before_mm,
+        "{} -> {}",
+        deflection.test_rms_before_mm,
+        deflection.test_rms_after_mm
+    );
+    assert!(
+        deflection
+            .evidence
+            .contains("compensation does not need it")
+            && deflection
+                .explanation
+                .contains("deflection out of its plane"),
+        "{}\n{}",
+        deflection.explanation,
+        deflection.evidence
+    );
+}

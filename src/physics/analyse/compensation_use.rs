@@ -31,6 +31,7 @@ pub(super) fn words(kind: &Kind, point_data: bool) -> String {
         "clock"
     };
     match (*target, *driver, *target_index, *driver_index) {
+        (T::FrameDeflection, ..) => "compensation does not need it: it corrects what the strings read, not where the robot went; the string frame deflects by where T draws the strings (its anchors move unequally with T's position, as a frame bending or twisting under the strings' pull does): stiffen or brace the frame (diagonals, a stiffer corner or post), or lower the strings' spring tension".into(),
         (t, D::Workspace, ..) if t != T::StringReading => in_workspace(kind, point_data),
         (t, D::JointAngle, ..) if t != T::StringReading => by_joint_angles(kind),
         (T::LinkLength, d, i, _) => format!(

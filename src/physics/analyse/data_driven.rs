@@ -404,7 +404,14 @@ fn families(inputs: &Inputs, place: &Place, jumps_s: &[f64]) -> Vec<Vec<Kind>> {
         ],
         ("temperature", _, _) => slots.at_temperature(),
         ("workspace", None, None) => slots.over_workspace(),
-        ("workspace", _, Some(s)) if s <= m => slots.by_string_direction(s - 1),
+        // Or the frame deflecting by where T draws the strings (one
+        // string's reading by where T is, with four strings, moves the
+        // located point too).
+        ("workspace", _, Some(s)) if s <= m => {
+            let mut out = slots.by_string_direction(s - 1);
+            out.extend(slots.frame_deflection());
+            out
+        }
         // One string's last change of length: its reading off by the way
         // it last moved (friction in its drum, stretch of its cable).
         ("motion", _, Some(s)) if s <= m => vec![slots.signed(
@@ -577,6 +584,27 @@ impl Slots<'_> {
         })
     }
 
+    /// The string frame deflected out of its plane by the strings' pull
+    /// (a frame bending or twisting under the strings, or on soft legs):
+    /// a symmetric compliance between the anchors. Four strings or more:
+    /// with three, any reading error is a displacement of the located
+    /// point.
+    fn frame_deflection(&self) -> Option<Vec<Kind>> {
+        let m = self.ctx.anchors.len();
+        (m >= 4).then(|| {
+            vec![Kind::DataDriven {
+                target: CorrectionTarget::FrameDeflection,
+                target_index: None,
+                driver: CorrectionDriver::Workspace,
+                driver_index: None,
+                knots: (0..m).map(|a| a as f64).collect(),
+                period: None,
+                range: None,
+                axis: None,
+            }]
+        })
+    }
+
     /// Over the workspace: T's displacement as a function of one
     /// coordinate of where T is, Cartesian or, for an instrument at the
     /// rig's origin, its own angles and distance.
@@ -612,6 +640,8 @@ impl Slots<'_> {
             // along its drum as it pays out).
             out.push(to_aim(s));
         }
+        // Or the string frame deflecting by where T draws the strings.
+        out.extend(self.frame_deflection());
         // With point data the rig's origin is the instrument's: its angle
         // and range errors as functions of its own angles and distance, in
         // the directions that turn with them.

@@ -102,11 +102,7 @@ fn size_of<'a>(
         Kind::DataDriven { target, .. } => {
             let kind = e.kind.clone();
             let train = obs.train.clone();
-            let scale = match target {
-                CorrectionTarget::JointAngle | CorrectionTarget::JointPlay => deg,
-                CorrectionTarget::InstrumentScale | CorrectionTarget::ReadingScale => 1e6,
-                _ => 1.0,
-            };
+            let scale = data_driven_scale(*target);
             Box::new(move |c: &[f64]| data_driven_spread(ctx, &kind, c, &train) * scale)
         }
     }
@@ -125,14 +121,7 @@ fn data_driven_size(
     fit: &FitInfo,
 ) -> (f64, f64) {
     let scale = match kind {
-        Kind::DataDriven {
-            target: CorrectionTarget::JointAngle,
-            ..
-        } => 180.0 / std::f64::consts::PI,
-        Kind::DataDriven {
-            target: CorrectionTarget::InstrumentScale | CorrectionTarget::ReadingScale,
-            ..
-        } => 1e6,
+        Kind::DataDriven { target, .. } => data_driven_scale(*target),
         _ => 1.0,
     };
     let v = data_driven_spread(ctx, kind, coef, poses);
@@ -143,7 +132,7 @@ fn data_driven_size(
     let mut buf = effects::Basis::default();
     let width = match kind {
         Kind::DataDriven {
-            target: CorrectionTarget::RigShape,
+            target: CorrectionTarget::RigShape | CorrectionTarget::FrameDeflection,
             ..
         } if !ctx.anchors.is_empty() => ctx.anchors.len(),
         _ => 3,
@@ -188,6 +177,16 @@ fn data_driven_size(
     (v * scale, var.max(0.0).sqrt() * scale)
 }
 
+/// What a data-driven correction's size is reported in per internal unit:
+/// degrees for a joint's angle or play, ppm for a scale, mm otherwise.
+fn data_driven_scale(target: CorrectionTarget) -> f64 {
+    match target {
+        CorrectionTarget::JointAngle | CorrectionTarget::JointPlay => 180.0 / std::f64::consts::PI,
+        CorrectionTarget::InstrumentScale | CorrectionTarget::ReadingScale => 1e6,
+        _ => 1.0,
+    }
+}
+
 /// The nonzero entries `(row, coefficient, weight)` of a data-driven
 /// correction's basis at pose `i`: row 0 for a joint's angle, one
 /// string's reading or a scale's knot weight; each string's row for the
@@ -213,7 +212,10 @@ fn basis_entries(
     let at = target_index.unwrap_or(0);
     for k in 0..n_coef {
         match target {
-            CorrectionTarget::JointAngle => nz.push((0, k, buf.dq[k * n + at])),
+            // The play's basis already carries the side the joint arrived from.
+            CorrectionTarget::JointAngle | CorrectionTarget::JointPlay => {
+                nz.push((0, k, buf.dq[k * n + at]))
+            }
             CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale => {
                 nz.push((0, k, buf.dl[k * m + at]))
             }
@@ -228,7 +230,7 @@ fn basis_entries(
                     .sum();
                 nz.push((0, k, w));
             }
-            CorrectionTarget::RigShape if m > 0 => {
+            CorrectionTarget::RigShape | CorrectionTarget::FrameDeflection if m > 0 => {
                 nz.extend((0..m).map(|s| (s, k, buf.dl[k * m + s])))
             }
             _ => nz.extend((0..3).map(|r| (r, k, buf.dp[k * 3 + r]))),
@@ -256,7 +258,7 @@ fn data_driven_spread(ctx: &Context, kind: &Kind, coef: &[f64], poses: &[usize])
             };
             match kind {
                 Kind::DataDriven {
-                    target: CorrectionTarget::JointAngle,
+                    target: CorrectionTarget::JointAngle | CorrectionTarget::JointPlay,
                     target_index,
                     ..
                 } => vec![sum(&buf.dq, n, target_index.unwrap_or(0))],
@@ -267,7 +269,7 @@ fn data_driven_spread(ctx: &Context, kind: &Kind, coef: &[f64], poses: &[usize])
                 } => vec![sum(&buf.dl, m, target_index.unwrap_or(0))],
                 // Every string's reading.
                 Kind::DataDriven {
-                    target: CorrectionTarget::RigShape,
+                    target: CorrectionTarget::RigShape | CorrectionTarget::FrameDeflection,
                     ..
                 } if m > 0 => (0..m).map(|s| sum(&buf.dl, m, s)).collect(),
                 Kind::DataDriven {
@@ -351,7 +353,7 @@ fn fixed_unit(kind: &Kind) -> &'static str {
         Kind::RigStep { .. } => "mm (RMS displacement of T after the move)",
         Kind::RigDrift => "mm (RMS displacement of T over the session)",
         Kind::DataDriven {
-            target: CorrectionTarget::JointAngle,
+            target: CorrectionTarget::JointAngle | CorrectionTarget::JointPlay,
             ..
         } => "deg (RMS of the correction over the train poses)",
         Kind::DataDriven {
@@ -371,6 +373,10 @@ fn fixed_unit(kind: &Kind) -> &'static str {
             target: CorrectionTarget::ReadingScale,
             ..
         } => "ppm (RMS change of every string's scale over the train poses)",
+        Kind::DataDriven {
+            target: CorrectionTarget::RigShape | CorrectionTarget::FrameDeflection,
+            ..
+        } => "mm (RMS change of the strings' readings over the train poses)",
         Kind::DataDriven { .. } => "mm (RMS change of the reading over the train poses)",
     }
 }
