@@ -43,3 +43,38 @@ fn a_lagging_string_found_by_ts_move_is_placed_at_the_string() {
     );
     assert!(d.evidence.contains("compensation"), "{}", d.evidence);
 }
+
+/// What one correction leaves is located again and corrected again: a
+/// string whose drum winds loosely after a retraction reads long by an
+/// amount set by its last change and its length. The first correction (by
+/// its last change) takes part; the remainder is located once more and a
+/// second correction of the same string's reading, by its length, takes
+/// much of the rest, nothing named.
+#[test]
+fn what_a_first_correction_leaves_is_located_and_corrected_again() {
+    let (report, _, _) = common::unnamed_near_the_twin(
+        "xcheck8_string_retract_slack_std4",
+        |p| p.driver == "motion" && p.sensor == Some(1),
+        1.8,
+    );
+    let corrections: Vec<_> = report
+        .findings
+        .iter()
+        .filter(|f| f.effect == "data_driven")
+        .collect();
+    let unexplained = report
+        .findings
+        .iter()
+        .filter(|f| f.effect == "unexplained")
+        .count();
+    assert!(
+        corrections.len() == 2 && unexplained == 2,
+        "{:#?}",
+        report.findings
+    );
+    let second = corrections[1];
+    assert!(
+        second.sensor == Some(1) && second.test_rms_after_mm < 0.8 * second.test_rms_before_mm,
+        "{second:#?}"
+    );
+}

@@ -172,8 +172,20 @@ fn drop_backlash_beside_motion(inputs: &Inputs, state: &mut State) {
 /// finding), and model it there without a name where that predicts the
 /// held-out poses better (then the named terms it makes redundant are
 /// dropped, and every finding restated from the refit). True when a
-/// data-driven correction was kept.
+/// data-driven correction was kept. Where one was, what it leaves is
+/// located and modelled once more: a correction in one driver (a string's
+/// last change) can leave the part that follows another (its length),
+/// which the first round's places did not name.
 fn locate_and_correct(inputs: &Inputs, state: &mut State) -> bool {
+    let corrected = locate_and_correct_once(inputs, state);
+    if corrected {
+        locate_and_correct_once(inputs, state);
+    }
+    corrected
+}
+
+/// One round of [`locate_and_correct`]: locate, report, correct.
+fn locate_and_correct_once(inputs: &Inputs, state: &mut State) -> bool {
     let Some(f) = unexplained(
         inputs.obs,
         &inputs.ctx,
