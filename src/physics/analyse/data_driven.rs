@@ -1240,7 +1240,7 @@ pub(super) fn try_place(
         magnitude: mag,
         sigma: sig,
         unit,
-        explanation: e.kind.explanation(ctx),
+        explanation: explanation(ctx, &eff_new[..k], &e.kind),
         evidence,
         test_rms_before_mm: before.test_rms,
         test_rms_after_mm: held.test_after,
@@ -1251,6 +1251,28 @@ pub(super) fn try_place(
     state.accepted = eff_new;
     state.final_fit = Some(fit);
     true
+}
+
+/// What a kept correction is, in words; one in a slot (target and
+/// driver) an earlier round corrected says that the two are one function,
+/// their sum (the later round, on what the first left, chose its own
+/// knots).
+fn explanation(
+    ctx: &crate::physics::effects::Context,
+    earlier: &[EffectModel],
+    kind: &Kind,
+) -> String {
+    let words = kind.explanation(ctx);
+    if earlier
+        .iter()
+        .any(|e| e.kind.is_data_driven() && super::candidates::same_slot(&e.kind, kind))
+    {
+        format!(
+            "{words}; it adds to an earlier correction of the same target by the same driver: together they are one function of the driver, their sum"
+        )
+    } else {
+        words
+    }
 }
 
 /// The whole model (`state`'s geometry and effects) refit by one
