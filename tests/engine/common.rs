@@ -219,6 +219,28 @@ pub fn correction_slot(
     (target, target_index, driver, driver_index)
 }
 
+/// The finding of `report`'s data-driven correction of `target` by
+/// `driver` (the first such), or a panic listing the findings.
+pub fn correction_finding(
+    report: &drawcal::report::Report,
+    target: drawcal::physics::effects::CorrectionTarget,
+    driver: drawcal::physics::effects::CorrectionDriver,
+) -> &drawcal::report::Finding {
+    report
+        .findings
+        .iter()
+        .find(|f| {
+            f.effect_model().is_some_and(|m| {
+                matches!(
+                    m.kind,
+                    drawcal::physics::Kind::DataDriven { target: t, driver: d, .. }
+                        if t == target && d == driver
+                )
+            })
+        })
+        .unwrap_or_else(|| panic!("no {target:?} by {driver:?}: {:#?}", report.findings))
+}
+
 /// The twin (the same session without the error) finds nothing, and
 /// `report`'s held-out RMS comes within `factor` times the twin's.
 pub fn near_the_twin(

@@ -162,22 +162,11 @@ fn a_frame_tilting_with_the_temperature_is_a_rig_shape_correction() {
         |p| p.driver == "time" || p.driver == "temperature",
         1.3,
     );
-    let shape = report
-        .findings
-        .iter()
-        .find(|f| {
-            f.effect_model().is_some_and(|m| {
-                matches!(
-                    m.kind,
-                    drawcal::physics::Kind::DataDriven {
-                        target: CorrectionTarget::RigShape,
-                        driver: CorrectionDriver::Temperature,
-                        ..
-                    }
-                )
-            })
-        })
-        .unwrap_or_else(|| panic!("no frame shape by the temperature: {:#?}", report.findings));
+    let shape = common::correction_finding(
+        &report,
+        CorrectionTarget::RigShape,
+        CorrectionDriver::Temperature,
+    );
     assert!(
         shape
             .evidence

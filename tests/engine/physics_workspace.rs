@@ -377,22 +377,11 @@ fn a_frame_swayed_by_its_strings_is_not_named_string_offsets_or_steps() {
 fn a_frame_twisting_under_the_strings_is_its_deflection_by_their_pull() {
     let (report, _, _) =
         common::unnamed_near_the_twin("xcheck8_frame_twist_std4", |p| p.driver == "workspace", 1.3);
-    let deflection = report
-        .findings
-        .iter()
-        .find(|f| {
-            f.effect_model().is_some_and(|m| {
-                matches!(
-                    m.kind,
-                    Kind::DataDriven {
-                        target: CorrectionTarget::FrameDeflection,
-                        driver: CorrectionDriver::Workspace,
-                        ..
-                    }
-                )
-            })
-        })
-        .unwrap_or_else(|| panic!("no frame deflection: {:#?}", report.findings));
+    let deflection = common::correction_finding(
+        &report,
+        CorrectionTarget::FrameDeflection,
+        CorrectionDriver::Workspace,
+    );
     assert!(
         deflection.test_rms_after_mm < 0.5 * deflection.test_rms_before_mm,
         "{} -> {}",
