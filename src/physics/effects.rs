@@ -1175,7 +1175,7 @@ impl Context {
     /// `C (u_i · n)` and, off the diagonal, anchor `i` by `C (u_a · n)`;
     /// string `s` reads its anchor's move times `u_s · n` less. Nothing
     /// when the rig has not `k` anchors (a report read against another
-    /// rig).
+    /// rig) or fewer than three (no plane).
     fn frame_deflection_basis(&self, k: usize, pc: &PoseContext, out: &mut Basis) {
         let m = self.anchors.len();
         if m != k || m < 3 {

@@ -309,7 +309,9 @@ fn compensation(r: &Report) -> Option<(Level, String)> {
                 driver.usable_for_compensation()
                     && !matches!(
                         target,
-                        CorrectionTarget::StringReading | CorrectionTarget::StringZeroScale
+                        CorrectionTarget::StringReading
+                            | CorrectionTarget::StringZeroScale
+                            | CorrectionTarget::FrameDeflection
                     )
             }
             k => k.robot_side() && k.change_time_s().is_none() && *k != Kind::RigDrift,

@@ -1220,6 +1220,11 @@ pub(super) fn try_place(
             crate::physics::effects::correction_driver_amount(*driver, driver_index, p),
             periodogram::MAX_CYCLES
         ),
+        // Its knots are the anchors: only the family was chosen.
+        Kind::DataDriven {
+            target: CorrectionTarget::FrameDeflection,
+            ..
+        } => format!("{} coefficients", e.kind.n_coef()),
         _ => format!("{} knots", knots.len()),
     };
     let evidence = format!(

@@ -195,14 +195,20 @@ const ROUNDS: usize = 2;
 
 /// One round of [`locate_and_correct`]: locate, report, correct.
 fn locate_and_correct_once(inputs: &Inputs, state: &mut State) -> bool {
-    let Some(f) = unexplained(
+    let located = unexplained(
         inputs.obs,
         &inputs.ctx,
         &state.p,
         &state.accepted,
         inputs.free.len(),
-    )
-    .or_else(|| wrong_way_place(inputs, state)) else {
+    );
+    let Some(f) = located.or_else(|| {
+        // A wrong-way compliance's joint is said once: a later round
+        // would repeat it with the same z.
+        let f = wrong_way_place(inputs, state)?;
+        state.wrong_way.remove(0);
+        Some(f)
+    }) else {
         return false;
     };
     let places = f

@@ -190,7 +190,7 @@ fn data_driven_scale(target: CorrectionTarget) -> f64 {
 /// The nonzero entries `(row, coefficient, weight)` of a data-driven
 /// correction's basis at pose `i`: row 0 for a joint's angle, one
 /// string's reading or a scale's knot weight; each string's row for the
-/// frame's shape; x, y, z of T otherwise.
+/// frame's shape or deflection; x, y, z of T otherwise.
 fn basis_entries(
     ctx: &Context,
     kind: &Kind,
@@ -376,7 +376,7 @@ fn fixed_unit(kind: &Kind) -> &'static str {
         Kind::DataDriven {
             target: CorrectionTarget::RigShape | CorrectionTarget::FrameDeflection,
             ..
-        } => "mm (RMS change of the strings' readings over the train poses)",
+        } => "mm (RMS over the train poses of the strings' reading changes, root-sum-square over the strings)",
         Kind::DataDriven { .. } => "mm (RMS change of the reading over the train poses)",
     }
 }
