@@ -376,7 +376,9 @@ fn fixed_unit(kind: &Kind) -> &'static str {
         Kind::DataDriven {
             target: CorrectionTarget::RigShape | CorrectionTarget::FrameDeflection,
             ..
-        } => "mm (RMS over the train poses of the strings' reading changes, root-sum-square over the strings)",
+        } => {
+            "mm (RMS over the train poses of the strings' reading changes, root-sum-square over the strings)"
+        }
         Kind::DataDriven { .. } => "mm (RMS change of the reading over the train poses)",
     }
 }
