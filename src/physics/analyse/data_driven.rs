@@ -588,10 +588,12 @@ impl Slots<'_> {
     /// (a frame bending or twisting under the strings, or on soft legs):
     /// a symmetric compliance between the anchors. Four strings or more:
     /// with three, any reading error is a displacement of the located
-    /// point.
+    /// point. At most nine strings: beyond, its coefficients pass the
+    /// alias check's bound, which would drop a row of them as if it were
+    /// a constant ([`own_columns`]).
     fn frame_deflection(&self) -> Option<Vec<Kind>> {
         let m = self.ctx.anchors.len();
-        (m >= 4).then(|| {
+        (m >= 4 && m * (m + 1) / 2 <= ALIAS_CHECK_MAX_COLUMNS).then(|| {
             vec![Kind::DataDriven {
                 target: CorrectionTarget::FrameDeflection,
                 target_index: None,
