@@ -1594,6 +1594,20 @@ mod tests {
         (ctx, kind)
     }
 
+    /// The shape `D` of [`shape_by_clock`]'s three knots at pose `i`, which
+    /// sits on knot `i`: centred, its weights are 1 - 1/3 there and -1/3 at
+    /// the other two knots.
+    fn centred_shape(coef: &[f64], i: usize) -> nalgebra::Matrix3<f64> {
+        nalgebra::Matrix3::from_fn(|r, c| {
+            (0..3)
+                .map(|k| {
+                    let w = if k == i { 2.0 / 3.0 } else { -1.0 / 3.0 };
+                    w * coef[9 * k + 3 * r + c]
+                })
+                .sum::<f64>()
+        })
+    }
+
     /// A correction of the frame's shape against the exact readings of a
     /// frame deformed by it: each anchor moved by `D (A - centroid)`, `D`
     /// the knots' matrices weighted by the centred hat weights; and a
@@ -1621,16 +1635,7 @@ mod tests {
         let mut buf = Basis::default();
         for (i, t) in points.iter().enumerate() {
             ctx.basis(&kind, i, &mut buf);
-            // Pose i sits on knot i: centred, its weights are 1 - 1/3 there
-            // and -1/3 at the other two knots.
-            let d = nalgebra::Matrix3::from_fn(|r, c| {
-                (0..3)
-                    .map(|k| {
-                        let w = if k == i { 2.0 / 3.0 } else { -1.0 / 3.0 };
-                        w * coef[9 * k + 3 * r + c]
-                    })
-                    .sum::<f64>()
-            });
+            let d = centred_shape(&coef, i);
             for (s, a) in anchors.iter().enumerate() {
                 let moved = a + d * (a - centroid);
                 let exact = (t - moved).norm() - (t - a).norm();
@@ -1744,14 +1749,7 @@ mod tests {
         let mut buf = Basis::default();
         for (i, t) in points.iter().enumerate() {
             ctx.basis(&kind, i, &mut buf);
-            let d = nalgebra::Matrix3::from_fn(|r, c| {
-                (0..3)
-                    .map(|k| {
-                        let w = if k == i { 2.0 / 3.0 } else { -1.0 / 3.0 };
-                        w * coef[9 * k + 3 * r + c]
-                    })
-                    .sum::<f64>()
-            });
+            let d = centred_shape(&coef, i);
             let want = d * t;
             for r in 0..3 {
                 let got: f64 = (0..27).map(|c| coef[c] * buf.dp[c * 3 + r]).sum();

@@ -425,6 +425,21 @@ impl Kind {
         )
     }
 
+    /// The string frame's deflection ([`CorrectionTarget::FrameDeflection`])
+    /// of a rig of `n_anchors` anchors, every one of them in the frame.
+    pub fn frame_deflection(n_anchors: usize) -> Kind {
+        Kind::DataDriven {
+            target: CorrectionTarget::FrameDeflection,
+            target_index: None,
+            driver: CorrectionDriver::Workspace,
+            driver_index: None,
+            knots: (0..n_anchors).map(|a| a as f64).collect(),
+            period: None,
+            range: None,
+            axis: None,
+        }
+    }
+
     /// True for a data-driven correction (not a named physics).
     pub fn is_data_driven(&self) -> bool {
         matches!(self, Kind::DataDriven { .. })

@@ -5,7 +5,7 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use super::effect::{CorrectionTarget, Kind};
+use super::effect::Kind;
 use super::{FixedReason, Report};
 
 /// Held-out RMS up to this multiple of what the noise allows is as good as
@@ -305,14 +305,10 @@ fn compensation(r: &Report) -> Option<(Level, String)> {
             _ => None,
         };
         let used = match &model.kind {
-            Kind::DataDriven { target, driver, .. } => {
-                driver.usable_for_compensation()
-                    && !matches!(
-                        target,
-                        CorrectionTarget::StringReading
-                            | CorrectionTarget::StringZeroScale
-                            | CorrectionTarget::FrameDeflection
-                    )
+            // A correction of what T is (not of what the strings read) by
+            // a driver a future target carries.
+            k @ Kind::DataDriven { driver, .. } => {
+                driver.usable_for_compensation() && k.robot_side()
             }
             k => k.robot_side() && k.change_time_s().is_none() && *k != Kind::RigDrift,
         };

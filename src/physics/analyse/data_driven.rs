@@ -593,18 +593,8 @@ impl Slots<'_> {
     /// a constant ([`own_columns`]).
     fn frame_deflection(&self) -> Option<Vec<Kind>> {
         let m = self.ctx.anchors.len();
-        (m >= 4 && m * (m + 1) / 2 <= ALIAS_CHECK_MAX_COLUMNS).then(|| {
-            vec![Kind::DataDriven {
-                target: CorrectionTarget::FrameDeflection,
-                target_index: None,
-                driver: CorrectionDriver::Workspace,
-                driver_index: None,
-                knots: (0..m).map(|a| a as f64).collect(),
-                period: None,
-                range: None,
-                axis: None,
-            }]
-        })
+        (m >= 4 && m * (m + 1) / 2 <= ALIAS_CHECK_MAX_COLUMNS)
+            .then(|| vec![Kind::frame_deflection(m)])
     }
 
     /// Over the workspace: T's displacement as a function of one

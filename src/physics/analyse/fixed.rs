@@ -457,16 +457,7 @@ mod tests {
             // The frame deflected by the strings' pull (its knots are the
             // anchors).
             if m >= 3 {
-                kinds.push(Kind::DataDriven {
-                    target: CorrectionTarget::FrameDeflection,
-                    target_index: None,
-                    driver: CorrectionDriver::Workspace,
-                    driver_index: None,
-                    knots: (0..m).map(|a| a as f64).collect(),
-                    period: None,
-                    range: None,
-                    axis: None,
-                });
+                kinds.push(Kind::frame_deflection(m));
             }
             // By its last change of length, jumping at zero.
             kinds.push(Kind::DataDriven {
