@@ -1033,7 +1033,26 @@ impl Context {
             self.frame_deflection_basis(knots.len(), pc, out);
             return;
         }
-        for (k, w) in hat_weights(knots, *period, x) {
+        let weights = hat_weights(knots, *period, x);
+        let per_knot = kind.n_coef() / knots.len().max(1);
+        out.live.clear();
+        // At most two knots, ascending (a periodic scan wraps the last to
+        // the first), each once.
+        let [(k0, w0), (k1, w1)] = weights;
+        let (lo, hi) = (k0.min(k1), k0.max(k1));
+        let (w_lo, w_hi) = if k0 <= k1 { (w0, w1) } else { (w1, w0) };
+        if lo == hi {
+            if w0 != 0.0 || w1 != 0.0 {
+                out.live.extend(lo * per_knot..(lo + 1) * per_knot);
+            }
+        } else {
+            for (k, w) in [(lo, w_lo), (hi, w_hi)] {
+                if w != 0.0 {
+                    out.live.extend(k * per_knot..(k + 1) * per_knot);
+                }
+            }
+        }
+        for (k, w) in weights {
             if w == 0.0 {
                 continue;
             }
@@ -1391,10 +1410,18 @@ pub struct Basis {
     pub dl: Vec<f64>,
     /// `n_coef × 3`, row-major: displacement of T relative to the rig (mm).
     pub dp: Vec<f64>,
+    /// The coefficients that may move anything at this pose, ascending:
+    /// all of them, except that a data-driven correction's knots whose hat
+    /// weight is zero here are left out. The rest of the rows above are
+    /// zero, so a sum over the basis may visit these alone (a correction of
+    /// 32 knots has at most two live at a pose).
+    pub live: Vec<usize>,
 }
 
 impl Basis {
     fn reset(&mut self, nc: usize, n: usize, m: usize) {
+        self.live.clear();
+        self.live.extend(0..nc);
         self.dq.clear();
         self.dq.resize(nc * n, 0.0);
         self.thermal.clear();
@@ -1433,7 +1460,8 @@ impl Delta {
     /// Add one effect of coefficients `coef` and basis `buf` (`n` joints,
     /// `m` strings).
     fn add(&mut self, coef: &[f64], buf: &Basis, n: usize, m: usize) {
-        for (c, &v) in coef.iter().enumerate() {
+        for &c in &buf.live {
+            let v = coef[c];
             for j in 0..n {
                 self.dq[j] += v * buf.dq[c * n + j];
             }

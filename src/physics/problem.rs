@@ -154,6 +154,9 @@ impl<'a> EffectProblem<'a> {
         let mut dl = vec![0.0; nc * self.data.n_strings.max(1)];
         let mut frame = PoseFrame::default();
         let mut bases = vec![Basis::default(); effects.len()];
+        // The coefficients live at the current pose (see `Basis::live`);
+        // every other one's `dt`, `dl` and row entries stay zero.
+        let mut live: Vec<usize> = Vec::new();
         for (pos, &i) in self.poses.iter().enumerate() {
             let pose = &self.data.poses[i];
             // Each effect's basis once: the delta and the columns both
@@ -179,9 +182,19 @@ impl<'a> EffectProblem<'a> {
                 Vector3::zeros()
             };
             let m = self.data.n_strings;
+            let nf = self.free.len();
+            if DERIV {
+                for &c in &live {
+                    dt[c] = Vector3::zeros();
+                    dl[c * m..(c + 1) * m].fill(0.0);
+                    row[nf + c] = 0.0;
+                }
+                live.clear();
+            }
             let mut c0 = 0;
             for (e, buf) in effects.iter().zip(&bases).filter(|_| DERIV) {
-                for c in 0..e.kind.n_coef() {
+                for &c in &buf.live {
+                    live.push(c0 + c);
                     let mut v = dlen * buf.thermal[c];
                     for j in 0..n {
                         let b = buf.dq[c * n + j];
@@ -205,7 +218,6 @@ impl<'a> EffectProblem<'a> {
                 frame.dlen = dlen;
                 pose_f(pos, &frame);
             }
-            let nf = self.free.len();
             match &pose.measurement {
                 Measurement::Strings(readings) => {
                     let r = p[l.r()];
@@ -229,7 +241,7 @@ impl<'a> EffectProblem<'a> {
                                 -1.0
                             };
                         }
-                        for c in (0..nc).filter(|_| DERIV) {
+                        for &c in live.iter().filter(|_| DERIV) {
                             row[nf + c] = u.dot(&dt[c]) + dl[c * m + k];
                         }
                         f(pos, res, &row, RowDir::String { u, k });
@@ -241,7 +253,7 @@ impl<'a> EffectProblem<'a> {
                         for (col, &fi) in self.free.iter().enumerate().filter(|_| DERIV) {
                             row[col] = if fi < g { jac.d_params[fi][comp] } else { 0.0 };
                         }
-                        for c in (0..nc).filter(|_| DERIV) {
+                        for &c in live.iter().filter(|_| DERIV) {
                             row[nf + c] = dt[c][comp];
                         }
                         f(pos, res, &row, RowDir::Point { comp });

@@ -40,11 +40,16 @@ pub(super) struct FixedBase {
     /// Per train pose (position in `obs.train`): its frame.
     frames: Vec<PoseFrame>,
     /// Per row: the train position of its pose, its residual, what it
-    /// measures and its `n_base` derivatives.
+    /// measures and its `n_base` derivatives, the nonzero ones only (a
+    /// data-driven correction's row is nonzero at two knots of dozens):
+    /// row `i`'s are `row_cols[row_start[i]..row_start[i + 1]]` with their
+    /// values in `row_vals`.
     row_pos: Vec<usize>,
     r: Vec<f64>,
     dirs: Vec<RowDir>,
-    rows: Vec<f64>,
+    row_start: Vec<usize>,
+    row_cols: Vec<usize>,
+    row_vals: Vec<f64>,
 }
 
 impl FixedBase {
@@ -82,7 +87,10 @@ impl FixedBase {
         let mut row_pos = Vec::with_capacity(n_rows);
         let mut r = Vec::with_capacity(n_rows);
         let mut dirs = Vec::with_capacity(n_rows);
-        let mut rows = Vec::with_capacity(n_rows * n_base);
+        let mut row_start = Vec::with_capacity(n_rows + 1);
+        let mut row_cols = Vec::new();
+        let mut row_vals = Vec::new();
+        row_start.push(0);
         problem.rows_framed(
             &x0,
             |pos, frame| frames[pos].clone_from(frame),
@@ -90,7 +98,11 @@ impl FixedBase {
                 row_pos.push(pos);
                 r.push(res);
                 dirs.push(dir);
-                rows.extend_from_slice(row);
+                for (c, &v) in row.iter().enumerate().filter(|(_, v)| **v != 0.0) {
+                    row_cols.push(c);
+                    row_vals.push(v);
+                }
+                row_start.push(row_cols.len());
             },
         );
         FixedBase {
@@ -103,8 +115,16 @@ impl FixedBase {
             row_pos,
             r,
             dirs,
-            rows,
+            row_start,
+            row_cols,
+            row_vals,
         }
+    }
+
+    /// Row `row`'s nonzero base derivatives: their columns and values.
+    fn base_row(&self, row: usize) -> (&[usize], &[f64]) {
+        let span = self.row_start[row]..self.row_start[row + 1];
+        (&self.row_cols[span.clone()], &self.row_vals[span])
     }
 
     /// The normal equations, by fold, of the model so far with `kind`
@@ -260,7 +280,9 @@ impl FixedBase {
                 live.clear();
                 let frame = &self.frames[pos];
                 live.extend(
-                    (0..k)
+                    buf.live
+                        .iter()
+                        .copied()
                         .filter(|&c| touches(&buf, c, frame.d_theta.len(), self.m))
                         .map(|c| (c, frame.d_point(&buf, c))),
                 );
@@ -277,12 +299,13 @@ impl FixedBase {
             let f = fold_of[pos];
             let (cross, own, g) = (&mut cross[f], &mut own[f], &mut g[f]);
             let r = self.r[row];
-            // Column by column over the contiguous base row (a zero there
-            // adds a zero product: the same sums).
-            let base_row = &self.rows[row * nb..(row + 1) * nb];
+            // Column by column over the base row's nonzeros (a zero would
+            // add a zero product: the same sums).
+            let (idx, vals) = self.base_row(row);
             for &(c, v) in &col {
-                for (x, &ra) in cross[c * nb..(c + 1) * nb].iter_mut().zip(base_row) {
-                    *x += ra * v;
+                let cross = &mut cross[c * nb..(c + 1) * nb];
+                for (&i, &ra) in idx.iter().zip(vals) {
+                    cross[i] += ra * v;
                 }
             }
             for (i, &(c, v)) in col.iter().enumerate() {
@@ -659,7 +682,11 @@ mod tests {
                     }
                     for col in 0..nb {
                         let jb: f64 = (0..n_rows)
-                            .map(|i| fixed.rows[i * nb + col] * fd[c][i])
+                            .map(|i| {
+                                let (idx, vals) = fixed.base_row(i);
+                                idx.iter().position(|&j| j == col).map_or(0.0, |p| vals[p])
+                                    * fd[c][i]
+                            })
                             .sum();
                         let tol = 1e-5 * (scale * a[(col, col)]).sqrt().max(1e-300);
                         assert!((a[(col, nb + c)] - jb).abs() <= tol, "{kind:?} cross {col}");
