@@ -1033,9 +1033,19 @@ fn with_jumps(knots: &[f64], values: &[f64], at: &[f64]) -> Option<Vec<f64>> {
 /// `base`: those not aliased with it; for a correction of many columns,
 /// all but its first knot's (see [`ALIAS_CHECK_MAX_COLUMNS`]).
 fn own_columns(a: &DMatrix<f64>, base: &[usize], kind: &Kind, at: usize) -> Vec<usize> {
+    own_columns_by(kind, at, |own| unaliased(a, base, own))
+}
+
+/// [`own_columns`] with the alias check `unaliased` (of the columns
+/// given, in order: those kept).
+fn own_columns_by(
+    kind: &Kind,
+    at: usize,
+    unaliased: impl FnOnce(&[usize]) -> Vec<usize>,
+) -> Vec<usize> {
     let own: Vec<usize> = (at..at + kind.n_coef()).collect();
     if own.len() <= ALIAS_CHECK_MAX_COLUMNS {
-        return unaliased(a, base, &own);
+        return unaliased(&own);
     }
     let per_knot = match kind {
         Kind::DataDriven { knots, .. } => kind.n_coef() / knots.len().max(1),
@@ -1100,6 +1110,23 @@ fn linearise<'a>(
     })
 }
 
+/// The cross-validated SSE of [`linearise`] (`None` where it gives
+/// none), by block elimination against the base factored once
+/// ([`FixedBase::factors`]) rather than from the candidate's whole normal
+/// equations: the score every candidate of a place gets.
+fn cross_validated(inputs: &Inputs, fixed: &FixedBase, state: &State, kind: &Kind) -> Option<f64> {
+    let held = inputs.held_columns(state.accepted.iter().map(|e| &e.kind).chain([kind]));
+    let base: Vec<usize> = (0..fixed.n_base).filter(|c| !held.contains(c)).collect();
+    let factors = fixed.factors(&base);
+    let app = fixed.appended(inputs, kind);
+    // Columns as indices into the candidate's own block.
+    let cols = own_columns_by(kind, 0, |own| factors.unaliased(&app, own));
+    if cols.is_empty() {
+        return None;
+    }
+    Some(factors.cv_sse(&fixed.nm, &app, &cols))
+}
+
 /// The candidates `families` stand for: each family's own, then the
 /// aimed ones of each [`to_aim`] placeholder ([`aimed`]), then the periods
 /// each periodic scan keeps ([`screened`]), in that order.
@@ -1152,9 +1179,8 @@ pub(super) fn try_place(
     let fixed = FixedBase::new(inputs, state);
     let score = |kinds: &mut dyn Iterator<Item = &Kind>| -> Vec<(Kind, f64)> {
         kinds
-            .filter_map(|k| linearise(inputs, &fixed, state, k).map(|l| (k.clone(), l.cv, l.cv0)))
-            .filter(|(_, cv, cv0)| cv.is_finite() && cv < cv0)
-            .map(|(k, cv, _)| (k, cv))
+            .filter_map(|k| cross_validated(inputs, &fixed, state, k).map(|cv| (k.clone(), cv)))
+            .filter(|(_, cv)| cv.is_finite() && *cv < fixed.cv0)
             .collect()
     };
     let candidates = expanded(inputs, &fixed, families);

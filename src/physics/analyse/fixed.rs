@@ -15,9 +15,12 @@
 //! pass with the candidate appended at zero (a candidate at zero does not
 //! move the model).
 
+use std::cell::RefCell;
+use std::rc::Rc;
+
 use nalgebra::DMatrix;
 
-use super::normals::{FOLDS, Normals, cv_sse, normals};
+use super::normals::{Appended, BaseFactors, FOLDS, Normals, cv_sse, normals};
 use super::{Inputs, State};
 use crate::physics::effects::{Basis, EffectModel, Kind, hat_weights};
 use crate::physics::problem::{EffectProblem, PoseFrame, RowDir};
@@ -50,6 +53,8 @@ pub(super) struct FixedBase {
     row_start: Vec<usize>,
     row_cols: Vec<usize>,
     row_vals: Vec<f64>,
+    /// [`Self::factors`] made so far, by base column set.
+    factors: RefCell<Vec<(Vec<usize>, Rc<BaseFactors>)>>,
 }
 
 impl FixedBase {
@@ -118,6 +123,7 @@ impl FixedBase {
             row_start,
             row_cols,
             row_vals,
+            factors: RefCell::new(Vec::new()),
         }
     }
 
@@ -134,7 +140,7 @@ impl FixedBase {
         let nb = self.n_base;
         let k = kind.n_coef();
         let n = nb + k;
-        let (cross, own, g) = self.blocks(inputs, kind);
+        let Appended { cross, own, g, .. } = self.appended(inputs, kind);
         let a = (0..FOLDS)
             .map(|f| {
                 let base = &self.nm.a[f];
@@ -251,15 +257,22 @@ impl FixedBase {
         a.cholesky().map_or(0.0, |c| g.dot(&c.solve(&g)))
     }
 
+    /// The base columns `base` factored for block elimination (made once
+    /// per column set and kept: a place's candidates share one or two).
+    pub(super) fn factors(&self, base: &[usize]) -> Rc<BaseFactors> {
+        let mut memo = self.factors.borrow_mut();
+        if let Some((_, f)) = memo.iter().find(|(b, _)| b == base) {
+            return f.clone();
+        }
+        let f = Rc::new(BaseFactors::new(&self.nm, base));
+        memo.push((base.to_vec(), f.clone()));
+        f
+    }
+
     /// Per fold, the candidate's cross block with the base (k × nb, one
     /// base row per candidate column), its own block (k × k, upper) and
     /// its `Jᵀr`.
-    #[allow(clippy::type_complexity)]
-    fn blocks(
-        &self,
-        inputs: &Inputs,
-        kind: &Kind,
-    ) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    pub(super) fn appended(&self, inputs: &Inputs, kind: &Kind) -> Appended {
         let Inputs { obs, ctx, .. } = inputs;
         let fold_of = &self.fold_of;
         let nb = self.n_base;
@@ -315,7 +328,13 @@ impl FixedBase {
                 }
             }
         }
-        (cross, own, g)
+        Appended {
+            nb,
+            k,
+            cross,
+            own,
+            g,
+        }
     }
 }
 
@@ -341,6 +360,7 @@ mod tests {
     use super::*;
     use crate::identify::{IdentifyOptions, NoProgress, Observations, geometric};
     use crate::model::{Dataset, Rig, Robot};
+    use crate::physics::analyse::normals::unaliased;
     use crate::physics::effects::{CorrectionDriver, CorrectionTarget};
     use crate::physics::simulate;
 
@@ -595,6 +615,62 @@ mod tests {
                 let (a, _, _) = got.total();
                 assert!((fixed.n_base..got.n).any(|c| a[(c, c)] > 0.0), "{kind:?}");
             }
+        });
+    }
+
+    /// The alias check and the cross-validated SSE by block elimination
+    /// against the base factored once equal those of the candidate's whole
+    /// normal equations, for every candidate, with the whole base and with
+    /// three columns held; a constant offset of a joint (aliased with its
+    /// geometric offset) is dropped by both.
+    #[test]
+    fn block_elimination_equals_the_whole_block() {
+        each_session(|inputs, state, fixed| {
+            let n = inputs.ctx.n_joints;
+            let mut kinds = candidates(n, inputs.ctx.anchors.len());
+            kinds.push(Kind::DataDriven {
+                target: CorrectionTarget::JointAngle,
+                target_index: Some(1),
+                driver: CorrectionDriver::JointAngle,
+                driver_index: Some(1),
+                knots: vec![0.0],
+                period: None,
+                range: None,
+                axis: None,
+            });
+            let nb = fixed.n_base;
+            let mut dropped = 0;
+            for base in [(0..nb).collect::<Vec<_>>(), (3..nb).collect()] {
+                let factors = fixed.factors(&base);
+                for kind in &kinds {
+                    let k = kind.n_coef();
+                    let nm = fixed.with(inputs, kind);
+                    let (a, b, _) = nm.total();
+                    let own: Vec<usize> = (nb..nb + k).collect();
+                    let whole = unaliased(&a, &base, &own);
+                    let app = fixed.appended(inputs, kind);
+                    let blocked: Vec<usize> = factors
+                        .unaliased(&app, &(0..k).collect::<Vec<_>>())
+                        .iter()
+                        .map(|c| c + nb)
+                        .collect();
+                    assert_eq!(blocked, whole, "{kind:?}");
+                    dropped += k - whole.len();
+                    let mut all = base.clone();
+                    all.extend(&whole);
+                    let cv_whole = cv_sse(&nm, &a, &b, &all);
+                    let cols: Vec<usize> = whole.iter().map(|c| c - nb).collect();
+                    let cv_blocked = factors.cv_sse(&fixed.nm, &app, &cols);
+                    // Rounding only: 1e-14 relative, but 5e-8 for the
+                    // frame's shape on the strings (half its columns
+                    // nearly aliased: an ill-conditioned solve either way).
+                    assert!(
+                        (cv_blocked - cv_whole).abs() <= 1e-6 * cv_whole,
+                        "{kind:?}: {cv_blocked} vs {cv_whole}"
+                    );
+                }
+            }
+            assert!(dropped > 0, "no candidate column was aliased");
         });
     }
 
