@@ -1419,17 +1419,30 @@ pub struct Basis {
 }
 
 impl Basis {
+    /// Zero, for `nc` coefficients, `n` joints and `m` strings, every
+    /// coefficient live. Only the coefficients live at the last pose can
+    /// be nonzero ([`Context::basis`] writes no other), so a basis of the
+    /// same shape clears those alone (a 32-knot correction's two).
     fn reset(&mut self, nc: usize, n: usize, m: usize) {
+        if self.thermal.len() == nc && self.dq.len() == nc * n && self.dl.len() == nc * m {
+            for &c in &self.live {
+                self.dq[c * n..(c + 1) * n].fill(0.0);
+                self.thermal[c] = 0.0;
+                self.dl[c * m..(c + 1) * m].fill(0.0);
+                self.dp[c * 3..(c + 1) * 3].fill(0.0);
+            }
+        } else {
+            self.dq.clear();
+            self.dq.resize(nc * n, 0.0);
+            self.thermal.clear();
+            self.thermal.resize(nc, 0.0);
+            self.dl.clear();
+            self.dl.resize(nc * m, 0.0);
+            self.dp.clear();
+            self.dp.resize(nc * 3, 0.0);
+        }
         self.live.clear();
         self.live.extend(0..nc);
-        self.dq.clear();
-        self.dq.resize(nc * n, 0.0);
-        self.thermal.clear();
-        self.thermal.resize(nc, 0.0);
-        self.dl.clear();
-        self.dl.resize(nc * m, 0.0);
-        self.dp.clear();
-        self.dp.resize(nc * 3, 0.0);
     }
 }
 
