@@ -29,8 +29,12 @@ pub struct Observations<'a> {
     pub anchors: Vec<Vector3<f64>>,
     /// Indices of the train poses.
     pub train: Vec<usize>,
-    /// Indices of the test poses.
+    /// Indices of the test poses: the held-out poses the steps read.
     pub test: Vec<usize>,
+    /// Held-out poses set aside from every decision (see
+    /// [`Observations::gate_half`]): no step reads them, the report
+    /// measures the final model on them. Empty unless set aside.
+    pub confirmation: Vec<usize>,
     /// Measured T per pose in the rig frame (located from the strings with
     /// the nominal string constants, or as measured).
     pub measured: Vec<Vector3<f64>>,
@@ -116,9 +120,49 @@ impl<'a> Observations<'a> {
             anchors,
             train,
             test,
+            confirmation: Vec::new(),
             measured,
             located,
         })
+    }
+
+    /// These observations with the held-out poses split in two, for a
+    /// selection that decides on held-out poses (the physics analysis):
+    /// `test` keeps the gate half, which the decisions read, and
+    /// `confirmation` holds the other half, which none reads, so that the
+    /// final model's held-out error there is free of the selection's bias.
+    /// The halves alternate in session order ([`confirmation_split`]).
+    /// `None` when the held-out poses are too few to halve
+    /// ([`MIN_CONFIRMATION`]).
+    pub fn gate_half(&self) -> Option<Observations<'a>> {
+        let (gate, confirmation) = confirmation_split(&self.test)?;
+        Some(Observations {
+            robot: self.robot,
+            rig: self.rig,
+            data: self.data,
+            chain: self.chain,
+            anchors: self.anchors.clone(),
+            train: self.train.clone(),
+            test: gate,
+            confirmation,
+            measured: self.measured.clone(),
+            located: self.located.clone(),
+            q_trig: self.q_trig.clone(),
+            anchor_modes: self.anchor_modes.clone(),
+        })
+    }
+
+    /// Every held-out pose, gate and confirmation halves alike, in
+    /// session order.
+    pub fn held_out(&self) -> Vec<usize> {
+        let mut all: Vec<usize> = self
+            .test
+            .iter()
+            .chain(&self.confirmation)
+            .copied()
+            .collect();
+        all.sort_unstable();
+        all
     }
 
     /// The train poses.
@@ -197,6 +241,7 @@ impl<'a> Observations<'a> {
         Stats {
             train: split(&self.train),
             test: split(&self.test),
+            confirmation: None,
         }
     }
 
@@ -368,6 +413,27 @@ pub(crate) fn locate_all(
 /// a few hundred poses is as good as over all 11,911 of a grid.
 pub const ORIENTATION_POSES: usize = 500;
 
+/// Fewest held-out poses in either half of [`confirmation_split`]: with
+/// fewer, the held-out poses are not halved (a paired test on a handful of
+/// poses decides little, and a handful confirms little).
+pub const MIN_CONFIRMATION: usize = 10;
+
+/// The held-out poses `test` (session order) split into a gate half and a
+/// confirmation half: alternate poses, the first to the gate. Alternating
+/// in session order rather than drawing at random keeps both halves spread
+/// alike over the session (time, temperature, a drift) and over the
+/// workspace a plan walks through, needs no seed, and gives a recording
+/// and its effect-free twin with the same split the same halves. `None`
+/// with fewer than twice [`MIN_CONFIRMATION`] held-out poses.
+pub fn confirmation_split(test: &[usize]) -> Option<(Vec<usize>, Vec<usize>)> {
+    if test.len() < 2 * MIN_CONFIRMATION {
+        return None;
+    }
+    let gate = test.iter().step_by(2).copied().collect();
+    let confirmation = test.iter().skip(1).step_by(2).copied().collect();
+    Some((gate, confirmation))
+}
+
 fn choose_split(data: &Dataset, opts: &IdentifyOptions) -> (Vec<usize>, Vec<usize>) {
     let has_test = data.poses.iter().any(|p| p.split == Some(Split::Test));
     let has_train = data.poses.iter().any(|p| p.split == Some(Split::Train));
@@ -429,4 +495,24 @@ pub fn closed_form_comparison(obs: &Observations) -> Option<ClosedFormComparison
         }
     }
     ClosedFormComparison::from_distances(&d2, mirrored)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn confirmation_split_alternates_and_needs_enough_poses() {
+        let test: Vec<usize> = (0..45).map(|i| 3 * i + 1).collect();
+        let (gate, confirmation) = confirmation_split(&test).unwrap();
+        assert_eq!(gate.len(), 23);
+        assert_eq!(confirmation.len(), 22);
+        assert_eq!(&gate[..3], &[1, 7, 13]);
+        assert_eq!(&confirmation[..3], &[4, 10, 16]);
+        let mut all: Vec<usize> = gate.iter().chain(&confirmation).copied().collect();
+        all.sort_unstable();
+        assert_eq!(all, test);
+        assert!(confirmation_split(&test[..2 * MIN_CONFIRMATION - 1]).is_none());
+        assert!(confirmation_split(&test[..2 * MIN_CONFIRMATION]).is_some());
+    }
 }

@@ -162,6 +162,7 @@ impl JobOptions {
             identify: self.to_identify(),
             physics: self.physics.unwrap_or(true),
             force: self.force.unwrap_or(false),
+            ..pipeline::Options::default()
         }
     }
 

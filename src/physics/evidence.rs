@@ -313,7 +313,7 @@ pub fn evidence_plot(
         .div_ceil((EvidencePlot::MAX_POINTS / per_pose.max(1)).max(1))
         .max(1);
     let idx: Vec<usize> = (0..n).step_by(stride).collect();
-    let test: HashSet<usize> = obs.test.iter().copied().collect();
+    let test: HashSet<usize> = obs.held_out().into_iter().collect();
     let model = Fitted {
         obs,
         ctx,
@@ -710,7 +710,7 @@ pub fn unexplained_plot(
     );
 
     let stride = n.div_ceil(EvidencePlot::MAX_POINTS).max(1);
-    let test: HashSet<usize> = obs.test.iter().copied().collect();
+    let test: HashSet<usize> = obs.held_out().into_iter().collect();
     let mut points = Vec::new();
     for i in (0..n).step_by(stride) {
         if !ok(i) {

@@ -15,8 +15,8 @@ use crate::model::Rig;
 use crate::model::{Measurement, Split};
 use crate::physics::{self, Analysis, Context, EffectModel};
 use crate::report::{
-    AnchorCorrection, Convergence, Finding, Identifiability, JointDeviation, Outlier,
-    ParamEstimate, PoseResidual, REPORT_FORMAT, Report, RigAnchors,
+    AnchorCorrection, Convergence, ErrorStats, Finding, Identifiability, JointDeviation, Outlier,
+    ParamEstimate, PoseResidual, REPORT_FORMAT, Report, RigAnchors, SplitStats, Stats,
 };
 use crate::stats;
 
@@ -112,6 +112,7 @@ pub fn report(
         .or_else(|| (l.n_strings > 0).then_some(geo.sigma));
     let paper = paper::one_step(obs, &geo.before);
     let physics_notes = physics.notes();
+    let confirmation = physics.confirmation;
     let (model, findings) = final_model(obs, geo, opts, &paper, physics.analysis)?;
     let all: Vec<usize> = (0..data.poses.len()).collect();
     let eb = obs.errors(&geo.before.values, &all);
@@ -165,7 +166,19 @@ pub fn report(
             .collect(),
         identifiability,
         free_set: Some(geo.free_set.clone()),
-        stats: obs.stats_of(&eb, &model.errors),
+        stats: Stats {
+            confirmation: (!confirmation.is_empty()).then(|| SplitStats {
+                n: confirmation.len(),
+                before: ErrorStats::of(&confirmation.iter().map(|&i| eb[i]).collect::<Vec<_>>()),
+                after: ErrorStats::of(
+                    &confirmation
+                        .iter()
+                        .map(|&i| model.errors[i])
+                        .collect::<Vec<_>>(),
+                ),
+            }),
+            ..obs.stats_of(&eb, &model.errors)
+        },
         paper_stats,
         noise_floor_mm: obs.noise_floor(string_sigma),
         expected_test_rms_mm: obs.expected_test_rms(
@@ -190,7 +203,7 @@ pub fn report(
                 .sqrt(),
         },
         closed_form_vs_lsq: identify::closed_form_comparison(obs),
-        per_pose: per_pose(obs, &train_problem, &model, &eb),
+        per_pose: per_pose(obs, &train_problem, &model, &eb, &confirmation),
         findings,
         physics: physics.run,
         physics_notes,
@@ -337,6 +350,7 @@ fn per_pose(
     train_problem: &CalibrationProblem,
     model: &FinalModel,
     eb: &[Vector3<f64>],
+    confirmation: &[usize],
 ) -> Vec<PoseResidual> {
     let ea = &model.errors;
     let data = obs.data;
@@ -379,6 +393,7 @@ fn per_pose(
                 } else {
                     Split::Train
                 },
+                confirmation: confirmation.binary_search(&i).is_ok(),
                 before_mm: eb[i].into(),
                 after_mm: ea[i].into(),
                 strings_mm,

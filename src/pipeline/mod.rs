@@ -39,6 +39,12 @@ pub struct Options {
     /// (refused otherwise, since the result would move a robot by a model
     /// fitted to the wrong angles: [`InputCheck::in_radians`]).
     pub force: bool,
+    /// Hold half of the held-out poses back from the physics analysis
+    /// ([`Observations::gate_half`]): its held-out gates and confirmations
+    /// read the other half only, and the report's `stats.confirmation`
+    /// (and `per_pose[].confirmation`) measure the final model on poses no
+    /// decision saw. `stats.test` stays over every held-out pose.
+    pub confirm_half: bool,
 }
 
 impl Default for Options {
@@ -47,6 +53,7 @@ impl Default for Options {
             identify: IdentifyOptions::default(),
             physics: true,
             force: false,
+            confirm_half: false,
         }
     }
 }
@@ -216,6 +223,9 @@ pub struct PhysicsOutcome {
     pub analysis: Option<Analysis>,
     /// Why it did not run (beginning with [`PhysicsRun::NOTE_PREFIX`]).
     pub why_not: Option<String>,
+    /// The held-out poses it never read ([`Options::confirm_half`]), in
+    /// session order; empty when it read them all or did not run.
+    pub confirmation: Vec<usize>,
     /// What to do instead of trusting the analysis, when its findings were
     /// set aside ([`propose_rig_anchors`]): a warning of the report.
     pub advice: Option<String>,
@@ -245,6 +255,7 @@ pub fn physics_step(
         analysis: None,
         why_not: Some(format!("{}{why}", PhysicsRun::NOTE_PREFIX)),
         advice: None,
+        confirmation: Vec::new(),
     };
     if !opts.physics {
         return Ok(not_run(PhysicsRun::Off, " (physics off)".into()));
@@ -267,6 +278,9 @@ pub fn physics_step(
         ));
     }
     progress.update("physics analysis", 0.0);
+    // Every decision below that reads held-out poses reads the gate half.
+    let gate = opts.confirm_half.then(|| obs.gate_half()).flatten();
+    let obs = gate.as_ref().unwrap_or(obs);
     let mut analysis = physics::analyse(obs, geo, progress)?;
     let advice = if opts.identify.rig_anchors {
         None
@@ -278,6 +292,7 @@ pub fn physics_step(
         analysis: Some(analysis),
         why_not: None,
         advice,
+        confirmation: obs.confirmation.clone(),
     })
 }
 
@@ -377,4 +392,74 @@ pub fn propose_rig_anchors(
     analysis.final_params = geo.after.clone();
     analysis.final_sigmas = None;
     Some(advice)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identify::NoProgress;
+    use crate::model::{Measurement, Split};
+    use crate::physics::simulate;
+    use crate::report::Report;
+
+    fn session() -> simulate::Simulated {
+        let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
+            "robot": "er3a", "n_poses": 150, "seed": 3,
+            "effects": [{"effect": "joint_compliance", "joint": 2, "size_x_noise": 5}]
+        }))
+        .unwrap();
+        simulate::generate(&spec).unwrap()
+    }
+
+    fn calibrate_with(sim: &simulate::Simulated, data: &Dataset, confirm_half: bool) -> Report {
+        let opts = Options {
+            confirm_half,
+            ..Options::default()
+        };
+        calibrate(&sim.robot, &sim.rig, data, &opts, &NoProgress).unwrap()
+    }
+
+    /// The confirmation half is every other held-out pose, marked in
+    /// `per_pose` and measured in `stats.confirmation`; and no decision of
+    /// the analysis reads it: readings moved there change the figures
+    /// measured there, never what was found nor the model.
+    #[test]
+    fn the_confirmation_half_is_reported_and_read_by_no_decision() {
+        let sim = session();
+        let report = calibrate_with(&sim, &sim.dataset, true);
+        assert!(!report.findings.is_empty(), "the compliance is found");
+        let test: Vec<usize> = (0..report.per_pose.len())
+            .filter(|&i| report.per_pose[i].split == Split::Test)
+            .collect();
+        let marked: Vec<usize> = (0..report.per_pose.len())
+            .filter(|&i| report.per_pose[i].confirmation)
+            .collect();
+        let expected: Vec<usize> = test.iter().skip(1).step_by(2).copied().collect();
+        assert_eq!(marked, expected);
+        let c = report.stats.confirmation.expect("halved");
+        assert_eq!(c.n, marked.len());
+        assert_eq!(report.stats.test.n, test.len());
+
+        // Move every confirmation pose's readings by 0.3 mm.
+        let mut moved = sim.dataset.clone();
+        for &i in &marked {
+            if let Measurement::Strings(l) = &mut moved.poses[i].measurement {
+                l.iter_mut().for_each(|v| *v += 0.3);
+            }
+        }
+        let again = calibrate_with(&sim, &moved, true);
+        let names =
+            |r: &Report| -> Vec<String> { r.findings.iter().map(|f| f.effect.clone()).collect() };
+        assert_eq!(names(&again), names(&report));
+        assert_eq!(again.parameters, report.parameters);
+        assert_eq!(again.stats.train, report.stats.train);
+        let c2 = again.stats.confirmation.unwrap();
+        assert!(c2.after.rms_mm > c.after.rms_mm + 0.05, "{c2:?} vs {c:?}");
+
+        // Off: nothing set aside.
+        let off = calibrate_with(&sim, &sim.dataset, false);
+        assert!(off.stats.confirmation.is_none());
+        assert!(off.per_pose.iter().all(|p| !p.confirmation));
+        assert_eq!(off.stats.test.n, report.stats.test.n);
+    }
 }

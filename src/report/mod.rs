@@ -127,6 +127,15 @@ pub struct Stats {
     pub train: SplitStats,
     /// Held-out poses.
     pub test: SplitStats,
+    /// The held-out poses no decision of the physics analysis read (half
+    /// of `test`, alternate poses in session order; `--confirm-half`):
+    /// `test.after` is measured on poses the analysis's held-out gates
+    /// also chose by, so it runs optimistic where effects were kept, while
+    /// this is not. Absent when the held-out poses were not halved (the
+    /// analysis off or not run, fewer than 20 held-out poses, or reports
+    /// written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confirmation: Option<SplitStats>,
 }
 
 /// Identified deviation of one joint from nominal, with 1-sigma
@@ -349,6 +358,10 @@ pub struct PoseResidual {
     pub pose: String,
     /// `train` or `test`.
     pub split: crate::model::Split,
+    /// A held-out pose no decision of the physics analysis read (see
+    /// `stats.confirmation`); written only when true.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub confirmation: bool,
     /// Error before calibration, base frame (mm).
     pub before_mm: [f64; 3],
     /// Error after calibration, base frame (mm).
