@@ -32,7 +32,7 @@ use nalgebra::{DMatrix, Vector3};
 
 use super::candidates::Candidate;
 use super::compensation_use;
-use super::fixed::{FixedBase, with_candidate};
+use super::fixed::{FixedBase, TargetPatterns, with_candidate};
 use super::gates::{self, Before};
 use super::magnitude::magnitude;
 use super::normals::{Normals, cv_sse, normals, solve_subset, unaliased};
@@ -1114,17 +1114,68 @@ fn linearise<'a>(
 /// none), by block elimination against the base factored once
 /// ([`FixedBase::factors`]) rather than from the candidate's whole normal
 /// equations: the score every candidate of a place gets.
-fn cross_validated(inputs: &Inputs, fixed: &FixedBase, state: &State, kind: &Kind) -> Option<f64> {
+///
+/// A correction by knots (every target but the frame's shape and its
+/// deflection) has its blocks from its target's patterns
+/// ([`FixedBase::target_patterns`]), kept in `patterns` for the next
+/// candidate of the same target (a family's knot counts come together).
+fn cross_validated(
+    inputs: &Inputs,
+    fixed: &FixedBase,
+    state: &State,
+    kind: &Kind,
+    patterns: &mut Option<(Kind, TargetPatterns)>,
+) -> Option<f64> {
     let held = inputs.held_columns(state.accepted.iter().map(|e| &e.kind).chain([kind]));
     let base: Vec<usize> = (0..fixed.n_base).filter(|c| !held.contains(c)).collect();
     let factors = fixed.factors(&base);
-    let app = fixed.appended(inputs, kind);
+    let app = match by_knots(kind) {
+        Some(probe) => {
+            if patterns.as_ref().is_none_or(|(p, _)| *p != probe) {
+                let t = fixed.target_patterns(inputs, &probe);
+                *patterns = Some((probe, t));
+            }
+            let (_, t) = patterns.as_ref()?;
+            fixed.appended_by_weights(inputs, t, kind)
+        }
+        None => fixed.appended(inputs, kind),
+    };
     // Columns as indices into the candidate's own block.
     let cols = own_columns_by(kind, 0, |own| factors.unaliased(&app, own));
     if cols.is_empty() {
         return None;
     }
     Some(factors.cv_sse(&fixed.nm, &app, &cols))
+}
+
+/// What a correction by knots is made of at every pose, whatever its
+/// knots (its target and driver; see [`cross_validated`]); `None` for a
+/// named effect and for the frame's shape and deflection, whose
+/// coefficients are not knots' hat weights times one pattern.
+fn by_knots(kind: &Kind) -> Option<Kind> {
+    match kind {
+        Kind::DataDriven {
+            target: CorrectionTarget::RigShape | CorrectionTarget::FrameDeflection,
+            ..
+        } => None,
+        Kind::DataDriven {
+            target,
+            target_index,
+            driver,
+            driver_index,
+            ..
+        } => Some(Kind::DataDriven {
+            target: *target,
+            target_index: *target_index,
+            driver: *driver,
+            driver_index: *driver_index,
+            knots: vec![],
+            period: None,
+            range: None,
+            axis: None,
+        }),
+        _ => None,
+    }
 }
 
 /// The candidates `families` stand for: each family's own, then the
@@ -1178,8 +1229,11 @@ pub(super) fn try_place(
     // the best that also solves in full is linearised again.
     let fixed = FixedBase::new(inputs, state);
     let score = |kinds: &mut dyn Iterator<Item = &Kind>| -> Vec<(Kind, f64)> {
+        let mut patterns = None;
         kinds
-            .filter_map(|k| cross_validated(inputs, &fixed, state, k).map(|cv| (k.clone(), cv)))
+            .filter_map(|k| {
+                cross_validated(inputs, &fixed, state, k, &mut patterns).map(|cv| (k.clone(), cv))
+            })
             .filter(|(_, cv)| cv.is_finite() && *cv < fixed.cv0)
             .collect()
     };

@@ -178,8 +178,21 @@ impl FixedBase {
     /// correction of that target is a weight per pose times this pattern,
     /// so [`Self::drop_alone`] screens a scan of them without the rows.
     pub(super) fn pose_patterns(&self, inputs: &Inputs, probe: &Kind) -> Vec<(f64, f64)> {
+        let t = self.target_patterns(inputs, probe);
+        (0..t.start.len() - 1)
+            .map(|pos| (t.g[pos * t.per], t.own[pos * t.per * t.per]))
+            .collect()
+    }
+
+    /// Per train pose, the blocks a data-driven correction of `probe`'s
+    /// target adds with one knot at weight 1 (its `per` coefficients).
+    /// A correction of that target at any knots is, at each pose, its hat
+    /// weights times these ([`Self::appended_by_weights`]): the rows are
+    /// visited once per target rather than once per candidate.
+    pub(super) fn target_patterns(&self, inputs: &Inputs, probe: &Kind) -> TargetPatterns {
         let Inputs { obs, ctx, .. } = inputs;
-        // Knots beyond every value: coefficient 0 weighs 1 at every pose.
+        // Knots beyond every value: knot 0's coefficients weigh 1 at every
+        // pose.
         let probe = match probe {
             Kind::DataDriven {
                 target,
@@ -199,21 +212,158 @@ impl FixedBase {
             },
             other => other.clone(),
         };
-        let mut out = vec![(0.0, 0.0); obs.train.len()];
+        let per = (probe.n_coef() / 2).max(1);
+        let (nb, n_pose) = (self.n_base, obs.train.len());
+        let mut t = TargetPatterns {
+            per,
+            start: Vec::with_capacity(n_pose + 1),
+            cols: Vec::new(),
+            cross: Vec::new(),
+            own: vec![0.0; n_pose * per * per],
+            g: vec![0.0; n_pose * per],
+        };
+        t.start.push(0);
         let mut buf = Basis::default();
-        let mut dt = nalgebra::Vector3::zeros();
+        let mut dt = vec![nalgebra::Vector3::zeros(); per];
+        // The pose's cross sums per coefficient, over the base columns its
+        // rows touch (in the order first touched, sorted at the flush).
+        let mut scratch = vec![vec![0.0; nb]; per];
+        let mut touched: Vec<usize> = Vec::new();
+        let mut mark = vec![false; nb];
+        let mut v = vec![0.0; per];
         let mut last = usize::MAX;
+        let flush = |t: &mut TargetPatterns,
+                     scratch: &mut [Vec<f64>],
+                     touched: &mut Vec<usize>,
+                     mark: &mut [bool]| {
+            touched.sort_unstable();
+            for row in scratch.iter_mut() {
+                t.cross.extend(touched.iter().map(|&i| row[i]));
+                touched.iter().for_each(|&i| row[i] = 0.0);
+            }
+            t.cols.extend_from_slice(touched);
+            touched.iter().for_each(|&i| mark[i] = false);
+            touched.clear();
+            t.start.push(t.cols.len());
+        };
         for (row, &pos) in self.row_pos.iter().enumerate() {
             if pos != last {
+                // The pose before is complete (a pose without rows, were
+                // there one, would be an empty entry).
+                while t.start.len() <= pos {
+                    flush(&mut t, &mut scratch, &mut touched, &mut mark);
+                }
                 last = pos;
                 ctx.basis(&probe, obs.train[pos], &mut buf);
-                dt = self.frames[pos].d_point(&buf, 0);
+                for (c, d) in dt.iter_mut().enumerate() {
+                    *d = self.frames[pos].d_point(&buf, c);
+                }
             }
-            let v = PoseFrame::column(self.dirs[row], &dt, &buf, 0, self.m);
-            out[pos].0 += v * self.r[row];
-            out[pos].1 += v * v;
+            for (c, x) in v.iter_mut().enumerate() {
+                *x = PoseFrame::column(self.dirs[row], &dt[c], &buf, c, self.m);
+            }
+            let r = self.r[row];
+            let (idx, vals) = self.base_row(row);
+            for c in 0..per {
+                if v[c] == 0.0 {
+                    continue;
+                }
+                t.g[pos * per + c] += v[c] * r;
+                for c2 in 0..per {
+                    t.own[(pos * per + c) * per + c2] += v[c] * v[c2];
+                }
+                for (&i, &ra) in idx.iter().zip(vals) {
+                    scratch[c][i] += ra * v[c];
+                    if !mark[i] {
+                        mark[i] = true;
+                        touched.push(i);
+                    }
+                }
+            }
         }
-        out
+        while t.start.len() <= n_pose {
+            flush(&mut t, &mut scratch, &mut touched, &mut mark);
+        }
+        t
+    }
+
+    /// [`Self::appended`] of the data-driven correction `kind` from its
+    /// target's [`Self::target_patterns`] `t`: the same blocks to
+    /// rounding (each pose's hat weights times the pattern, rather than
+    /// the pattern's rows each times the weight).
+    pub(super) fn appended_by_weights(
+        &self,
+        inputs: &Inputs,
+        t: &TargetPatterns,
+        kind: &Kind,
+    ) -> Appended {
+        let Inputs { obs, ctx, .. } = inputs;
+        let (nb, k, per) = (self.n_base, kind.n_coef(), t.per);
+        let mut cross = vec![vec![0.0; nb * k]; FOLDS];
+        let mut own = vec![vec![0.0; k * k]; FOLDS];
+        let mut g = vec![vec![0.0; k]; FOLDS];
+        let Kind::DataDriven {
+            driver,
+            driver_index,
+            knots,
+            period,
+            axis,
+            ..
+        } = kind
+        else {
+            return Appended {
+                nb,
+                k,
+                cross,
+                own,
+                g,
+            };
+        };
+        for pos in 0..t.start.len() - 1 {
+            let x = ctx.driver_value(
+                &ctx.poses[obs.train[pos]],
+                *driver,
+                *driver_index,
+                axis.as_ref(),
+            );
+            let [(k0, w0), (k1, w1)] = hat_weights(knots, *period, x);
+            // One knot named twice weighs their sum, as the basis adds them.
+            let live: &[(usize, f64)] = &if k0 == k1 {
+                [(k0, w0 + w1), (k0, 0.0)]
+            } else {
+                [(k0, w0), (k1, w1)]
+            };
+            let f = self.fold_of[pos];
+            let (s, e) = (t.start[pos], t.start[pos + 1]);
+            let cols = &t.cols[s..e];
+            let len = e - s;
+            for &(kn, w) in live.iter().filter(|(_, w)| *w != 0.0) {
+                for c in 0..per {
+                    let a = kn * per + c;
+                    let src = &t.cross[s * per + c * len..s * per + (c + 1) * len];
+                    let dst = &mut cross[f][a * nb..(a + 1) * nb];
+                    for (&i, &val) in cols.iter().zip(src) {
+                        dst[i] += w * val;
+                    }
+                    g[f][a] += w * t.g[pos * per + c];
+                    for &(kn2, w2) in live.iter().filter(|(_, w)| *w != 0.0) {
+                        for c2 in 0..per {
+                            let b = kn2 * per + c2;
+                            if a <= b {
+                                own[f][a * k + b] += w * w2 * t.own[(pos * per + c) * per + c2];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Appended {
+            nb,
+            k,
+            cross,
+            own,
+            g,
+        }
     }
 
     /// How much `kind` (a correction of the scalar `patterns` were made
@@ -336,6 +486,21 @@ impl FixedBase {
             g,
         }
     }
+}
+
+/// Per train pose, what one knot of a data-driven correction at weight 1
+/// adds to the normal equations ([`FixedBase::target_patterns`]): pose
+/// `p`'s base columns are `cols[start[p]..start[p + 1]]` (length `len`),
+/// its cross sums of coefficient `c` against them
+/// `cross[start[p] * per + c * len..][..len]`, its own block
+/// `own[(p * per + c) * per + c2]` and its `Jᵀr` `g[p * per + c]`.
+pub(super) struct TargetPatterns {
+    per: usize,
+    start: Vec<usize>,
+    cols: Vec<usize>,
+    cross: Vec<f64>,
+    own: Vec<f64>,
+    g: Vec<f64>,
 }
 
 /// Whether coefficient `c` of a basis over `n` joints and `m` strings
@@ -671,6 +836,91 @@ mod tests {
                 }
             }
             assert!(dropped > 0, "no candidate column was aliased");
+        });
+    }
+
+    /// A correction's blocks from its target's patterns (hat weights times
+    /// one knot's sums per pose) equal those from its rows, for every
+    /// correction by knots among the candidates, a periodic one included.
+    #[test]
+    fn blocks_from_patterns_equal_blocks_from_rows() {
+        each_session(|inputs, _, fixed| {
+            let n = inputs.ctx.n_joints;
+            let mut kinds = candidates(n, inputs.ctx.anchors.len());
+            kinds.push(Kind::DataDriven {
+                target: CorrectionTarget::JointAngle,
+                target_index: Some(0),
+                driver: CorrectionDriver::JointAngle,
+                driver_index: Some(0),
+                knots: vec![0.0, 1.5, 3.0, 4.5],
+                period: Some(6.0),
+                range: None,
+                axis: None,
+            });
+            let mut tried = 0;
+            for kind in kinds {
+                let Kind::DataDriven { target, .. } = &kind else {
+                    continue;
+                };
+                if matches!(
+                    target,
+                    CorrectionTarget::RigShape | CorrectionTarget::FrameDeflection
+                ) {
+                    continue;
+                }
+                tried += 1;
+                let rows = fixed.appended(inputs, &kind);
+                let t = fixed.target_patterns(inputs, &kind);
+                let pats = fixed.appended_by_weights(inputs, &t, &kind);
+                for f in 0..FOLDS {
+                    for (got, want) in [
+                        (&pats.cross[f], &rows.cross[f]),
+                        (&pats.own[f], &rows.own[f]),
+                        (&pats.g[f], &rows.g[f]),
+                    ] {
+                        let scale = want.iter().fold(1e-300, |m, v| v.abs().max(m));
+                        for (x, y) in got.iter().zip(want.iter()) {
+                            assert!((x - y).abs() <= 1e-12 * scale, "{kind:?}: {x} vs {y}");
+                        }
+                    }
+                }
+            }
+            assert!(tried >= 5);
+        });
+    }
+
+    /// A basis writes no coefficient outside its live list, so reusing a
+    /// buffer (which clears only the last pose's live rows) gives exactly
+    /// a fresh buffer's basis, at every pose and for every candidate.
+    #[test]
+    fn a_reused_basis_equals_a_fresh_one_and_is_zero_outside_its_live_list() {
+        each_session(|inputs, state, _| {
+            let ctx = &inputs.ctx;
+            let (n, m) = (ctx.n_joints, ctx.anchors.len());
+            let mut kinds = candidates(n, m);
+            kinds.extend(state.accepted.iter().map(|e| e.kind.clone()));
+            let mut reused = Basis::default();
+            for i in 0..ctx.poses.len() {
+                for kind in &kinds {
+                    ctx.basis(kind, i, &mut reused);
+                    let mut fresh = Basis::default();
+                    ctx.basis(kind, i, &mut fresh);
+                    assert_eq!(
+                        (
+                            &reused.dq,
+                            &reused.thermal,
+                            &reused.dl,
+                            &reused.dp,
+                            &reused.live
+                        ),
+                        (&fresh.dq, &fresh.thermal, &fresh.dl, &fresh.dp, &fresh.live),
+                        "{kind:?} at pose {i}"
+                    );
+                    for c in (0..kind.n_coef()).filter(|c| !fresh.live.contains(c)) {
+                        assert!(!touches(&fresh, c, n, m), "{kind:?} writes {c} at pose {i}");
+                    }
+                }
+            }
         });
     }
 
