@@ -127,7 +127,7 @@ pub struct Stats {
     pub train: SplitStats,
     /// Held-out poses.
     pub test: SplitStats,
-    /// The held-out poses no decision of the physics analysis read (half
+    /// The held-out poses whose residuals no decision of the physics analysis read (half
     /// of `test`, alternate poses in session order; `--confirm-half`):
     /// `test.after` is measured on poses the analysis's held-out gates
     /// also chose by, so it runs optimistic where effects were kept, while
@@ -358,7 +358,7 @@ pub struct PoseResidual {
     pub pose: String,
     /// `train` or `test`.
     pub split: crate::model::Split,
-    /// A held-out pose no decision of the physics analysis read (see
+    /// A held-out pose whose residuals no decision of the physics analysis read (see
     /// `stats.confirmation`); written only when true.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub confirmation: bool,
