@@ -20,7 +20,7 @@ use std::rc::Rc;
 
 use nalgebra::DMatrix;
 
-use super::normals::{Appended, BaseFactors, FOLDS, Normals, cv_sse, normals};
+use super::normals::{Appended, BaseFactors, FOLDS, FoldAccumulator, Normals, cv_sse};
 use super::{Inputs, State};
 use crate::physics::effects::{Basis, EffectModel, Kind, hat_weights};
 use crate::physics::problem::{EffectProblem, PoseFrame, RowDir};
@@ -86,9 +86,10 @@ impl FixedBase {
             EffectProblem::of_observations(obs, ctx, obs.train.clone(), p, free.clone(), effects);
         let x0 = problem.x0();
         let n_base = x0.len();
-        let nm = normals(&problem, &x0, &fold_of);
+        // The normal equations in the same pass as the rows kept.
+        let mut acc = FoldAccumulator::new(n_base);
         let mut frames = vec![PoseFrame::default(); obs.train.len()];
-        let n_rows = nm.rows;
+        let n_rows = problem.poses.len() * problem.rows_per_pose();
         let mut row_pos = Vec::with_capacity(n_rows);
         let mut r = Vec::with_capacity(n_rows);
         let mut dirs = Vec::with_capacity(n_rows);
@@ -100,6 +101,7 @@ impl FixedBase {
             &x0,
             |pos, frame| frames[pos].clone_from(frame),
             |pos, res, row, dir| {
+                acc.add(fold_of[pos], res, row);
                 row_pos.push(pos);
                 r.push(res);
                 dirs.push(dir);
@@ -112,7 +114,7 @@ impl FixedBase {
         );
         FixedBase {
             n_base,
-            nm,
+            nm: acc.finish(),
             cv0: f64::NAN,
             m: obs.data.n_strings,
             fold_of,
@@ -525,7 +527,7 @@ mod tests {
     use super::*;
     use crate::identify::{IdentifyOptions, NoProgress, Observations, geometric};
     use crate::model::{Dataset, Rig, Robot};
-    use crate::physics::analyse::normals::unaliased;
+    use crate::physics::analyse::normals::{normals, unaliased};
     use crate::physics::effects::{CorrectionDriver, CorrectionTarget};
     use crate::physics::simulate;
 

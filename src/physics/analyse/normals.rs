@@ -63,34 +63,70 @@ impl Normals {
 /// One pass over the rows of `problem` at `x`, accumulated into the fold
 /// each row's pose belongs to.
 pub(super) fn normals(problem: &EffectProblem, x: &[f64], fold_of: &[usize]) -> Normals {
-    let n = x.len();
-    let mut up = vec![vec![0.0; n * n]; FOLDS];
-    let mut g = vec![vec![0.0; n]; FOLDS];
-    let mut rr = vec![0.0; FOLDS];
-    let mut rows = 0;
-    let mut runs = Vec::new();
-    problem.rows(x, |pos, r, row| {
-        let f = fold_of[pos];
-        accumulate(&mut up[f], &mut g[f], n, row, r, &mut runs);
-        rr[f] += r * r;
-        rows += 1;
-    });
-    let a = up
-        .iter()
-        .map(|u| {
-            DMatrix::from_fn(
-                n,
-                n,
-                |i, j| if i <= j { u[i * n + j] } else { u[j * n + i] },
-            )
-        })
-        .collect();
-    Normals {
-        n,
-        a,
-        b: g,
-        rr,
-        rows,
+    let mut acc = FoldAccumulator::new(x.len());
+    problem.rows(x, |pos, r, row| acc.add(fold_of[pos], r, row));
+    acc.finish()
+}
+
+/// The normal equations of rows given one at a time, by fold: what
+/// [`normals`] sums, for a caller that visits the rows for more.
+pub(super) struct FoldAccumulator {
+    n: usize,
+    up: Vec<Vec<f64>>,
+    g: Vec<Vec<f64>>,
+    rr: Vec<f64>,
+    rows: usize,
+    runs: Vec<(usize, usize)>,
+}
+
+impl FoldAccumulator {
+    /// Nothing yet, for rows of `n` columns.
+    pub(super) fn new(n: usize) -> Self {
+        FoldAccumulator {
+            n,
+            up: vec![vec![0.0; n * n]; FOLDS],
+            g: vec![vec![0.0; n]; FOLDS],
+            rr: vec![0.0; FOLDS],
+            rows: 0,
+            runs: Vec::new(),
+        }
+    }
+
+    /// Row `row` with residual `r`, into fold `f`.
+    pub(super) fn add(&mut self, f: usize, r: f64, row: &[f64]) {
+        accumulate(
+            &mut self.up[f],
+            &mut self.g[f],
+            self.n,
+            row,
+            r,
+            &mut self.runs,
+        );
+        self.rr[f] += r * r;
+        self.rows += 1;
+    }
+
+    /// The normal equations of the rows added.
+    pub(super) fn finish(self) -> Normals {
+        let n = self.n;
+        let a = self
+            .up
+            .iter()
+            .map(|u| {
+                DMatrix::from_fn(
+                    n,
+                    n,
+                    |i, j| if i <= j { u[i * n + j] } else { u[j * n + i] },
+                )
+            })
+            .collect();
+        Normals {
+            n,
+            a,
+            b: self.g,
+            rr: self.rr,
+            rows: self.rows,
+        }
     }
 }
 
