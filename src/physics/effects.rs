@@ -352,6 +352,20 @@ pub fn hat_weights(knots: &[f64], period: Option<f64>, x: f64) -> [(usize, f64);
     [(s - 1, 1.0 - t), (s, t)]
 }
 
+/// [`hat_weights`] as the knots that weigh: ascending (a periodic scan
+/// wraps the last knot to the first), each knot once (a knot named twice
+/// weighs the sum), an entry of weight zero weighing nothing.
+pub fn live_knots(weights: [(usize, f64); 2]) -> [(usize, f64); 2] {
+    let [(k0, w0), (k1, w1)] = weights;
+    if k0 == k1 {
+        [(k0, w0 + w1), (k0, 0.0)]
+    } else if k0 < k1 {
+        weights
+    } else {
+        [(k1, w1), (k0, w0)]
+    }
+}
+
 /// A session's values of one driver, sorted, with their running sums: the
 /// mean of each knot's hat weight over the session in `O(knots log poses)`
 /// rather than a pass over the poses for every pose (a correction centred
@@ -1033,29 +1047,11 @@ impl Context {
             self.frame_deflection_basis(knots.len(), pc, out);
             return;
         }
-        let weights = hat_weights(knots, *period, x);
+        let weights = live_knots(hat_weights(knots, *period, x));
         let per_knot = kind.n_coef() / knots.len().max(1);
         out.live.clear();
-        // At most two knots, ascending (a periodic scan wraps the last to
-        // the first), each once.
-        let [(k0, w0), (k1, w1)] = weights;
-        let (lo, hi) = (k0.min(k1), k0.max(k1));
-        let (w_lo, w_hi) = if k0 <= k1 { (w0, w1) } else { (w1, w0) };
-        if lo == hi {
-            if w0 != 0.0 || w1 != 0.0 {
-                out.live.extend(lo * per_knot..(lo + 1) * per_knot);
-            }
-        } else {
-            for (k, w) in [(lo, w_lo), (hi, w_hi)] {
-                if w != 0.0 {
-                    out.live.extend(k * per_knot..(k + 1) * per_knot);
-                }
-            }
-        }
-        for (k, w) in weights {
-            if w == 0.0 {
-                continue;
-            }
+        for (k, w) in weights.into_iter().filter(|(_, w)| *w != 0.0) {
+            out.live.extend(k * per_knot..(k + 1) * per_knot);
             match target {
                 CorrectionTarget::Point if *driver == CorrectionDriver::Motion => {
                     for r in 0..3 {

@@ -148,15 +148,11 @@ impl<'a> EffectProblem<'a> {
         let thermal_used = effects
             .iter()
             .any(|e| matches!(e.kind, super::effects::Kind::ThermalExpansion { .. }));
-        // dT/dcoef for every coefficient, reused per pose.
-        let nc = ncol - self.free.len();
-        let mut dt = vec![Vector3::zeros(); nc];
-        let mut dl = vec![0.0; nc * self.data.n_strings.max(1)];
+        let m = self.data.n_strings;
+        let nf = self.free.len();
+        let mut cols = LiveColumns::new(ncol - nf, m);
         let mut frame = PoseFrame::default();
         let mut bases = vec![Basis::default(); effects.len()];
-        // The coefficients live at the current pose (see `Basis::live`);
-        // every other one's `dt`, `dl` and row entries stay zero.
-        let mut live: Vec<usize> = Vec::new();
         for (pos, &i) in self.poses.iter().enumerate() {
             let pose = &self.data.poses[i];
             // Each effect's basis once: the delta and the columns both
@@ -181,41 +177,17 @@ impl<'a> EffectProblem<'a> {
             } else {
                 Vector3::zeros()
             };
-            let m = self.data.n_strings;
-            let nf = self.free.len();
-            if DERIV {
-                for &c in &live {
-                    dt[c] = Vector3::zeros();
-                    dl[c * m..(c + 1) * m].fill(0.0);
-                    row[nf + c] = 0.0;
-                }
-                live.clear();
-            }
-            let mut c0 = 0;
-            for (e, buf) in effects.iter().zip(&bases).filter(|_| DERIV) {
-                for &c in &buf.live {
-                    live.push(c0 + c);
-                    let mut v = dlen * buf.thermal[c];
-                    for j in 0..n {
-                        let b = buf.dq[c * n + j];
-                        if b != 0.0 {
-                            v += jac.d_params[l.joint(j, JointParam::Theta)] * b;
-                        }
-                    }
-                    dt[c0 + c] =
-                        v + Vector3::new(buf.dp[c * 3], buf.dp[c * 3 + 1], buf.dp[c * 3 + 2]);
-                    for k in 0..m {
-                        dl[(c0 + c) * m + k] = buf.dl[c * m + k];
-                    }
-                }
-                c0 += e.kind.n_coef();
-            }
-            if FRAMES {
+            if DERIV || FRAMES {
                 frame.d_theta.clear();
                 frame
                     .d_theta
                     .extend((0..n).map(|j| jac.d_params[l.joint(j, JointParam::Theta)]));
                 frame.dlen = dlen;
+            }
+            if DERIV {
+                cols.set(&effects, &bases, &frame, &mut row[nf..]);
+            }
+            if FRAMES {
                 pose_f(pos, &frame);
             }
             match &pose.measurement {
@@ -241,8 +213,8 @@ impl<'a> EffectProblem<'a> {
                                 -1.0
                             };
                         }
-                        for &c in live.iter().filter(|_| DERIV) {
-                            row[nf + c] = u.dot(&dt[c]) + dl[c * m + k];
+                        for &c in cols.live.iter().filter(|_| DERIV) {
+                            row[nf + c] = u.dot(&cols.dt[c]) + cols.dl[c * m + k];
                         }
                         f(pos, res, &row, RowDir::String { u, k });
                     }
@@ -253,8 +225,8 @@ impl<'a> EffectProblem<'a> {
                         for (col, &fi) in self.free.iter().enumerate().filter(|_| DERIV) {
                             row[col] = if fi < g { jac.d_params[fi][comp] } else { 0.0 };
                         }
-                        for &c in live.iter().filter(|_| DERIV) {
-                            row[nf + c] = dt[c][comp];
+                        for &c in cols.live.iter().filter(|_| DERIV) {
+                            row[nf + c] = cols.dt[c][comp];
                         }
                         f(pos, res, &row, RowDir::Point { comp });
                     }
@@ -317,6 +289,58 @@ impl LeastSquares for EffectProblem<'_> {
             }
         }
         0.5 * cost
+    }
+}
+
+/// The effect coefficients live at one pose (see [`Basis::live`], indices
+/// into all the effects' coefficients) and, for each, T's derivative `dt`
+/// (rig frame, mm) and the readings' `dl` (`m` per coefficient); every
+/// other coefficient's entries stay zero.
+struct LiveColumns {
+    m: usize,
+    live: Vec<usize>,
+    dt: Vec<Vector3<f64>>,
+    dl: Vec<f64>,
+}
+
+impl LiveColumns {
+    /// For `nc` coefficients and `m` strings, none live.
+    fn new(nc: usize, m: usize) -> Self {
+        LiveColumns {
+            m,
+            live: Vec::new(),
+            dt: vec![Vector3::zeros(); nc],
+            dl: vec![0.0; nc * m],
+        }
+    }
+
+    /// The pose whose effects' bases are `bases` and whose frame is
+    /// `frame`: the last pose's entries (and their row entries in
+    /// `row_effects`, a row's effect part) cleared, this pose's set.
+    fn set(
+        &mut self,
+        effects: &[EffectModel],
+        bases: &[Basis],
+        frame: &PoseFrame,
+        row_effects: &mut [f64],
+    ) {
+        let m = self.m;
+        for &c in &self.live {
+            self.dt[c] = Vector3::zeros();
+            self.dl[c * m..(c + 1) * m].fill(0.0);
+            row_effects[c] = 0.0;
+        }
+        self.live.clear();
+        let mut c0 = 0;
+        for (e, buf) in effects.iter().zip(bases) {
+            for &c in &buf.live {
+                self.live.push(c0 + c);
+                self.dt[c0 + c] = frame.d_point(buf, c);
+                self.dl[(c0 + c) * m..(c0 + c + 1) * m]
+                    .copy_from_slice(&buf.dl[c * m..(c + 1) * m]);
+            }
+            c0 += e.kind.n_coef();
+        }
     }
 }
 

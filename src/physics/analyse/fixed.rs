@@ -22,7 +22,7 @@ use nalgebra::DMatrix;
 
 use super::normals::{Appended, BaseFactors, FOLDS, FoldAccumulator, Normals, cv_sse};
 use super::{Inputs, State};
-use crate::physics::effects::{Basis, EffectModel, Kind, hat_weights};
+use crate::physics::effects::{Basis, EffectModel, Kind, hat_weights, live_knots};
 use crate::physics::problem::{EffectProblem, PoseFrame, RowDir};
 
 /// The train rows of the model so far (geometry and accepted effects at
@@ -328,13 +328,7 @@ impl FixedBase {
                 *driver_index,
                 axis.as_ref(),
             );
-            let [(k0, w0), (k1, w1)] = hat_weights(knots, *period, x);
-            // One knot named twice weighs their sum, as the basis adds them.
-            let live: &[(usize, f64)] = &if k0 == k1 {
-                [(k0, w0 + w1), (k0, 0.0)]
-            } else {
-                [(k0, w0), (k1, w1)]
-            };
+            let live = live_knots(hat_weights(knots, *period, x));
             let f = self.fold_of[pos];
             let (s, e) = (t.start[pos], t.start[pos + 1]);
             let cols = &t.cols[s..e];
