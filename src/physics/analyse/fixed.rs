@@ -786,7 +786,7 @@ mod tests {
     /// geometric offset) is dropped by both.
     #[test]
     fn block_elimination_equals_the_whole_block() {
-        each_session(|inputs, state, fixed| {
+        each_session(|inputs, _, fixed| {
             let n = inputs.ctx.n_joints;
             let mut kinds = candidates(n, inputs.ctx.anchors.len());
             kinds.push(Kind::DataDriven {
