@@ -32,7 +32,8 @@
 //! run time knows: it is left out of compensation.
 //!
 //! Payload: an accepted joint compliance deflects the joint in proportion
-//! to its gravity torque, the payload hanging at T included.
+//! to its gravity torque, the payload hanging at T included; a compliant
+//! tool droops under the payload's moment about the flange.
 //! [`Compensator::from_report`] compensates with the payload the
 //! calibration session carried (its median `payload_kg`, none if it
 //! recorded none); [`Compensator::with_payload_kg`] gives the compensator
@@ -44,8 +45,9 @@
 //! minus the field's displacement there, with a warning for a target
 //! outside the region the calibration's poses covered.
 //!
-//! A base that tilts under the arm's gravity moment moves T by an amount
-//! that depends on the joints (and the payload): each solve aims the
+//! A base that tilts under the arm's gravity moment, and a tool that
+//! tilts about the flange under its payload's, move T by an amount that
+//! depends on the joints (and the payload): each solve aims the
 //! calibrated model at the target minus that shift at its starting joints,
 //! and once more at the solution's when they differ.
 //!
@@ -183,8 +185,8 @@ impl Compensator {
         (t, f.r)
     }
 
-    /// Where the calibrated robot (with its effects, a tilting base's shift
-    /// of T included) puts T and the flange when commanded `q_rad`.
+    /// Where the calibrated robot (with its effects, the shift of T by a
+    /// tilting base or a compliant tool included) puts T and the flange when commanded `q_rad`.
     pub fn calibrated_pose(&self, q_rad: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
         let q = self.effective(q_rad);
         let (f, t) = self
@@ -193,7 +195,7 @@ impl Compensator {
         let shift = self
             .joint_effects
             .as_ref()
-            .and_then(|e| e.base_shift_mm(q_rad))
+            .and_then(|e| e.point_shift_mm(q_rad))
             .unwrap_or_default();
         (t + shift, f.r)
     }

@@ -109,10 +109,14 @@ impl Compensator {
     }
 
     /// Where to aim the calibrated model so that T lands on `pos` when a
-    /// tilting base moves it by its shift at joints `q` (`pos` itself
-    /// without a base tilt).
+    /// tilting base or a compliant tool moves it by its shift at joints `q`
+    /// (`pos` itself without either).
     fn tilt_aim(&self, pos: &Vector3<f64>, q: &[f64]) -> Vector3<f64> {
-        match self.joint_effects.as_ref().and_then(|e| e.base_shift_mm(q)) {
+        match self
+            .joint_effects
+            .as_ref()
+            .and_then(|e| e.point_shift_mm(q))
+        {
             Some(shift) => pos - shift,
             None => *pos,
         }

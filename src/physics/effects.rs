@@ -81,6 +81,9 @@ impl Kind {
                 "the zero of string {} creeps steadily during the session (the encoder or its electronics drifting as they warm up)",
                 sensor_index + 1
             ),
+            Kind::ToolCompliance => {
+                "the tool (its adapter, quick changer or holder) tilts about the flange under the gravity moment of the payload it carries, so T droops more the heavier the payload and the more its lever from the flange lies across gravity".into()
+            }
             Kind::BaseTilt => {
                 "the robot's mount (pedestal, floor or stand) tilts under the gravity moment of the arm and its payload about the base, so T moves as if the whole robot leaned, more the further the arm reaches out".into()
             }
@@ -467,6 +470,13 @@ pub struct PoseContext {
     tilt: Vector3<f64>,
     /// Size of that gravity moment (N·m; zero without masses).
     pub base_moment_nm: f64,
+    /// Displacement of T in the rig frame (mm) per rad/(N·m) of a tool's
+    /// compliance: the gravity moment of the payload at T about the
+    /// flange origin (N·m), as a rotation, applied to T's lever from the
+    /// flange (zero without a payload).
+    droop: Vector3<f64>,
+    /// Size of that gravity moment (N·m; zero without a payload).
+    pub flange_moment_nm: f64,
     /// Displacement of T in the rig frame (mm) per mm of each length of
     /// [`Context::lengths`], in that order, at the nominal geometry (a
     /// length's change moves T by this to first order; the deviations
@@ -683,6 +693,21 @@ fn base_tilt(
     (moment.cross(tool), moment.norm())
 }
 
+/// A tool's compliance at one pose (base frame; flange origin `flange`
+/// and T at `tool`, mm): T's displacement (mm) per rad/(N·m), and the
+/// size of the gravity moment (N·m) of the `payload_kg` at T about the
+/// flange origin. The tool turns about the flange by the moment.
+fn tool_droop(
+    flange: &Vector3<f64>,
+    tool: &Vector3<f64>,
+    g_base: Vector3<f64>,
+    payload_kg: f64,
+) -> (Vector3<f64>, f64) {
+    let lever = tool - flange;
+    let moment = (lever * 1e-3).cross(&(g_base * payload_kg));
+    (moment.cross(&lever), moment.norm())
+}
+
 /// What every pose's context is built from: the robot's nominal chain
 /// and masses, gravity, and the session's clock and temperature
 /// ([`Context::new`]).
@@ -760,6 +785,7 @@ impl<'r> Session<'r> {
             }
             None => (Vector3::zeros(), 0.0),
         };
+        let (droop, flange_moment_nm) = tool_droop(&flange.o, &tool, self.g_base, payload);
         chain.point_jacobian(values, p.q_rad, OutputFrame::Base, jac);
         let thermal = match self.thermal_driver {
             ThermalDriver::Temperature => p.temp_c.unwrap_or(self.temp_ref) - self.temp_ref,
@@ -788,6 +814,8 @@ impl<'r> Session<'r> {
             move_direction_rad: vec![0.0; self.n_joints.saturating_sub(1)],
             tilt,
             base_moment_nm,
+            droop: rot * droop,
+            flange_moment_nm,
             d_lengths: self
                 .lengths
                 .iter()
@@ -1001,6 +1029,11 @@ impl Context {
             Kind::RigDrift => self.rigid_basis(pc, self.clock_h(pc), out),
             Kind::BaseTilt => {
                 for (d, t) in out.dp.iter_mut().zip(pc.tilt.iter()) {
+                    *d = *t;
+                }
+            }
+            Kind::ToolCompliance => {
+                for (d, t) in out.dp.iter_mut().zip(pc.droop.iter()) {
                     *d = *t;
                 }
             }
@@ -1488,6 +1521,29 @@ impl Delta {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A tool's droop per unit compliance against T turned exactly about
+    /// the flange by the payload's moment times a small compliance: the
+    /// first-order column is the rotation's derivative.
+    #[test]
+    fn a_tools_droop_is_the_derivative_of_its_rotation_about_the_flange() {
+        let flange = Vector3::new(400.0, -120.0, 650.0);
+        let tool = flange + Vector3::new(60.0, 35.0, -140.0);
+        let g = Vector3::new(0.3, -0.2, -9.8);
+        let kg = 2.5;
+        let (droop, moment_nm) = tool_droop(&flange, &tool, g, kg);
+        let moment = ((tool - flange) * 1e-3).cross(&(g * kg));
+        assert!((moment_nm - moment.norm()).abs() < 1e-12);
+        let c = 1e-7;
+        let turned = flange + nalgebra::Rotation3::from_scaled_axis(moment * c) * (tool - flange);
+        let fd = (turned - tool) / c;
+        assert!(
+            (fd - droop).norm() < 1e-6 * droop.norm(),
+            "{fd:?} vs {droop:?}"
+        );
+        // No payload: no droop.
+        assert_eq!(tool_droop(&flange, &tool, g, 0.0).0, Vector3::zeros());
+    }
 
     /// The reading change per unit of the rig's scale against the exact
     /// change of the string's length when the anchor moves outward.

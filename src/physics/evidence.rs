@@ -115,6 +115,10 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             d(format!("{label} (step {})", ctx.when(*t0_s)), unit)
         }
         Kind::BaseTilt => d("gravity moment of the arm about the base".into(), "N*m"),
+        Kind::ToolCompliance => d(
+            "gravity moment of the payload about the flange".into(),
+            "N*m",
+        ),
         Kind::CableSag => Driver {
             label: "horizontal span of the string".into(),
             unit: "m".into(),
@@ -191,6 +195,7 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
         Kind::SensorOffset { .. } | Kind::AnchorStep { .. } if !ctx.timed => pc.time_s + 1.0,
         Kind::SensorOffset { .. } | Kind::AnchorStep { .. } => pc.time_s,
         Kind::BaseTilt => pc.base_moment_nm,
+        Kind::ToolCompliance => pc.flange_moment_nm,
         Kind::CableSag => {
             let v = pc.point_rig - ctx.anchors[k];
             let vert = v.dot(&ctx.gravity_rig);

@@ -25,6 +25,13 @@ pub use field::WorkspaceField;
 use crate::model::Robot;
 use crate::report::Finding;
 
+/// The robot-side effects that move T itself at a pose rather than a
+/// joint's angle: a mount tilting under the arm's moment, a tool tilting
+/// about the flange under its payload's.
+fn moves_t_directly(kind: &Kind) -> bool {
+    matches!(kind, Kind::BaseTilt | Kind::ToolCompliance)
+}
+
 /// The accepted effect models of report findings (`unexplained` has
 /// none).
 pub fn effects_of(findings: &[Finding]) -> Vec<EffectModel> {
@@ -37,7 +44,7 @@ pub fn effects_of(findings: &[Finding]) -> Vec<EffectModel> {
 /// The robot-side effects a calibration accepted (compliance, backlash,
 /// periodic and scale errors of the joints, and a base that tilts under the
 /// arm's moment), ready to evaluate at commanded joints: the joint
-/// really sits at `q + offsets_rad(q)`, and T moves by `base_shift_mm(q)`. To put T where the calibrated model
+/// really sits at `q + offsets_rad(q)`, and T moves by `point_shift_mm(q)`. To put T where the calibrated model
 /// puts it with angles `q_model`, command `q_model - offsets(q_model)` (one
 /// fixed-point step is enough: the offsets change by their own square).
 ///
@@ -67,7 +74,7 @@ impl JointEffects {
         // a move or the gravity load is this session's, not the target's.
         let effects: Vec<EffectModel> = effects_of(findings)
             .into_iter()
-            .filter(|e| e.kind.joint().is_some() || e.kind == Kind::BaseTilt)
+            .filter(|e| e.kind.joint().is_some() || moves_t_directly(&e.kind))
             .filter(|e| match &e.kind {
                 Kind::DataDriven { driver, .. } => driver.usable_for_compensation(),
                 _ => true,
@@ -163,14 +170,14 @@ impl JointEffects {
         (!out.is_empty()).then(|| out.join("; "))
     }
 
-    /// How far a tilting base moves T (mm, robot base frame) at the
-    /// commanded `q_rad` with the current payload; `None` when the
-    /// calibration accepted no base tilt.
-    pub fn base_shift_mm(&self, q_rad: &[f64]) -> Option<nalgebra::Vector3<f64>> {
+    /// How far a tilting base and a compliant tool move T (mm, robot base
+    /// frame) at the commanded `q_rad` with the current payload; `None`
+    /// when the calibration accepted neither.
+    pub fn point_shift_mm(&self, q_rad: &[f64]) -> Option<nalgebra::Vector3<f64>> {
         let tilt: Vec<EffectModel> = self
             .effects
             .iter()
-            .filter(|e| e.kind == Kind::BaseTilt)
+            .filter(|e| moves_t_directly(&e.kind))
             .cloned()
             .collect();
         if tilt.is_empty() {

@@ -292,6 +292,13 @@ pub enum Kind {
     /// the payload about it, a vector in the horizontal plane: T moves by
     /// that rotation about the base origin. Needs link masses.
     BaseTilt,
+    /// The tool (its adapter, quick changer or holder) tilts about the
+    /// flange origin by `c` (rad/(N·m)) times the gravity moment of the
+    /// payload at T about the flange origin: T droops by that rotation of
+    /// its lever from the flange. Known only where poses carry a payload
+    /// (`payload_kg`); the tool's own weight is not modelled (robot.json
+    /// does not give it).
+    ToolCompliance,
     /// Anchor `sensor_index` moved by a vector (mm, rig frame) at `t0_s`.
     AnchorStep {
         /// 0-based sensor.
@@ -361,6 +368,7 @@ impl Kind {
             Kind::SensorDrift { .. } => "sensor_drift",
             Kind::CableSag => "cable_sag",
             Kind::BaseTilt => "base_tilt",
+            Kind::ToolCompliance => "tool_compliance",
             Kind::AnchorStep { .. } => "anchor_step",
             Kind::RigStep { .. } => "rig_step",
             Kind::RigDrift => "rig_drift",
@@ -414,6 +422,7 @@ impl Kind {
                 | Kind::RigStep { .. }
                 | Kind::RigDrift
                 | Kind::BaseTilt
+                | Kind::ToolCompliance
                 | Kind::DataDriven {
                     target: CorrectionTarget::JointAngle
                         | CorrectionTarget::Point
@@ -557,8 +566,9 @@ impl EffectModel {
                         .zip(&self.coef)
                         .any(|(&r, &c)| r == payload_regressor && c != 0.0)
             }
-            // The payload adds its moment about the base.
-            Kind::BaseTilt => true,
+            // The payload adds its moment about the base, or is the load
+            // the tool gives under.
+            Kind::BaseTilt | Kind::ToolCompliance => true,
             _ => false,
         }
     }

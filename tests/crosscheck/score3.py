@@ -28,7 +28,10 @@ TARGETS = {"located_pct": 90.0, "misnamed_per10": 1.0, "ratio": 1.3}
 # base_tilt: added 2026-12-04, after this simulator's tune half showed it
 # named joint_compliance on joint 2 (a compliant pedestal or floor is
 # common physics).
-NOW_IN_CATALOGUE = {"base_tilt": "base_tilt"}
+# payload_tool_droop (gen4.py): added 2026-12-08 as tool_compliance, after
+# gen4 showed its six recordings named as wrist-joint compliance (a tool
+# adapter or quick changer giving under its payload is common physics).
+NOW_IN_CATALOGUE = {"base_tilt": "base_tilt", "payload_tool_droop": "tool_compliance"}
 
 
 def _num(x):

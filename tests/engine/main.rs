@@ -37,6 +37,7 @@ mod physics_rig;
 mod physics_sensor_drift;
 mod physics_string_direction;
 mod physics_string_move;
+mod physics_tool_compliance;
 mod physics_workspace;
 mod plan;
 mod plan_effects;

@@ -70,6 +70,14 @@ pub(super) fn candidates(
             "the gravity moment of the arm about the base".into(),
         );
     }
+    // The tool giving under its payload: known only where poses carry one.
+    if train.iter().any(|&i| ctx.poses[i].flange_moment_nm > 0.0) {
+        list.push(
+            Kind::ToolCompliance,
+            1,
+            "the gravity moment of the payload about the flange".into(),
+        );
+    }
     thermal_candidates(&mut list, ctx, train, accepted);
     // Change points at quantiles of the train times; each family scans
     // every change point of the session, so its look-elsewhere count is

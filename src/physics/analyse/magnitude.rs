@@ -75,7 +75,9 @@ fn size_of<'a>(
                 })
             }
         }
-        Kind::Backlash { .. } | Kind::BaseTilt => Box::new(move |c: &[f64]| c[0] * deg),
+        Kind::Backlash { .. } | Kind::BaseTilt | Kind::ToolCompliance => {
+            Box::new(move |c: &[f64]| c[0] * deg)
+        }
         Kind::JointPeriodic { .. } => Box::new(move |c: &[f64]| c[0].hypot(c[1]) * deg),
         Kind::JointScale { .. } => Box::new(|c: &[f64]| c[0] * 1e6),
         // A settling warm-up: its initial rate per hour says little at a
@@ -348,7 +350,7 @@ fn fixed_unit(kind: &Kind) -> &'static str {
         Kind::SensorOffset { .. } => "mm",
         Kind::SensorDrift { .. } => "mm/h",
         Kind::CableSag => "mm/m^3",
-        Kind::BaseTilt => "deg/(N*m)",
+        Kind::BaseTilt | Kind::ToolCompliance => "deg/(N*m)",
         Kind::AnchorStep { .. } => "mm",
         Kind::RigStep { .. } => "mm (RMS displacement of T after the move)",
         Kind::RigDrift => "mm (RMS displacement of T over the session)",

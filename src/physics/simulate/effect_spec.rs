@@ -41,6 +41,12 @@ pub(super) fn effect_model(
             }
             (Kind::BaseTilt, vec![mag.to_radians()])
         }
+        "tool_compliance" => {
+            if ctx.poses.iter().all(|p| p.flange_moment_nm == 0.0) {
+                return Err("tool_compliance needs a payload: session.payload_kg (or a payload_kg column in the targets) with a nonzero payload".into());
+            }
+            (Kind::ToolCompliance, vec![mag.to_radians()])
+        }
         "anchor_step" => anchor_step(es, mag, ctx, time, rng)?,
         "rig_step" | "rig_drift" => rig_motion(es, mag, time, rng)?,
         other => return Err(format!("unknown effect '{other}'")),
@@ -211,7 +217,7 @@ pub fn report_magnitude(e: &EffectModel, ctx: &Context) -> (f64, &'static str) {
         Kind::SensorOffset { .. } => (c[0], "mm"),
         Kind::SensorDrift { .. } => (c[0], "mm/h"),
         Kind::CableSag => (c[0], "mm/m^3"),
-        Kind::BaseTilt => (c[0] * deg, "deg/(N*m)"),
+        Kind::BaseTilt | Kind::ToolCompliance => (c[0] * deg, "deg/(N*m)"),
         Kind::AnchorStep { .. } => ((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt(), "mm"),
         Kind::RigStep { .. } => (
             ctx.rigid_rms_mm(&e.kind, c, &(0..ctx.poses.len()).collect::<Vec<_>>()),
