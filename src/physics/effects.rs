@@ -81,6 +81,11 @@ impl Kind {
                 "the zero of string {} creeps steadily during the session (the encoder or its electronics drifting as they warm up)",
                 sensor_index + 1
             ),
+            Kind::LinkBending { link_index } => format!(
+                "the link from joint {} to joint {} bends under the weight it carries (its own, the outboard links' and the payload's), like a cantilever, so the joints beyond it are displaced and turned by more than a stiff joint would give",
+                link_index + 1,
+                link_index + 2
+            ),
             Kind::ToolCompliance => {
                 "the tool (its adapter, quick changer or holder) tilts about the flange under the gravity moment of the payload it carries, so T droops more the heavier the payload and the more its lever from the flange lies across gravity".into()
             }
@@ -477,6 +482,13 @@ pub struct PoseContext {
     droop: Vector3<f64>,
     /// Size of that gravity moment (N·m; zero without a payload).
     pub flange_moment_nm: f64,
+    /// Per joint `j` but the last: displacement of T in the rig frame
+    /// (mm) per 1/(N·m²) of the link from joint `j`'s axis to joint `j +
+    /// 1`'s bending under its load (empty without masses).
+    bending: Vec<Vector3<f64>>,
+    /// Per joint `j` but the last: the load's bending moment at that
+    /// link's root across it (N·m; empty without masses).
+    pub bending_moment_nm: Vec<f64>,
     /// Displacement of T in the rig frame (mm) per mm of each length of
     /// [`Context::lengths`], in that order, at the nominal geometry (a
     /// length's change moves T by this to first order; the deviations
@@ -514,6 +526,10 @@ pub struct Context {
     /// The session's median payload (kg) when any pose recorded one: what
     /// compensation assumes the robot carries unless told otherwise.
     pub payload_ref_kg: Option<f64>,
+    /// Per joint `j`: the distance (mm) from its axis's origin to joint
+    /// `j + 1`'s, the span of the link a [`Kind::LinkBending`] bends (zero
+    /// for the last joint).
+    pub link_spans_mm: Vec<f64>,
     /// Centre of the poses' points (rig frame, mm): the pivot of rig rotations,
     /// so that their coefficients are not mostly translation.
     pub centre_rig: Vector3<f64>,
@@ -546,6 +562,12 @@ pub struct PoseInput<'a> {
 /// `cos q` term was left for a separate periodic error of the same joint).
 /// Each is a coefficient the look-elsewhere threshold charges for.
 pub const MAX_COMPLIANCE_REGRESSORS: usize = 4;
+
+/// Shortest link (mm, between consecutive joint axes' origins) proposed
+/// as bending: a cantilever's tip moves with the cube of its span, so an
+/// offset of a few centimetres between axes is stiff beside the upper arm
+/// and forearm (0.3-0.6 m on arms of 3-10 kg payload).
+pub const MIN_BENDING_SPAN_MM: f64 = 200.0;
 
 /// `(parameter index, nominal value)` of every nonzero a and d of `robot`:
 /// the lengths thermal expansion scales. A thermal multiplier `m` adds
@@ -708,6 +730,52 @@ fn tool_droop(
     (moment.cross(&lever), moment.norm())
 }
 
+/// A link bending at one pose (base frame): T's displacement (mm) per
+/// 1/(N·m²) of the link from joint `j`'s axis origin to joint `j + 1`'s
+/// (`axes`), a cantilever from the first, under its own weight (link `j`
+/// of `masses`, spread evenly along it) and, at its end, the force and
+/// moment of the outboard links and the `payload_kg` at T; and the size of
+/// the bending moment at its root (N·m). Only the load's components across
+/// the link bend it: Euler-Bernoulli's tip deflection `F L³/3 + (M × e)
+/// L²/2 + w L⁴/8` and rotation `e × F L²/2 + M L + e × w L³/6`, `e` along
+/// the link, applied to T's lever from the end.
+fn link_bending(
+    frames: &[crate::kinematics::chain::Frame],
+    axes: &[(Vector3<f64>, Vector3<f64>)],
+    tool: &Vector3<f64>,
+    masses: &[crate::model::LinkMass],
+    g_base: Vector3<f64>,
+    payload_kg: f64,
+    j: usize,
+) -> (Vector3<f64>, f64) {
+    let (root, end) = (axes[j].1 * 1e-3, axes[j + 1].1 * 1e-3);
+    let span = end - root;
+    let l = span.norm();
+    if l < 1e-9 {
+        return (Vector3::zeros(), 0.0);
+    }
+    let e = span / l;
+    let across = |v: Vector3<f64>| v - e * e.dot(&v);
+    let (mut force, mut moment) = (
+        g_base * payload_kg,
+        (tool * 1e-3 - end).cross(&(g_base * payload_kg)),
+    );
+    for (k, lm) in masses.iter().enumerate().skip(j + 1) {
+        let c = frames[k].apply(&Vector3::new(lm.com_mm[0], lm.com_mm[1], lm.com_mm[2])) * 1e-3;
+        force += g_base * lm.mass_kg;
+        moment += (c - end).cross(&(g_base * lm.mass_kg));
+    }
+    let w = across(g_base * masses[j].mass_kg / l);
+    let (f, m) = (across(force), across(moment));
+    let tip = f * (l.powi(3) / 3.0) + m.cross(&e) * (l * l / 2.0) + w * (l.powi(4) / 8.0);
+    let turn = e.cross(&f) * (l * l / 2.0) + m * l + e.cross(&w) * (l.powi(3) / 6.0);
+    let root_moment = m + e.cross(&f) * l + e.cross(&w) * (l * l / 2.0);
+    (
+        (tip + turn.cross(&(tool * 1e-3 - end))) * 1e3,
+        root_moment.norm(),
+    )
+}
+
 /// What every pose's context is built from: the robot's nominal chain
 /// and masses, gravity, and the session's clock and temperature
 /// ([`Context::new`]).
@@ -786,6 +854,16 @@ impl<'r> Session<'r> {
             None => (Vector3::zeros(), 0.0),
         };
         let (droop, flange_moment_nm) = tool_droop(&flange.o, &tool, self.g_base, payload);
+        // Without masses nothing bends: no room taken per pose.
+        let (bending, bending_moment_nm): (Vec<Vector3<f64>>, Vec<f64>) = match self.masses {
+            Some(ms) => (0..self.n_joints.saturating_sub(1))
+                .map(|j| {
+                    let (d, m) = link_bending(&frames, &axes, &tool, ms, self.g_base, payload, j);
+                    (rot * d, m)
+                })
+                .unzip(),
+            None => (Vec::new(), Vec::new()),
+        };
         chain.point_jacobian(values, p.q_rad, OutputFrame::Base, jac);
         let thermal = match self.thermal_driver {
             ThermalDriver::Temperature => p.temp_c.unwrap_or(self.temp_ref) - self.temp_ref,
@@ -816,6 +894,8 @@ impl<'r> Session<'r> {
             base_moment_nm,
             droop: rot * droop,
             flange_moment_nm,
+            bending,
+            bending_moment_nm,
             d_lengths: self
                 .lengths
                 .iter()
@@ -859,7 +939,24 @@ impl Context {
             .iter()
             .fold(Vector3::zeros(), |acc, p| acc + p.point_rig)
             / poses.len().max(1) as f64;
+        // A rigid link's span between the axes is the same at every pose.
+        let link_spans_mm = match poses.first() {
+            Some(p) => {
+                let axes =
+                    session
+                        .chain
+                        .joint_axes(&session.nominal.values, p.q_rad, OutputFrame::Base);
+                (0..n)
+                    .map(|j| {
+                        axes.get(j + 1)
+                            .map_or(0.0, |next| (next.1 - axes[j].1).norm())
+                    })
+                    .collect()
+            }
+            None => vec![0.0; n],
+        };
         let mut ctx = Context {
+            link_spans_mm,
             n_joints: n,
             anchors,
             r_mm,
@@ -951,6 +1048,20 @@ impl Context {
         idx
     }
 
+    /// True when the link from joint `j`'s axis to the next joint's is one
+    /// [`Kind::LinkBending`] models: link masses known, a span of at least
+    /// [`MIN_BENDING_SPAN_MM`], and not the first joint's (the column from
+    /// the base carries the arm's moment about the base, and bends as the
+    /// mount tilts: [`Kind::BaseTilt`] is that shape).
+    pub fn can_bend(&self, j: usize) -> bool {
+        self.has_masses
+            && j >= 1
+            && self
+                .link_spans_mm
+                .get(j)
+                .is_some_and(|&s| s >= MIN_BENDING_SPAN_MM)
+    }
+
     /// The basis of `kind` at pose `i`: per coefficient, `n_joints` joint
     /// angle changes (rad), one thermal multiplier of the nominal lengths,
     /// one reading change per string (mm) and a displacement of T relative
@@ -1034,6 +1145,12 @@ impl Context {
             }
             Kind::ToolCompliance => {
                 for (d, t) in out.dp.iter_mut().zip(pc.droop.iter()) {
+                    *d = *t;
+                }
+            }
+            Kind::LinkBending { link_index } => {
+                let b = pc.bending.get(*link_index).copied().unwrap_or_default();
+                for (d, t) in out.dp.iter_mut().zip(b.iter()) {
                     *d = *t;
                 }
             }

@@ -115,6 +115,14 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             d(format!("{label} (step {})", ctx.when(*t0_s)), unit)
         }
         Kind::BaseTilt => d("gravity moment of the arm about the base".into(), "N*m"),
+        Kind::LinkBending { link_index } => d(
+            format!(
+                "bending moment at the root of the link from joint {} to joint {}",
+                link_index + 1,
+                link_index + 2
+            ),
+            "N*m",
+        ),
         Kind::ToolCompliance => d(
             "gravity moment of the payload about the flange".into(),
             "N*m",
@@ -196,6 +204,11 @@ fn driver_value(ctx: &Context, kind: &Kind, i: usize, k: usize, buf: &mut Basis)
         Kind::SensorOffset { .. } | Kind::AnchorStep { .. } => pc.time_s,
         Kind::BaseTilt => pc.base_moment_nm,
         Kind::ToolCompliance => pc.flange_moment_nm,
+        Kind::LinkBending { link_index } => pc
+            .bending_moment_nm
+            .get(*link_index)
+            .copied()
+            .unwrap_or(0.0),
         Kind::CableSag => {
             let v = pc.point_rig - ctx.anchors[k];
             let vert = v.dot(&ctx.gravity_rig);

@@ -26,10 +26,13 @@ use crate::model::Robot;
 use crate::report::Finding;
 
 /// The robot-side effects that move T itself at a pose rather than a
-/// joint's angle: a mount tilting under the arm's moment, a tool tilting
-/// about the flange under its payload's.
+/// joint's angle: a mount tilting under the arm's moment, a link bending
+/// under its load, a tool tilting about the flange under its payload's.
 fn moves_t_directly(kind: &Kind) -> bool {
-    matches!(kind, Kind::BaseTilt | Kind::ToolCompliance)
+    matches!(
+        kind,
+        Kind::BaseTilt | Kind::ToolCompliance | Kind::LinkBending { .. }
+    )
 }
 
 /// The accepted effect models of report findings (`unexplained` has

@@ -299,6 +299,18 @@ pub enum Kind {
     /// (`payload_kg`); the tool's own weight is not modelled (robot.json
     /// does not give it).
     ToolCompliance,
+    /// The link between joint `link_index`'s axis and the next joint's
+    /// (0-based: 1 is the upper arm of a six-axis arm) bends as a
+    /// cantilever from the first axis under the weight it carries: its
+    /// own, spread along it, and at its end the outboard links' and the
+    /// payload's, as a force and a moment (the components across the
+    /// link; its twist is not modelled). The end moves and turns by
+    /// Euler-Bernoulli's tip deflections times the coefficient `1/EI`
+    /// (1/(N·m²)), and T with it. Needs link masses.
+    LinkBending {
+        /// 0-based joint at the link's fixed end.
+        link_index: usize,
+    },
     /// Anchor `sensor_index` moved by a vector (mm, rig frame) at `t0_s`.
     AnchorStep {
         /// 0-based sensor.
@@ -369,6 +381,7 @@ impl Kind {
             Kind::CableSag => "cable_sag",
             Kind::BaseTilt => "base_tilt",
             Kind::ToolCompliance => "tool_compliance",
+            Kind::LinkBending { .. } => "link_bending",
             Kind::AnchorStep { .. } => "anchor_step",
             Kind::RigStep { .. } => "rig_step",
             Kind::RigDrift => "rig_drift",
@@ -423,6 +436,7 @@ impl Kind {
                 | Kind::RigDrift
                 | Kind::BaseTilt
                 | Kind::ToolCompliance
+                | Kind::LinkBending { .. }
                 | Kind::DataDriven {
                     target: CorrectionTarget::JointAngle
                         | CorrectionTarget::Point
@@ -554,8 +568,9 @@ impl EffectModel {
     /// True when a payload at T changes this effect's offsets on a robot of
     /// `n_joints` joints: a compliance with link masses (the payload adds
     /// its torque), or without masses one whose session varied the payload
-    /// (so that its lever was fitted); a base tilt (the payload adds its
-    /// moment).
+    /// (so that its lever was fitted); a base tilt, a bending link (the
+    /// payload adds its moment, its weight); a compliant tool (the payload
+    /// is its load).
     pub fn payload_matters(&self, n_joints: usize) -> bool {
         let payload_regressor = n_joints + 1;
         match &self.kind {
@@ -568,7 +583,7 @@ impl EffectModel {
             }
             // The payload adds its moment about the base, or is the load
             // the tool gives under.
-            Kind::BaseTilt | Kind::ToolCompliance => true,
+            Kind::BaseTilt | Kind::ToolCompliance | Kind::LinkBending { .. } => true,
             _ => false,
         }
     }
@@ -589,6 +604,16 @@ impl EffectModel {
         }
         if self.kind == Kind::BaseTilt && !has_masses {
             return Err("a base tilt is driven by the arm's gravity moment, which needs link masses, but the robot has none".into());
+        }
+        if let Kind::LinkBending { link_index } = self.kind {
+            if !has_masses {
+                return Err("a link bends under the weight it carries, which needs link masses, but the robot has none".into());
+            }
+            if link_index + 1 >= n_joints {
+                return Err(format!(
+                    "link_index {link_index} (0-based): a bending link runs from one joint's axis to the next, and the robot has {n_joints} joints"
+                ));
+            }
         }
         if let Kind::JointCompliance { regressors, .. } = &self.kind {
             if regressors.is_empty() != has_masses {

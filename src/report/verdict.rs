@@ -297,7 +297,10 @@ fn compensation(r: &Report) -> Option<(Level, String)> {
         let needs = match &model.kind {
             Kind::ThermalExpansion { .. } => Some("temp_c"),
             Kind::Backlash { .. } => Some("the approach direction"),
-            Kind::JointCompliance { .. } | Kind::BaseTilt | Kind::ToolCompliance
+            Kind::JointCompliance { .. }
+            | Kind::BaseTilt
+            | Kind::ToolCompliance
+            | Kind::LinkBending { .. }
                 if model.payload_matters(r.nominal_robot.dof()) =>
             {
                 Some("payload_kg")

@@ -31,7 +31,11 @@ TARGETS = {"located_pct": 90.0, "misnamed_per10": 1.0, "ratio": 1.3}
 # payload_tool_droop (gen4.py): added 2026-12-08 as tool_compliance, after
 # gen4 showed its six recordings named as wrist-joint compliance (a tool
 # adapter or quick changer giving under its payload is common physics).
-NOW_IN_CATALOGUE = {"base_tilt": "base_tilt", "payload_tool_droop": "tool_compliance"}
+# link_bending (gen4.py): added 2026-12-08 as link_bending, after gen4
+# showed its six recordings named as joint 2's and 3's compliance (and a
+# base tilt); the catalogue's model is the textbook cantilever, as gen4's.
+NOW_IN_CATALOGUE = {"base_tilt": "base_tilt", "payload_tool_droop": "tool_compliance",
+                    "link_bending": "link_bending"}
 
 
 def _num(x):

@@ -31,6 +31,7 @@ mod physics_evidence;
 mod physics_honesty;
 mod physics_in_time;
 mod physics_joint_angle;
+mod physics_link_bending;
 mod physics_payload;
 mod physics_periodic;
 mod physics_rig;

@@ -70,6 +70,21 @@ pub(super) fn candidates(
             "the gravity moment of the arm about the base".into(),
         );
     }
+    // A long link bending under the weight it carries: known only with
+    // masses.
+    for j in 0..ctx.n_joints {
+        if ctx.can_bend(j) {
+            list.push(
+                Kind::LinkBending { link_index: j },
+                1,
+                format!(
+                    "the bending of the link from joint {} to joint {} under its load",
+                    j + 1,
+                    j + 2
+                ),
+            );
+        }
+    }
     // The tool giving under its payload: known only where poses carry one.
     if train.iter().any(|&i| ctx.poses[i].flange_moment_nm > 0.0) {
         list.push(

@@ -235,7 +235,11 @@ fn thermal_doubt(ctx: &Context, e: &EffectModel) -> Option<String> {
 /// the temperature a thermal expansion scales from).
 fn finding_parameters(ctx: &Context, e: &EffectModel) -> EffectParameters {
     let mut p = EffectParameters::new(e.clone());
-    if let Kind::JointCompliance { .. } | Kind::BaseTilt | Kind::ToolCompliance = e.kind {
+    if let Kind::JointCompliance { .. }
+    | Kind::BaseTilt
+    | Kind::ToolCompliance
+    | Kind::LinkBending { .. } = e.kind
+    {
         p.reference_payload_kg = ctx.payload_ref_kg;
         p.payload_matters = Some(e.payload_matters(ctx.n_joints));
     }

@@ -367,6 +367,9 @@ fn unphysical(e: &EffectModel) -> Option<String> {
         Kind::BaseTilt if c < 0.0 => Some(
             "fitted negative, the mount tilting against the arm's gravity moment, which a yielding mount never does".into(),
         ),
+        Kind::LinkBending { .. } if c < 0.0 => Some(
+            "fitted negative, the link bending against the weight it carries, which an elastic link never does".into(),
+        ),
         Kind::ToolCompliance if c < 0.0 => Some(
             "fitted negative, the tool tilting against its payload's gravity moment, which a yielding adapter never does".into(),
         ),

@@ -75,6 +75,7 @@ fn size_of<'a>(
                 })
             }
         }
+        Kind::LinkBending { .. } => Box::new(|c: &[f64]| c[0] * 1e6),
         Kind::Backlash { .. } | Kind::BaseTilt | Kind::ToolCompliance => {
             Box::new(move |c: &[f64]| c[0] * deg)
         }
@@ -351,6 +352,7 @@ fn fixed_unit(kind: &Kind) -> &'static str {
         Kind::SensorDrift { .. } => "mm/h",
         Kind::CableSag => "mm/m^3",
         Kind::BaseTilt | Kind::ToolCompliance => "deg/(N*m)",
+        Kind::LinkBending { .. } => "1e-6/(N*m^2) (1/EI)",
         Kind::AnchorStep { .. } => "mm",
         Kind::RigStep { .. } => "mm (RMS displacement of T after the move)",
         Kind::RigDrift => "mm (RMS displacement of T over the session)",

@@ -543,8 +543,19 @@ pub(super) struct Series {
     why: &'static str,
 }
 
+/// The joint a named effect is a term of: its own, or for a bending link
+/// the joint at its root (the bending turns what follows by the load that
+/// joint carries, as its compliance does).
+fn term_joint(kind: &crate::physics::effects::Kind) -> Option<usize> {
+    match kind {
+        crate::physics::effects::Kind::LinkBending { link_index } => Some(*link_index),
+        k => k.joint(),
+    }
+}
+
 /// The named effects of `state` whose shape is no one physical effect:
-/// three or more terms of one joint, or two
+/// three or more terms of one joint (a bending link's counts at its root
+/// joint, [`term_joint`]), or two
 /// shape terms (harmonics, a scale error) of one joint; two or more moves
 /// or drifts of the rig; two or more steps or creeps of one string.
 pub(super) fn series(state: &State) -> Vec<Series> {
@@ -553,12 +564,12 @@ pub(super) fn series(state: &State) -> Vec<Series> {
     let mut out = Vec::new();
     let n_joints = acc
         .iter()
-        .filter_map(|e| e.kind.joint())
+        .filter_map(|e| term_joint(&e.kind))
         .max()
         .map_or(0, |j| j + 1);
     for j in 0..n_joints {
         let terms: Vec<usize> = (0..acc.len())
-            .filter(|&k| !acc[k].kind.is_data_driven() && acc[k].kind.joint() == Some(j))
+            .filter(|&k| !acc[k].kind.is_data_driven() && term_joint(&acc[k].kind) == Some(j))
             .collect();
         let is_shape = |k: &usize| {
             matches!(
@@ -627,7 +638,8 @@ pub(super) fn series(state: &State) -> Vec<Series> {
 /// or of one string (and a thermal expansion driven by the clock), the
 /// temperature for a thermal expansion driven by it, a string's length
 /// for that string's scale or offset, a joint's angle for that joint's
-/// compliance, periodic term or scale error. They did not explain the structure
+/// compliance, periodic term or scale error (and the root joint's for a
+/// bending link). They did not explain the structure
 /// they were found on (a knock that springs back, a joint's zero that
 /// jumped, a frame that grows with the temperature, a drum that winds
 /// unevenly), so they are condemned like a series.
@@ -676,7 +688,10 @@ pub(super) fn left_in_their_driver(state: &State, located: &State) -> Vec<Series
             // remainder still follows that joint's angle.
             Kind::JointCompliance { joint_index, .. }
             | Kind::JointPeriodic { joint_index, .. }
-            | Kind::JointScale { joint_index } => places
+            | Kind::JointScale { joint_index }
+            | Kind::LinkBending {
+                link_index: joint_index,
+            } => places
                 .iter()
                 .any(|p| p.driver == "joint" && p.joint == Some(joint_index + 1)),
             _ => false,

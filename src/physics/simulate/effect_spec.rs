@@ -41,6 +41,20 @@ pub(super) fn effect_model(
             }
             (Kind::BaseTilt, vec![mag.to_radians()])
         }
+        "link_bending" => {
+            if !ctx.has_masses {
+                return Err("link_bending needs link masses in robot.json".into());
+            }
+            let j = joint_index(es, ctx.n_joints)?;
+            if !ctx.can_bend(j) {
+                return Err(format!(
+                    "link_bending: the link from joint {} to the next joint's axis is not one the analysis models (the first joint's column, or a span under {} mm)",
+                    j + 1,
+                    crate::physics::effects::MIN_BENDING_SPAN_MM
+                ));
+            }
+            (Kind::LinkBending { link_index: j }, vec![mag * 1e-6])
+        }
         "tool_compliance" => {
             if ctx.poses.iter().all(|p| p.flange_moment_nm == 0.0) {
                 return Err("tool_compliance needs a payload: session.payload_kg (or a payload_kg column in the targets) with a nonzero payload".into());
@@ -218,6 +232,7 @@ pub fn report_magnitude(e: &EffectModel, ctx: &Context) -> (f64, &'static str) {
         Kind::SensorDrift { .. } => (c[0], "mm/h"),
         Kind::CableSag => (c[0], "mm/m^3"),
         Kind::BaseTilt | Kind::ToolCompliance => (c[0] * deg, "deg/(N*m)"),
+        Kind::LinkBending { .. } => (c[0] * 1e6, "1e-6/(N*m^2) (1/EI)"),
         Kind::AnchorStep { .. } => ((c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt(), "mm"),
         Kind::RigStep { .. } => (
             ctx.rigid_rms_mm(&e.kind, c, &(0..ctx.poses.len()).collect::<Vec<_>>()),
