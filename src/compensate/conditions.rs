@@ -397,8 +397,9 @@ impl<'a> Applied<'a> {
         Ok(&self.notes[from..])
     }
 
-    /// The payload asked, checked, and applied when the calibration has a
-    /// joint compliance that depends on it; the notes it made.
+    /// The payload asked, checked, and applied when the calibration has an
+    /// effect that depends on it (a joint's compliance, a base tilt, a
+    /// bending link, a compliant tool); the notes it made.
     pub fn payload(&mut self, payload_kg: Option<f64>) -> Result<&[Note]> {
         if let Some(p) = payload_kg {
             check_payload_kg(self.names.payload_kg, p)?;
@@ -410,23 +411,25 @@ impl<'a> Applied<'a> {
             (Some(reference), None) => self.note(
                 NoteKind::Defaulted,
                 format!(
-                    "the calibration models joint compliance; compensating with the calibration \
-                     session's payload {reference} kg. Give {name} with the payload the robot \
-                     carries"
+                    "the calibration models an effect of the payload (a joint's compliance, a \
+                     base tilt, a bending link or a compliant tool); compensating with the \
+                     calibration session's payload {reference} kg. Give {name} with the payload \
+                     the robot carries"
                 ),
             ),
             (Some(_), Some(p)) => {
                 self.note(
                     NoteKind::Applied,
-                    format!("compensating with a payload of {p} kg at T (joint compliance)"),
+                    format!("compensating with a payload of {p} kg at T"),
                 );
                 self.compensator = Cow::Owned(self.compensator.with_payload_kg(p));
             }
             (None, Some(_)) => self.note(
                 NoteKind::NotUsed,
                 format!(
-                    "{name} is not used: the calibration has no joint compliance that depends \
-                     on the payload"
+                    "{name} is not used: the calibration has no effect that depends on the \
+                     payload (a joint's compliance, a base tilt, a bending link or a compliant \
+                     tool)"
                 ),
             ),
             (None, None) => {}

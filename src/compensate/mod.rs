@@ -45,8 +45,9 @@
 //! minus the field's displacement there, with a warning for a target
 //! outside the region the calibration's poses covered.
 //!
-//! A base that tilts under the arm's gravity moment, and a tool that
-//! tilts about the flange under its payload's, move T by an amount that
+//! A base that tilts under the arm's gravity moment, a link that bends
+//! under its load, and a tool that tilts about the flange under its
+//! payload's, move T by an amount that
 //! depends on the joints (and the payload): each solve aims the
 //! calibrated model at the target minus that shift at its starting joints,
 //! and once more at the solution's when they differ.
@@ -186,7 +187,7 @@ impl Compensator {
     }
 
     /// Where the calibrated robot (with its effects, the shift of T by a
-    /// tilting base or a compliant tool included) puts T and the flange when commanded `q_rad`.
+    /// tilting base, a bending link or a compliant tool included) puts T and the flange when commanded `q_rad`.
     pub fn calibrated_pose(&self, q_rad: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
         let q = self.effective(q_rad);
         let (f, t) = self

@@ -109,9 +109,9 @@ impl Compensator {
     }
 
     /// Where to aim the calibrated model so that T lands on `pos` when a
-    /// tilting base or a compliant tool moves it by its shift at joints `q`
-    /// (`pos` itself without either).
-    fn tilt_aim(&self, pos: &Vector3<f64>, q: &[f64]) -> Vector3<f64> {
+    /// tilting base, a bending link or a compliant tool moves it by its
+    /// shift at joints `q` (`pos` itself without any of them).
+    fn load_aim(&self, pos: &Vector3<f64>, q: &[f64]) -> Vector3<f64> {
         match self
             .joint_effects
             .as_ref()
@@ -254,13 +254,13 @@ impl Compensator {
                     self.solve_taught(aim, rot.as_ref(), &seed)
                 }
             };
-            // A tilting base moves T by an amount that depends on the
-            // joints: aimed from the seed's, then once more from the
+            // A tilting base (a bending link, a compliant tool) moves T by
+            // an amount that depends on the joints: aimed from the seed's, then once more from the
             // solution's when they differ (a far numerical seed).
-            let aim = self.tilt_aim(&pos, &seed);
+            let aim = self.load_aim(&pos, &seed);
             let mut solved = run(&aim);
             if let Ok(sol) = &solved {
-                let again = self.tilt_aim(&pos, &sol.q);
+                let again = self.load_aim(&pos, &sol.q);
                 if (again - aim).norm() > 0.1 * self.tolerance_mm {
                     solved = run(&again);
                 }

@@ -82,7 +82,7 @@ impl Kind {
                 sensor_index + 1
             ),
             Kind::LinkBending { link_index } => format!(
-                "the link from joint {} to joint {} bends under the weight it carries (its own, the outboard links' and the payload's), like a cantilever, so the joints beyond it are displaced and turned by more than a stiff joint would give",
+                "the link from joint {} to joint {} bends under the weight it carries (its own, the outboard links' and the payload's), like a cantilever, so its end and everything beyond it are displaced and turned, more the further the load reaches out across it",
                 link_index + 1,
                 link_index + 2
             ),
@@ -497,6 +497,23 @@ pub struct PoseContext {
     /// The flange's x, y and z axes in the rig frame at the nominal
     /// geometry: how T moves per mm of the tool point along each.
     pub flange_axes_rig: [Vector3<f64>; 3],
+}
+
+impl PoseContext {
+    /// T's displacement (mm, rig frame) per unit coefficient of an effect
+    /// that moves T under a gravity load rather than turning a joint: a
+    /// base tilt, a tool's compliance, a link's bending (zero for any
+    /// other effect, and where the load is unknown).
+    fn load_shift(&self, kind: &Kind) -> Vector3<f64> {
+        match kind {
+            Kind::BaseTilt => self.tilt,
+            Kind::ToolCompliance => self.droop,
+            Kind::LinkBending { link_index } => {
+                self.bending.get(*link_index).copied().unwrap_or_default()
+            }
+            _ => Vector3::zeros(),
+        }
+    }
 }
 
 /// The pose contexts of a whole session and the fixed quantities effects use.
@@ -1138,21 +1155,9 @@ impl Context {
                 }
             }
             Kind::RigDrift => self.rigid_basis(pc, self.clock_h(pc), out),
-            Kind::BaseTilt => {
-                for (d, t) in out.dp.iter_mut().zip(pc.tilt.iter()) {
-                    *d = *t;
-                }
-            }
-            Kind::ToolCompliance => {
-                for (d, t) in out.dp.iter_mut().zip(pc.droop.iter()) {
-                    *d = *t;
-                }
-            }
-            Kind::LinkBending { link_index } => {
-                let b = pc.bending.get(*link_index).copied().unwrap_or_default();
-                for (d, t) in out.dp.iter_mut().zip(b.iter()) {
-                    *d = *t;
-                }
+            Kind::BaseTilt | Kind::ToolCompliance | Kind::LinkBending { .. } => {
+                let shift = pc.load_shift(kind);
+                out.dp[..3].copy_from_slice(shift.as_slice());
             }
             Kind::DataDriven { .. } => self.correction_basis(kind, pc, out),
         }
@@ -1638,6 +1643,93 @@ impl Delta {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A horizontal link (along x, 0.5 m, from joint 0's axis at the
+    /// origin to joint 1's) under gravity along -z: each load alone against
+    /// the textbook cantilever. T 0.2 m beyond the link's end along x turns
+    /// with the end's rotation.
+    #[test]
+    fn a_bending_links_deflections_are_the_textbook_cantilevers() {
+        use crate::kinematics::chain::Frame;
+        use crate::model::LinkMass;
+        let (l, g): (f64, f64) = (0.5, 9.81);
+        let at = |x_mm: f64| Frame {
+            r: nalgebra::Matrix3::identity(),
+            o: Vector3::new(x_mm, 0.0, 0.0),
+        };
+        // Link 1's frame at the link's end; joint axes along y.
+        let frames = [at(0.0), at(500.0), at(500.0)];
+        let axes = [
+            (Vector3::y(), Vector3::zeros()),
+            (Vector3::y(), Vector3::new(500.0, 0.0, 0.0)),
+            (Vector3::y(), Vector3::new(500.0, 0.0, 0.0)),
+        ];
+        let mass = |kg: f64, x_mm: f64| LinkMass {
+            mass_kg: kg,
+            com_mm: [x_mm, 0.0, 0.0],
+        };
+        let gravity = Vector3::new(0.0, 0.0, -g);
+        let end = Vector3::new(500.0, 0.0, 0.0);
+        let tool = Vector3::new(700.0, 0.0, 0.0);
+        let close = |a: Vector3<f64>, b: Vector3<f64>| (a - b).norm() < 1e-9 * b.norm().max(1.0);
+        let bend = |ms: &[LinkMass], t: &Vector3<f64>, kg: f64| {
+            link_bending(&frames, &axes, t, ms, gravity, kg, 0)
+        };
+        // A point mass at the end: F L^3 / 3 down, the end turned by F L^2 / 2.
+        let m = 3.0;
+        let f = m * g;
+        let (d, root) = bend(&[mass(0.0, 0.0), mass(m, 0.0), mass(0.0, 0.0)], &end, 0.0);
+        assert!(
+            close(d, Vector3::new(0.0, 0.0, -f * l.powi(3) / 3.0 * 1e3)),
+            "{d:?}"
+        );
+        assert!((root - f * l).abs() < 1e-9);
+        let (d, _) = bend(&[mass(0.0, 0.0), mass(m, 0.0), mass(0.0, 0.0)], &tool, 0.0);
+        let expect = -f * l.powi(3) / 3.0 - f * l * l / 2.0 * 0.2;
+        assert!(close(d, Vector3::new(0.0, 0.0, expect * 1e3)), "{d:?}");
+        // The same weight as a payload at the end: the same bending.
+        let (d, _) = bend(&[mass(0.0, 0.0), mass(0.0, 0.0), mass(0.0, 0.0)], &end, m);
+        assert!(
+            close(d, Vector3::new(0.0, 0.0, -f * l.powi(3) / 3.0 * 1e3)),
+            "{d:?}"
+        );
+        // A mass 0.1 m beyond the end: the force and a moment f * 0.1,
+        // M L^2 / 2 more at the end.
+        let (d, root) = bend(&[mass(0.0, 0.0), mass(m, 100.0), mass(0.0, 0.0)], &end, 0.0);
+        let expect = -f * l.powi(3) / 3.0 - f * 0.1 * l * l / 2.0;
+        assert!(close(d, Vector3::new(0.0, 0.0, expect * 1e3)), "{d:?}");
+        assert!((root - f * (l + 0.1)).abs() < 1e-9);
+        // The link's own weight, spread along it: w L^4 / 8.
+        let (d, root) = bend(&[mass(m, 250.0), mass(0.0, 0.0), mass(0.0, 0.0)], &end, 0.0);
+        assert!(
+            close(d, Vector3::new(0.0, 0.0, -f / l * l.powi(4) / 8.0 * 1e3)),
+            "{d:?}"
+        );
+        assert!((root - f * l / 2.0).abs() < 1e-9);
+        // A load along the link bends nothing.
+        let up = [
+            (Vector3::y(), Vector3::zeros()),
+            (Vector3::y(), Vector3::new(0.0, 0.0, 500.0)),
+            (Vector3::y(), Vector3::new(0.0, 0.0, 500.0)),
+        ];
+        let (d, root) = link_bending(
+            &[
+                at(0.0),
+                Frame {
+                    r: nalgebra::Matrix3::identity(),
+                    o: Vector3::new(0.0, 0.0, 500.0),
+                },
+                at(0.0),
+            ],
+            &up,
+            &Vector3::new(0.0, 0.0, 500.0),
+            &[mass(0.0, 0.0), mass(m, 0.0), mass(0.0, 0.0)],
+            gravity,
+            0.0,
+            0,
+        );
+        assert!(d.norm() < 1e-12 && root.abs() < 1e-12, "{d:?} {root}");
+    }
 
     /// A tool's droop per unit compliance against T turned exactly about
     /// the flange by the payload's moment times a small compliance: the

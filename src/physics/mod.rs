@@ -45,8 +45,9 @@ pub fn effects_of(findings: &[Finding]) -> Vec<EffectModel> {
 }
 
 /// The robot-side effects a calibration accepted (compliance, backlash,
-/// periodic and scale errors of the joints, and a base that tilts under the
-/// arm's moment), ready to evaluate at commanded joints: the joint
+/// periodic and scale errors of the joints; a base that tilts under the
+/// arm's moment, a link that bends under its load, a tool that tilts under
+/// its payload's), ready to evaluate at commanded joints: the joint
 /// really sits at `q + offsets_rad(q)`, and T moves by `point_shift_mm(q)`. To put T where the calibrated model
 /// puts it with angles `q_model`, command `q_model - offsets(q_model)` (one
 /// fixed-point step is enough: the offsets change by their own square).
@@ -98,9 +99,11 @@ impl JointEffects {
         })
     }
 
-    /// True when a payload changes the offsets: an accepted compliance with
-    /// link masses (the payload adds its torque), or without masses one
-    /// whose session varied the payload (so that its lever was fitted).
+    /// True when a payload changes the offsets or T's shift: an accepted
+    /// compliance with link masses (the payload adds its torque), or
+    /// without masses one whose session varied the payload (so that its
+    /// lever was fitted); a base tilt, a bending link or a compliant tool
+    /// ([`EffectModel::payload_matters`]).
     pub fn payload_matters(&self) -> bool {
         let n = self.robot.dof();
         self.effects.iter().any(|e| e.payload_matters(n))
@@ -173,22 +176,22 @@ impl JointEffects {
         (!out.is_empty()).then(|| out.join("; "))
     }
 
-    /// How far a tilting base and a compliant tool move T (mm, robot base
-    /// frame) at the commanded `q_rad` with the current payload; `None`
-    /// when the calibration accepted neither.
+    /// How far a tilting base, a bending link and a compliant tool move T
+    /// (mm, robot base frame) at the commanded `q_rad` with the current
+    /// payload; `None` when the calibration accepted none of them.
     pub fn point_shift_mm(&self, q_rad: &[f64]) -> Option<nalgebra::Vector3<f64>> {
-        let tilt: Vec<EffectModel> = self
+        let loaded: Vec<EffectModel> = self
             .effects
             .iter()
             .filter(|e| moves_t_directly(&e.kind))
             .cloned()
             .collect();
-        if tilt.is_empty() {
+        if loaded.is_empty() {
             return None;
         }
         let ctx = self.context(q_rad);
         let mut buf = effects::Basis::default();
-        Some(ctx.apply(&tilt, 0, &mut buf).dp)
+        Some(ctx.apply(&loaded, 0, &mut buf).dp)
     }
 
     /// One pose's effect context at `q_rad` in the robot base frame (no

@@ -405,6 +405,18 @@ impl Kind {
         }
     }
 
+    /// 0-based joint where the effect acts, as a finding places it: a
+    /// joint effect's own joint, or the joint at a bending link's root
+    /// (the bending turns what follows by the load that joint carries, as
+    /// its compliance does). [`Kind::joint`] is the joint whose angle the
+    /// effect changes; a bending link changes none.
+    pub fn acting_joint(&self) -> Option<usize> {
+        match self {
+            Kind::LinkBending { link_index } => Some(*link_index),
+            k => k.joint(),
+        }
+    }
+
     /// 0-based sensor, where it applies.
     pub fn sensor(&self) -> Option<usize> {
         match self {

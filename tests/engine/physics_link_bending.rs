@@ -30,18 +30,12 @@ fn calibrate(sim: &simulate::Simulated) -> Report {
     .unwrap()
 }
 
-/// Each finding's name with its joint, or a bending link's root joint
-/// (1-based).
+/// Each finding's name with its joint (a bending link's: the joint at its
+/// root, 1-based).
 fn named(r: &Report) -> Vec<(String, Option<usize>)> {
     r.findings
         .iter()
-        .map(|f| {
-            let link = f.effect_model().and_then(|m| match m.kind {
-                drawcal::physics::Kind::LinkBending { link_index } => Some(link_index + 1),
-                _ => None,
-            });
-            (f.effect.clone(), f.joint.or(link))
-        })
+        .map(|f| (f.effect.clone(), f.joint))
         .collect()
 }
 

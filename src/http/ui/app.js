@@ -489,8 +489,10 @@ const APPROACH_TEXT = {positive: "in +q", negative: "in −q", in_order: "in ord
 
 // Which conditions the selected calibration's findings make relevant, from
 // the report as GET /calibrations/{id} gave it: thermal_expansion driven by
-// the temperature → temperature, joint_compliance → payload, backlash →
-// approach. Only a hint: the inputs stay usable either way.
+// the temperature → temperature, joint_compliance (and a base tilt, a
+// bending link, a compliant tool: the payload adds to their load) →
+// payload, backlash → approach. Only a hint: the inputs stay usable either
+// way.
 function conditionHints(report) {
   const f = (report && report.findings) || [];
   const of = effect => f.filter(x => x.effect === effect);
@@ -500,21 +502,23 @@ function conditionHints(report) {
   const byTemp = thermal.filter(x => x.parameters && x.parameters.driver === "temperature");
   // A compliance takes a payload only when compensation says so (its
   // `payload_matters`, from the engine; reports before it: assume it does).
+  const loaded = ["base_tilt", "link_bending", "tool_compliance"].flatMap(of);
   const compliance = of("joint_compliance").filter(x => !x.parameters || x.parameters.payload_matters !== false);
   const massFree = of("joint_compliance").length > compliance.length;
+  const payloadBy = [...compliance, ...loaded];
   const backlash = of("backlash");
-  const refT = param(byTemp, "reference_temp_c"), refP = param(compliance, "reference_payload_kg");
+  const refT = param(byTemp, "reference_temp_c"), refP = param(payloadBy, "reference_payload_kg");
   return {
     temp: byTemp.length
       ? {relevant: true, text: `matters: thermal expansion driven by the temperature; default: ${refT != null ? `the reference ${esc(refT)} °C` : "the calibration's reference temperature"}`}
       : {relevant: false, text: thermal.length
         ? `not used: this calibration's thermal expansion is driven by ${esc(thermal.map(x => x.parameters && x.parameters.driver).filter(Boolean).join(", ") || "something other than the temperature")}, which compensation leaves out`
         : "no thermal expansion driven by the temperature among the findings"},
-    payload: compliance.length
-      ? {relevant: true, text: `matters: joint compliance${joints(compliance)}; default: ${refP != null ? `the session's ${esc(refP)} kg` : "0 kg (the session recorded no payload)"}`}
+    payload: payloadBy.length
+      ? {relevant: true, text: `matters: ${[compliance.length ? `joint compliance${joints(compliance)}` : "", ...loaded.map(x => x.effect.replace("_", " "))].filter(Boolean).map(esc).join(", ")}; default: ${refP != null ? `the session's ${esc(refP)} kg` : "0 kg (the session recorded no payload)"}`}
       : {relevant: false, text: massFree
         ? "not used: this calibration's joint compliance was fitted without link masses and without payload changes, so a payload cannot be applied to it"
-        : "no joint compliance among the findings"},
+        : "no joint compliance, base tilt, bending link or compliant tool among the findings"},
     approach: backlash.length
       ? {relevant: true, text: `matters: backlash${joints(backlash)}; default: every joint moving in +q`}
       : {relevant: false, text: "no backlash among the findings"},

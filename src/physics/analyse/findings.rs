@@ -57,7 +57,7 @@ pub(super) fn write(
         let params = finding_parameters(ctx, &e);
         state.findings.push(Finding {
             effect: e.kind.name().into(),
-            joint: e.kind.joint().map(|j| j + 1),
+            joint: e.kind.acting_joint().map(|j| j + 1),
             sensor: e.kind.sensor().map(|k| k + 1),
             magnitude: mag,
             sigma: sig,

@@ -463,7 +463,11 @@ fn doubt_cancelling_terms(
             j + 1,
             j + 1
         );
-        for f in findings.iter_mut().filter(|f| f.joint == Some(j + 1)) {
+        // The terms of the joint's angle (not a link bending from it).
+        for f in findings
+            .iter_mut()
+            .filter(|f| f.joint == Some(j + 1) && f.effect != "link_bending")
+        {
             f.evidence = format!("{}; {doubt}", f.evidence);
         }
     }

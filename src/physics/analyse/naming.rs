@@ -158,7 +158,10 @@ fn prune_overlapping(inputs: &Inputs, state: &mut State) {
 
 /// `kind` with where it acts, for a sentence.
 fn described(gone: &crate::physics::effects::Kind) -> String {
-    match (gone.joint(), gone.sensor()) {
+    match (gone.acting_joint(), gone.sensor()) {
+        (Some(j), _) if gone.joint().is_none() => {
+            format!("{} from joint {}", gone.name(), j + 1)
+        }
         (Some(j), _) => format!("{} on joint {}", gone.name(), j + 1),
         (_, Some(s)) => format!("{} on string {}", gone.name(), s + 1),
         _ => gone.name().to_string(),
@@ -543,19 +546,9 @@ pub(super) struct Series {
     why: &'static str,
 }
 
-/// The joint a named effect is a term of: its own, or for a bending link
-/// the joint at its root (the bending turns what follows by the load that
-/// joint carries, as its compliance does).
-fn term_joint(kind: &crate::physics::effects::Kind) -> Option<usize> {
-    match kind {
-        crate::physics::effects::Kind::LinkBending { link_index } => Some(*link_index),
-        k => k.joint(),
-    }
-}
-
 /// The named effects of `state` whose shape is no one physical effect:
 /// three or more terms of one joint (a bending link's counts at its root
-/// joint, [`term_joint`]), or two
+/// joint, [`Kind::acting_joint`](crate::physics::effects::Kind::acting_joint)), or two
 /// shape terms (harmonics, a scale error) of one joint; two or more moves
 /// or drifts of the rig; two or more steps or creeps of one string.
 pub(super) fn series(state: &State) -> Vec<Series> {
@@ -564,12 +557,12 @@ pub(super) fn series(state: &State) -> Vec<Series> {
     let mut out = Vec::new();
     let n_joints = acc
         .iter()
-        .filter_map(|e| term_joint(&e.kind))
+        .filter_map(|e| e.kind.acting_joint())
         .max()
         .map_or(0, |j| j + 1);
     for j in 0..n_joints {
         let terms: Vec<usize> = (0..acc.len())
-            .filter(|&k| !acc[k].kind.is_data_driven() && term_joint(&acc[k].kind) == Some(j))
+            .filter(|&k| !acc[k].kind.is_data_driven() && acc[k].kind.acting_joint() == Some(j))
             .collect();
         let is_shape = |k: &usize| {
             matches!(
