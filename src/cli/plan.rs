@@ -35,7 +35,8 @@ pub struct PlanArgs {
     #[arg(long, allow_hyphen_values = true)]
     pub floor_z_mm: Option<f64>,
     /// Effects the poses must also determine, comma-separated:
-    /// joint_compliance, backlash, joint_scale, sensor_scale, cable_sag.
+    /// joint_compliance, backlash, joint_scale, sensor_scale, cable_sag,
+    /// base_tilt, link_bending (the last two need link masses).
     #[arg(long, value_delimiter = ',')]
     pub effects: Vec<String>,
     /// Valid candidate poses to choose from.

@@ -96,9 +96,10 @@ pub struct CreatePlan {
     #[serde(default)]
     pub workspace: PlanWorkspace,
     /// Effects the poses must also determine: `joint_compliance`,
-    /// `backlash`, `joint_scale`, `sensor_scale`, `cable_sag`.
+    /// `backlash`, `joint_scale`, `sensor_scale`, `cable_sag`, `base_tilt`,
+    /// `link_bending` (the last two need link masses).
     #[serde(default)]
-    #[schema(max_items = 5)]
+    #[schema(max_items = 7)]
     pub effects: Vec<String>,
     /// Valid candidate poses to choose from (default 10000), at least four
     /// per pose planned.

@@ -132,6 +132,14 @@ pub(super) fn effect_columns(
                 )
             })),
             "cable_sag" => effects.push((Kind::CableSag, "cable_sag".into())),
+            "base_tilt" => effects.push((Kind::BaseTilt, "base_tilt".into())),
+            // Every link the analysis would propose as bending.
+            "link_bending" => effects.extend((0..n).filter(|&j| ctx.can_bend(j)).map(|j| {
+                (
+                    Kind::LinkBending { link_index: j },
+                    format!("j{}.link_bending", j + 1),
+                )
+            })),
             _ => {} // backlash: a matter of the tour's approach directions
         }
     }

@@ -15,6 +15,8 @@ pub const PLANNABLE_EFFECTS: &[&str] = &[
     "joint_scale",
     "sensor_scale",
     "cable_sag",
+    "base_tilt",
+    "link_bending",
 ];
 
 /// What to plan.
@@ -131,6 +133,20 @@ pub(super) fn check_options(robot: &Robot, opts: &PlanOptions) -> Result<()> {
         }
     }
     check_payload(opts)?;
+    if let Some(e) = opts
+        .effects
+        .iter()
+        .find(|e| matches!(e.as_str(), "base_tilt" | "link_bending"))
+    {
+        if !super::payload::has_masses(robot) {
+            return Err(Error::field(
+                "effects",
+                format!(
+                    "'{e}' is driven by the weight of the links, and robot.json has no link masses"
+                ),
+            ));
+        }
+    }
     for (i, e) in opts.effects.iter().enumerate() {
         if !PLANNABLE_EFFECTS.contains(&e.as_str()) {
             return Err(Error::field(

@@ -540,3 +540,57 @@ fn backlash_tour_gain() {
         }
     }
 }
+
+/// A plan for a bending upper arm: the planner reports the predicted
+/// sigma of each link the analysis would bend, and a session recorded at
+/// its targets with a true bending of the upper arm names it with its
+/// size within three predicted sigma. Without link masses it is refused,
+/// naming the field.
+#[test]
+fn a_plan_for_link_bending_predicts_what_the_session_identifies() {
+    let (robot, rig, _) = simulate::preset("er3a").unwrap();
+    let mut opts = PlanOptions::new(40);
+    opts.candidates = 2000;
+    opts.effects = vec!["link_bending".into(), "base_tilt".into()];
+    let p = plan::plan(&robot, &rig, &opts).unwrap();
+    let sigma = |name: &str| {
+        p.report
+            .parameters
+            .iter()
+            .find(|q| q.name == name)
+            .unwrap_or_else(|| panic!("{name} not planned: {:?}", p.report.parameters))
+            .sigma
+    };
+    // The ER3A's upper arm (from joint 2) and forearm (from joint 4).
+    let upper = sigma("j2.link_bending");
+    assert!(upper.is_finite() && upper > 0.0 && sigma("j4.link_bending") > 0.0);
+    assert!(sigma("base_tilt") > 0.0);
+    let truth = 4e-4; // 1/(N·m²)
+    let effects =
+        serde_json::json!([{"effect": "link_bending", "joint": 2, "magnitude": truth * 1e6}]);
+    let sim = simulate_plan(&p, "er3a", 9, effects);
+    let (a, _) = crate::common::analyse_blind(&sim.robot, &sim.rig, &sim.dataset);
+    let f = a
+        .findings
+        .iter()
+        .find(|f| f.effect == "link_bending" && f.joint == Some(2))
+        .unwrap_or_else(|| panic!("{:#?}", a.findings));
+    // The finding's magnitude is in 1e-6/(N·m²), the plan's sigma in 1/(N·m²).
+    let identified = f.magnitude * 1e-6;
+    println!(
+        "identified {identified} ± {} (truth {truth}, predicted sigma {upper})",
+        f.sigma * 1e-6
+    );
+    assert!(
+        (identified - truth).abs() < 3.0 * upper,
+        "{identified} against {truth}, predicted sigma {upper}"
+    );
+
+    let mut massless = robot.clone();
+    massless.links = None;
+    let err = plan::plan(&massless, &rig, &opts).unwrap_err().to_string();
+    assert!(
+        err.contains("effects") && err.contains("link masses"),
+        "{err}"
+    );
+}
