@@ -12,6 +12,73 @@ pub fn identify_default(robot: &Robot, rig: &Rig, data: &Dataset) -> drawcal::re
     drawcal::pipeline::calibrate(robot, rig, data, &Default::default(), &NoProgress).unwrap()
 }
 
+/// `drawcal identify` with the default options on a simulated session.
+pub fn identify_default_sim(
+    sim: &drawcal::physics::simulate::Simulated,
+) -> drawcal::report::Report {
+    identify_default(&sim.robot, &sim.rig, &sim.dataset)
+}
+
+/// Each finding of a report as (effect, joint): a joint effect's joint or
+/// a bending link's root joint (1-based), none elsewhere.
+pub fn named(r: &drawcal::report::Report) -> Vec<(String, Option<usize>)> {
+    r.findings
+        .iter()
+        .map(|f| (f.effect.clone(), f.joint))
+        .collect()
+}
+
+/// The effect context of a simulated session at the nominal geometry, as
+/// the analysis builds it: what a simulated effect's truth is measured in.
+pub fn sim_context(sim: &drawcal::physics::simulate::Simulated) -> drawcal::physics::Context {
+    drawcal::physics::analyse::effect_context(
+        &drawcal::identify::Observations::new(
+            &sim.robot,
+            &sim.rig,
+            &sim.dataset,
+            &Default::default(),
+        )
+        .unwrap(),
+        &drawcal::kinematics::Params::of_robot(&sim.robot),
+    )
+}
+
+/// How well a calibration's compensator follows the shift of T that a
+/// simulated load effect (a base tilt, a bending link, a compliant tool)
+/// put into the recording: over the held-out poses, each at its own
+/// payload, the RMS (mm) of the calibrated pose's shift by the report's
+/// findings less the true shift, and the RMS of the true shift.
+pub fn load_shift_followed(
+    sim: &drawcal::physics::simulate::Simulated,
+    report: &drawcal::report::Report,
+) -> (f64, f64) {
+    use drawcal::compensate::Compensator;
+    let comp = Compensator::from_report(report).unwrap();
+    let mut without = report.clone();
+    without.findings.clear();
+    let comp_without = Compensator::from_report(&without).unwrap();
+    let ctx = sim_context(sim);
+    // The context's frame: the nominal base's rotation in the rig.
+    let rig_to_base = drawcal::kinematics::Params::of_robot(&sim.robot)
+        .base_rt()
+        .0
+        .transpose();
+    let mut buf = drawcal::physics::effects::Basis::default();
+    let (mut with_sq, mut without_sq, mut n) = (0.0, 0.0, 0.0);
+    for (i, pose) in sim.dataset.poses.iter().enumerate() {
+        if pose.split != Some(drawcal::model::Split::Test) {
+            continue;
+        }
+        let truth = rig_to_base * ctx.apply(&sim.effects, i, &mut buf).dp;
+        let at = comp.with_payload_kg(pose.payload_kg.unwrap_or(0.0));
+        let shift = at.calibrated_pose(&pose.q_rad).0 - comp_without.calibrated_pose(&pose.q_rad).0;
+        with_sq += (shift - truth).norm_squared();
+        without_sq += truth.norm_squared();
+        n += 1.0;
+    }
+    ((with_sq / n).sqrt(), (without_sq / n).sqrt())
+}
+
 /// The geometric fit and the physics analysis with the default options, as
 /// `drawcal identify` runs them: the analysis and the held-out 3-D RMS of
 /// its final model (mm).

@@ -11,7 +11,6 @@ use nalgebra::Vector3;
 use drawcal::compensate::Compensator;
 use drawcal::model::{BasePose, Split, TargetKind};
 use drawcal::physics::simulate;
-use drawcal::report::Report;
 
 fn simulate(seed: u64, effect: serde_json::Value) -> simulate::Simulated {
     let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
@@ -21,24 +20,6 @@ fn simulate(seed: u64, effect: serde_json::Value) -> simulate::Simulated {
     simulate::generate(&spec).unwrap()
 }
 
-fn calibrate(sim: &simulate::Simulated) -> Report {
-    drawcal::pipeline::calibrate(
-        &sim.robot,
-        &sim.rig,
-        &sim.dataset,
-        &Default::default(),
-        &drawcal::identify::NoProgress,
-    )
-    .unwrap()
-}
-
-fn named(r: &Report) -> Vec<(String, Option<usize>)> {
-    r.findings
-        .iter()
-        .map(|f| (f.effect.clone(), f.joint))
-        .collect()
-}
-
 #[test]
 fn a_tilting_base_and_joint_2_compliance_are_each_named_as_themselves() {
     for seed in [3, 4] {
@@ -46,19 +27,14 @@ fn a_tilting_base_and_joint_2_compliance_are_each_named_as_themselves() {
             seed,
             serde_json::json!({"effect": "base_tilt", "size_x_noise": 4}),
         );
-        let r = calibrate(&tilt);
-        assert_eq!(named(&r), [("base_tilt".to_string(), None)], "seed {seed}");
-        let f = &r.findings[0];
-        let a = drawcal::physics::analyse::effect_context(
-            &drawcal::identify::Observations::new(
-                &tilt.robot,
-                &tilt.rig,
-                &tilt.dataset,
-                &Default::default(),
-            )
-            .unwrap(),
-            &drawcal::kinematics::Params::of_robot(&tilt.robot),
+        let r = crate::common::identify_default_sim(&tilt);
+        assert_eq!(
+            crate::common::named(&r),
+            [("base_tilt".to_string(), None)],
+            "seed {seed}"
         );
+        let f = &r.findings[0];
+        let a = crate::common::sim_context(&tilt);
         let (truth, unit) = simulate::report_magnitude(&tilt.effects[0], &a);
         assert_eq!(f.unit, unit);
         assert!(
@@ -73,7 +49,7 @@ fn a_tilting_base_and_joint_2_compliance_are_each_named_as_themselves() {
             serde_json::json!({"effect": "joint_compliance", "joint": 2, "size_x_noise": 4}),
         );
         assert_eq!(
-            named(&calibrate(&compliance)),
+            crate::common::named(&crate::common::identify_default_sim(&compliance)),
             [("joint_compliance".to_string(), Some(2))],
             "seed {seed}"
         );
@@ -86,8 +62,11 @@ fn compensation_applies_a_tilting_base() {
         5,
         serde_json::json!({"effect": "base_tilt", "size_x_noise": 6}),
     );
-    let report = calibrate(&sim);
-    assert_eq!(named(&report), [("base_tilt".to_string(), None)]);
+    let report = crate::common::identify_default_sim(&sim);
+    assert_eq!(
+        crate::common::named(&report),
+        [("base_tilt".to_string(), None)]
+    );
     // The truth as a report: the true robot, base and tilt, so that its
     // compensator's calibrated pose is where the real robot puts T.
     let mut truth = report.clone();

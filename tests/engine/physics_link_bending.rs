@@ -6,10 +6,7 @@
 //! and turns, by the Euler-Bernoulli tip deflections. Each must be named
 //! as itself, with its size, and compensation must apply the bending.
 
-use drawcal::compensate::Compensator;
-use drawcal::model::Split;
 use drawcal::physics::simulate;
-use drawcal::report::Report;
 
 fn simulate(robot: &str, seed: u64, effect: serde_json::Value) -> simulate::Simulated {
     let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
@@ -17,39 +14,6 @@ fn simulate(robot: &str, seed: u64, effect: serde_json::Value) -> simulate::Simu
     }))
     .unwrap();
     simulate::generate(&spec).unwrap()
-}
-
-fn calibrate(sim: &simulate::Simulated) -> Report {
-    drawcal::pipeline::calibrate(
-        &sim.robot,
-        &sim.rig,
-        &sim.dataset,
-        &Default::default(),
-        &drawcal::identify::NoProgress,
-    )
-    .unwrap()
-}
-
-/// Each finding's name with its joint (a bending link's: the joint at its
-/// root, 1-based).
-fn named(r: &Report) -> Vec<(String, Option<usize>)> {
-    r.findings
-        .iter()
-        .map(|f| (f.effect.clone(), f.joint))
-        .collect()
-}
-
-fn context(sim: &simulate::Simulated) -> drawcal::physics::Context {
-    drawcal::physics::analyse::effect_context(
-        &drawcal::identify::Observations::new(
-            &sim.robot,
-            &sim.rig,
-            &sim.dataset,
-            &Default::default(),
-        )
-        .unwrap(),
-        &drawcal::kinematics::Params::of_robot(&sim.robot),
-    )
 }
 
 #[test]
@@ -64,14 +28,15 @@ fn a_bending_link_and_the_compliance_of_its_joints_are_each_named_as_themselves(
                 3,
                 serde_json::json!({"effect": "link_bending", "joint": link, "size_x_noise": 4}),
             );
-            let r = calibrate(&sim);
+            let r = crate::common::identify_default_sim(&sim);
             assert_eq!(
-                named(&r),
+                crate::common::named(&r),
                 [("link_bending".to_string(), Some(link))],
                 "{robot} link {link}"
             );
             let f = &r.findings[0];
-            let (truth, unit) = simulate::report_magnitude(&sim.effects[0], &context(&sim));
+            let (truth, unit) =
+                simulate::report_magnitude(&sim.effects[0], &crate::common::sim_context(&sim));
             assert_eq!(f.unit, unit);
             assert!(
                 (f.magnitude - truth).abs() < 3.0 * f.sigma,
@@ -87,7 +52,7 @@ fn a_bending_link_and_the_compliance_of_its_joints_are_each_named_as_themselves(
                 serde_json::json!({"effect": "joint_compliance", "joint": joint, "size_x_noise": 4}),
             );
             assert_eq!(
-                named(&calibrate(&sim)),
+                crate::common::named(&crate::common::identify_default_sim(&sim)),
                 [("joint_compliance".to_string(), Some(joint))],
                 "{robot} joint {joint}"
             );
@@ -102,33 +67,14 @@ fn compensation_applies_a_bending_link() {
         5,
         serde_json::json!({"effect": "link_bending", "joint": 2, "size_x_noise": 6}),
     );
-    let report = calibrate(&sim);
-    assert_eq!(named(&report), [("link_bending".to_string(), Some(2))]);
-    let comp = Compensator::from_report(&report).unwrap();
-    let mut without = report.clone();
-    without.findings.clear();
-    let comp_without = Compensator::from_report(&without).unwrap();
-    // The calibrated pose's shift of T by the bending against the true
-    // bending the simulator put in the recording.
-    let ctx = context(&sim);
-    let rig_to_base = drawcal::kinematics::Params::of_robot(&sim.robot)
-        .base_rt()
-        .0
-        .transpose();
-    let mut buf = drawcal::physics::effects::Basis::default();
-    let (mut with_sq, mut without_sq, mut n) = (0.0, 0.0, 0.0);
-    for (i, pose) in sim.dataset.poses.iter().enumerate() {
-        if pose.split != Some(Split::Test) {
-            continue;
-        }
-        let truth = rig_to_base * ctx.apply(&sim.effects, i, &mut buf).dp;
-        let shift =
-            comp.calibrated_pose(&pose.q_rad).0 - comp_without.calibrated_pose(&pose.q_rad).0;
-        with_sq += (shift - truth).norm_squared();
-        without_sq += truth.norm_squared();
-        n += 1.0;
-    }
-    let (with_rms, without_rms) = ((with_sq / n).sqrt(), (without_sq / n).sqrt());
+    let report = crate::common::identify_default_sim(&sim);
+    assert_eq!(
+        crate::common::named(&report),
+        [("link_bending".to_string(), Some(2))]
+    );
+    // The calibrated pose's shift of T against the true one the
+    // simulator put in the recording, each pose at its payload.
+    let (with_rms, without_rms) = crate::common::load_shift_followed(&sim, &report);
     eprintln!(
         "bending left: {with_rms:.4} mm with the link's bending, {without_rms:.4} mm without"
     );

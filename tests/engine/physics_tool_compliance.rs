@@ -8,10 +8,7 @@
 //! nothing may be named on payload sessions without an effect; and
 //! compensation must apply the droop at the payload the robot carries.
 
-use drawcal::compensate::Compensator;
-use drawcal::model::Split;
 use drawcal::physics::simulate;
-use drawcal::report::Report;
 
 fn simulate(seed: u64, effect: Option<serde_json::Value>) -> simulate::Simulated {
     let spec: simulate::Spec = serde_json::from_value(serde_json::json!({
@@ -23,24 +20,6 @@ fn simulate(seed: u64, effect: Option<serde_json::Value>) -> simulate::Simulated
     simulate::generate(&spec).unwrap()
 }
 
-fn calibrate(sim: &simulate::Simulated) -> Report {
-    drawcal::pipeline::calibrate(
-        &sim.robot,
-        &sim.rig,
-        &sim.dataset,
-        &Default::default(),
-        &drawcal::identify::NoProgress,
-    )
-    .unwrap()
-}
-
-fn named(r: &Report) -> Vec<(String, Option<usize>)> {
-    r.findings
-        .iter()
-        .map(|f| (f.effect.clone(), f.joint))
-        .collect()
-}
-
 #[test]
 fn a_compliant_tool_and_the_wrist_joints_compliance_are_each_named_as_themselves() {
     for seed in [1, 2] {
@@ -48,23 +27,14 @@ fn a_compliant_tool_and_the_wrist_joints_compliance_are_each_named_as_themselves
             seed,
             Some(serde_json::json!({"effect": "tool_compliance", "size_x_noise": 4})),
         );
-        let r = calibrate(&tool);
+        let r = crate::common::identify_default_sim(&tool);
         assert_eq!(
-            named(&r),
+            crate::common::named(&r),
             [("tool_compliance".to_string(), None)],
             "seed {seed}"
         );
         let f = &r.findings[0];
-        let ctx = drawcal::physics::analyse::effect_context(
-            &drawcal::identify::Observations::new(
-                &tool.robot,
-                &tool.rig,
-                &tool.dataset,
-                &Default::default(),
-            )
-            .unwrap(),
-            &drawcal::kinematics::Params::of_robot(&tool.robot),
-        );
+        let ctx = crate::common::sim_context(&tool);
         let (truth, unit) = simulate::report_magnitude(&tool.effects[0], &ctx);
         assert_eq!(f.unit, unit);
         assert!(
@@ -81,7 +51,7 @@ fn a_compliant_tool_and_the_wrist_joints_compliance_are_each_named_as_themselves
                 })),
             );
             assert_eq!(
-                named(&calibrate(&wrist)),
+                crate::common::named(&crate::common::identify_default_sim(&wrist)),
                 [("joint_compliance".to_string(), Some(joint))],
                 "seed {seed}, joint {joint}"
             );
@@ -92,8 +62,12 @@ fn a_compliant_tool_and_the_wrist_joints_compliance_are_each_named_as_themselves
 #[test]
 fn payload_sessions_without_an_effect_name_nothing() {
     for seed in [11, 12, 13] {
-        let r = calibrate(&simulate(seed, None));
-        assert!(r.findings.is_empty(), "seed {seed}: {:?}", named(&r));
+        let r = crate::common::identify_default_sim(&simulate(seed, None));
+        assert!(
+            r.findings.is_empty(),
+            "seed {seed}: {:?}",
+            crate::common::named(&r)
+        );
     }
 }
 
@@ -103,45 +77,14 @@ fn compensation_applies_the_tools_droop_at_the_payload_carried() {
         5,
         Some(serde_json::json!({"effect": "tool_compliance", "size_x_noise": 6})),
     );
-    let report = calibrate(&sim);
-    assert_eq!(named(&report), [("tool_compliance".to_string(), None)]);
-    let comp = Compensator::from_report(&report).unwrap();
-    let mut without = report.clone();
-    without.findings.clear();
-    let comp_without = Compensator::from_report(&without).unwrap();
-    // The calibrated pose with the droop at each test pose's payload
-    // against the true droop the simulator put in the recording: the
-    // model's T shift must follow the truth's, the model without it not.
-    let nominal = drawcal::kinematics::Params::of_robot(&sim.robot);
-    let ctx = drawcal::physics::analyse::effect_context(
-        &drawcal::identify::Observations::new(
-            &sim.robot,
-            &sim.rig,
-            &sim.dataset,
-            &Default::default(),
-        )
-        .unwrap(),
-        &nominal,
+    let report = crate::common::identify_default_sim(&sim);
+    assert_eq!(
+        crate::common::named(&report),
+        [("tool_compliance".to_string(), None)]
     );
-    // The context's frame: the nominal base's rotation in the rig.
-    let rig_to_base = nominal.base_rt().0.transpose();
-    let mut buf = drawcal::physics::effects::Basis::default();
-    let (mut with_sq, mut without_sq, mut n) = (0.0, 0.0, 0.0);
-    for (i, pose) in sim.dataset.poses.iter().enumerate() {
-        if pose.split != Some(Split::Test) {
-            continue;
-        }
-        let kg = pose.payload_kg.unwrap_or(0.0);
-        // The true droop, turned from the context's rig frame into the
-        // robot base frame the compensator works in.
-        let truth = rig_to_base * ctx.apply(&sim.effects, i, &mut buf).dp;
-        let at = comp.with_payload_kg(kg);
-        let shift = at.calibrated_pose(&pose.q_rad).0 - comp_without.calibrated_pose(&pose.q_rad).0;
-        with_sq += (shift - truth).norm_squared();
-        without_sq += truth.norm_squared();
-        n += 1.0;
-    }
-    let (with_rms, without_rms) = ((with_sq / n).sqrt(), (without_sq / n).sqrt());
+    // The calibrated pose's shift of T against the true one the
+    // simulator put in the recording, each pose at its payload.
+    let (with_rms, without_rms) = crate::common::load_shift_followed(&sim, &report);
     eprintln!(
         "droop left: {with_rms:.4} mm with the tool's compliance, {without_rms:.4} mm without"
     );
