@@ -46,43 +46,24 @@ struct Driver {
     per_string: bool,
 }
 
+impl Driver {
+    /// One point per pose.
+    fn per_pose(label: String, unit: &str) -> Self {
+        Driver {
+            label,
+            unit: unit.into(),
+            per_string: false,
+        }
+    }
+}
+
 fn driver(ctx: &Context, kind: &Kind) -> Driver {
-    let d = |label: String, unit: &str| Driver {
-        label,
-        unit: unit.into(),
-        per_string: false,
-    };
+    let d = Driver::per_pose;
     match kind {
         Kind::JointCompliance {
             joint_index,
             regressors,
-        } => match regressors.first() {
-            None => d(
-                format!("gravity torque on joint {}", joint_index + 1),
-                "N*m",
-            ),
-            Some(&k) if k == ctx.n_joints + 1 => d(
-                format!(
-                    "gravity lever on joint {} of the payload at the tool point",
-                    joint_index + 1
-                ),
-                "kg*m",
-            ),
-            Some(&k) if k == ctx.n_joints => d(
-                format!(
-                    "gravity lever on joint {} of a unit mass at the tool point",
-                    joint_index + 1
-                ),
-                "m",
-            ),
-            Some(&k) => d(
-                format!(
-                    "gravity lever on joint {} of a unit mass at the origin of link frame {k}",
-                    joint_index + 1
-                ),
-                "m",
-            ),
-        },
+        } => compliance_driver(ctx, *joint_index, regressors),
         Kind::Backlash { joint_index } => d(
             format!("direction joint {} approached from", joint_index + 1),
             "±1; 0 unknown",
@@ -136,30 +117,7 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             driver,
             driver_index,
             ..
-        } => {
-            let words = super::effects::correction_driver_words(*driver, *driver_index);
-            match driver {
-                CorrectionDriver::JointAngle
-                | CorrectionDriver::JointMove
-                | CorrectionDriver::MoveDirection => d(words, "deg"),
-                CorrectionDriver::Time => {
-                    let (label, unit) = ctx.time_axis();
-                    d(label.into(), unit)
-                }
-                CorrectionDriver::Temperature => d(words, "degrees C"),
-                CorrectionDriver::StringLength | CorrectionDriver::StringMove => d(words, "mm"),
-                CorrectionDriver::GravityTorque | CorrectionDriver::GravityTorqueChange => {
-                    d(words, "N*m")
-                }
-                CorrectionDriver::StringDirection => d(words, "deg"),
-                CorrectionDriver::Motion => d(words, "mm"),
-                CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => {
-                    d(words, "deg")
-                }
-                CorrectionDriver::Workspace => d(words, "mm"),
-                CorrectionDriver::LineOfSight => d(words, "1"),
-            }
-        }
+        } => correction_driver(ctx, *driver, *driver_index),
         // A moved rig: the session's clock (the row order without one).
         Kind::RigStep { .. } | Kind::RigDrift => Driver {
             label: if ctx.timed {
@@ -171,6 +129,66 @@ fn driver(ctx: &Context, kind: &Kind) -> Driver {
             unit: if ctx.timed { "h" } else { "row" }.into(),
             per_string: false,
         },
+    }
+}
+
+/// A compliance's driver: the gravity torque on the joint (with link
+/// masses), or the lever of its first unit-mass regressor (without).
+fn compliance_driver(ctx: &Context, joint_index: usize, regressors: &[usize]) -> Driver {
+    let d = Driver::per_pose;
+    match regressors.first() {
+        None => d(
+            format!("gravity torque on joint {}", joint_index + 1),
+            "N*m",
+        ),
+        Some(&k) if k == ctx.n_joints + 1 => d(
+            format!(
+                "gravity lever on joint {} of the payload at the tool point",
+                joint_index + 1
+            ),
+            "kg*m",
+        ),
+        Some(&k) if k == ctx.n_joints => d(
+            format!(
+                "gravity lever on joint {} of a unit mass at the tool point",
+                joint_index + 1
+            ),
+            "m",
+        ),
+        Some(&k) => d(
+            format!(
+                "gravity lever on joint {} of a unit mass at the origin of link frame {k}",
+                joint_index + 1
+            ),
+            "m",
+        ),
+    }
+}
+
+/// A data-driven correction's driver, in its unit.
+fn correction_driver(
+    ctx: &Context,
+    driver: CorrectionDriver,
+    driver_index: Option<usize>,
+) -> Driver {
+    let d = Driver::per_pose;
+    let words = super::effects::correction_driver_words(driver, driver_index);
+    match driver {
+        CorrectionDriver::JointAngle
+        | CorrectionDriver::JointMove
+        | CorrectionDriver::MoveDirection => d(words, "deg"),
+        CorrectionDriver::Time => {
+            let (label, unit) = ctx.time_axis();
+            d(label.into(), unit)
+        }
+        CorrectionDriver::Temperature => d(words, "degrees C"),
+        CorrectionDriver::StringLength | CorrectionDriver::StringMove => d(words, "mm"),
+        CorrectionDriver::GravityTorque | CorrectionDriver::GravityTorqueChange => d(words, "N*m"),
+        CorrectionDriver::StringDirection => d(words, "deg"),
+        CorrectionDriver::Motion => d(words, "mm"),
+        CorrectionDriver::Workspace if matches!(driver_index, Some(3 | 4)) => d(words, "deg"),
+        CorrectionDriver::Workspace => d(words, "mm"),
+        CorrectionDriver::LineOfSight => d(words, "1"),
     }
 }
 

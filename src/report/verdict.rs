@@ -297,14 +297,8 @@ fn compensation(r: &Report) -> Option<(Level, String)> {
         let needs = match &model.kind {
             Kind::ThermalExpansion { .. } => Some("temp_c"),
             Kind::Backlash { .. } => Some("the approach direction"),
-            Kind::JointCompliance { .. }
-            | Kind::BaseTilt
-            | Kind::ToolCompliance
-            | Kind::LinkBending { .. }
-                if model.payload_matters(r.nominal_robot.dof()) =>
-            {
-                Some("payload_kg")
-            }
+            // Whatever a payload loads (the effect says which it is).
+            _ if model.payload_matters(r.nominal_robot.dof()) => Some("payload_kg"),
             _ => None,
         };
         let used = match &model.kind {

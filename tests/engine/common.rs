@@ -43,6 +43,24 @@ pub fn sim_context(sim: &drawcal::physics::simulate::Simulated) -> drawcal::phys
     )
 }
 
+/// A finding's size is the simulated effect's (`sim.effects[0]`), in the
+/// same unit, within three of its sigma; `what` names the case.
+pub fn assert_size_within_3_sigma(
+    sim: &drawcal::physics::simulate::Simulated,
+    f: &drawcal::report::Finding,
+    what: &str,
+) {
+    let (truth, unit) =
+        drawcal::physics::simulate::report_magnitude(&sim.effects[0], &sim_context(sim));
+    assert_eq!(f.unit, unit);
+    assert!(
+        (f.magnitude - truth).abs() < 3.0 * f.sigma,
+        "{what}: {} ± {} {unit}, truth {truth}",
+        f.magnitude,
+        f.sigma
+    );
+}
+
 /// How well a calibration's compensator follows the shift of T that a
 /// simulated load effect (a base tilt, a bending link, a compliant tool)
 /// put into the recording: over the held-out poses, each at its own

@@ -33,16 +33,7 @@ fn a_tilting_base_and_joint_2_compliance_are_each_named_as_themselves() {
             [("base_tilt".to_string(), None)],
             "seed {seed}"
         );
-        let f = &r.findings[0];
-        let a = crate::common::sim_context(&tilt);
-        let (truth, unit) = simulate::report_magnitude(&tilt.effects[0], &a);
-        assert_eq!(f.unit, unit);
-        assert!(
-            (f.magnitude - truth).abs() < 3.0 * f.sigma,
-            "seed {seed}: {} ± {} {unit}, truth {truth}",
-            f.magnitude,
-            f.sigma
-        );
+        crate::common::assert_size_within_3_sigma(&tilt, &r.findings[0], &format!("seed {seed}"));
 
         let compliance = simulate(
             seed,

@@ -34,15 +34,10 @@ fn a_bending_link_and_the_compliance_of_its_joints_are_each_named_as_themselves(
                 [("link_bending".to_string(), Some(link))],
                 "{robot} link {link}"
             );
-            let f = &r.findings[0];
-            let (truth, unit) =
-                simulate::report_magnitude(&sim.effects[0], &crate::common::sim_context(&sim));
-            assert_eq!(f.unit, unit);
-            assert!(
-                (f.magnitude - truth).abs() < 3.0 * f.sigma,
-                "{robot} link {link}: {} ± {} {unit}, truth {truth}",
-                f.magnitude,
-                f.sigma
+            crate::common::assert_size_within_3_sigma(
+                &sim,
+                &r.findings[0],
+                &format!("{robot} link {link}"),
             );
         }
         for joint in [2, 3] {

@@ -33,16 +33,7 @@ fn a_compliant_tool_and_the_wrist_joints_compliance_are_each_named_as_themselves
             [("tool_compliance".to_string(), None)],
             "seed {seed}"
         );
-        let f = &r.findings[0];
-        let ctx = crate::common::sim_context(&tool);
-        let (truth, unit) = simulate::report_magnitude(&tool.effects[0], &ctx);
-        assert_eq!(f.unit, unit);
-        assert!(
-            (f.magnitude - truth).abs() < 3.0 * f.sigma,
-            "seed {seed}: {} ± {} {unit}, truth {truth}",
-            f.magnitude,
-            f.sigma
-        );
+        crate::common::assert_size_within_3_sigma(&tool, &r.findings[0], &format!("seed {seed}"));
         for joint in [4, 5] {
             let wrist = simulate(
                 seed,

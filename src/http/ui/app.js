@@ -489,9 +489,9 @@ const APPROACH_TEXT = {positive: "in +q", negative: "in −q", in_order: "in ord
 
 // Which conditions the selected calibration's findings make relevant, from
 // the report as GET /calibrations/{id} gave it: thermal_expansion driven by
-// the temperature → temperature, joint_compliance (and a base tilt, a
-// bending link, a compliant tool: the payload adds to their load) →
-// payload, backlash → approach. Only a hint: the inputs stay usable either
+// the temperature → temperature, joint_compliance and every other effect
+// whose finding says a payload matters (a base tilt, a bending link, a
+// compliant tool) → payload, backlash → approach. Only a hint: the inputs stay usable either
 // way.
 function conditionHints(report) {
   const f = (report && report.findings) || [];
@@ -502,7 +502,7 @@ function conditionHints(report) {
   const byTemp = thermal.filter(x => x.parameters && x.parameters.driver === "temperature");
   // A compliance takes a payload only when compensation says so (its
   // `payload_matters`, from the engine; reports before it: assume it does).
-  const loaded = ["base_tilt", "link_bending", "tool_compliance"].flatMap(of);
+  const loaded = f.filter(x => x.effect !== "joint_compliance" && x.parameters && x.parameters.payload_matters === true);
   const compliance = of("joint_compliance").filter(x => !x.parameters || x.parameters.payload_matters !== false);
   const massFree = of("joint_compliance").length > compliance.length;
   const payloadBy = [...compliance, ...loaded];

@@ -235,11 +235,9 @@ fn thermal_doubt(ctx: &Context, e: &EffectModel) -> Option<String> {
 /// the temperature a thermal expansion scales from).
 fn finding_parameters(ctx: &Context, e: &EffectModel) -> EffectParameters {
     let mut p = EffectParameters::new(e.clone());
-    if let Kind::JointCompliance { .. }
-    | Kind::BaseTilt
-    | Kind::ToolCompliance
-    | Kind::LinkBending { .. } = e.kind
-    {
+    // A compliance says whether a payload changes it, either way; every
+    // other effect a payload loads says so (EffectModel::payload_matters).
+    if matches!(e.kind, Kind::JointCompliance { .. }) || e.payload_matters(ctx.n_joints) {
         p.reference_payload_kg = ctx.payload_ref_kg;
         p.payload_matters = Some(e.payload_matters(ctx.n_joints));
     }

@@ -22,7 +22,7 @@ use nalgebra::DMatrix;
 
 use super::normals::{Appended, BaseFactors, FOLDS, FoldAccumulator, Normals, cv_sse};
 use super::{Inputs, State};
-use crate::physics::effects::{Basis, EffectModel, Kind, hat_weights, live_knots};
+use crate::physics::effects::{Basis, EffectModel, Kind, live_knots};
 use crate::physics::problem::{EffectProblem, PoseFrame, RowDir};
 
 /// The train rows of the model so far (geometry and accepted effects at
@@ -304,31 +304,8 @@ impl FixedBase {
         let mut cross = vec![vec![0.0; nb * k]; FOLDS];
         let mut own = vec![vec![0.0; k * k]; FOLDS];
         let mut g = vec![vec![0.0; k]; FOLDS];
-        let Kind::DataDriven {
-            driver,
-            driver_index,
-            knots,
-            period,
-            axis,
-            ..
-        } = kind
-        else {
-            return Appended {
-                nb,
-                k,
-                cross,
-                own,
-                g,
-            };
-        };
         for pos in 0..t.start.len() - 1 {
-            let x = ctx.driver_value(
-                &ctx.poses[obs.train[pos]],
-                *driver,
-                *driver_index,
-                axis.as_ref(),
-            );
-            let live = live_knots(hat_weights(knots, *period, x));
+            let live = live_knots(ctx.knot_weights(kind, obs.train[pos]));
             let f = self.fold_of[pos];
             let (s, e) = (t.start[pos], t.start[pos + 1]);
             let cols = &t.cols[s..e];
@@ -368,28 +345,14 @@ impl FixedBase {
     /// screen for a scan of many candidates, in one pass over the poses.
     pub(super) fn drop_alone(&self, inputs: &Inputs, kind: &Kind, patterns: &[(f64, f64)]) -> f64 {
         let Inputs { obs, ctx, .. } = inputs;
-        let Kind::DataDriven {
-            driver,
-            driver_index,
-            knots,
-            period,
-            axis,
-            ..
-        } = kind
-        else {
+        let Kind::DataDriven { knots, .. } = kind else {
             return 0.0;
         };
         let k = knots.len();
         let mut a = DMatrix::<f64>::zeros(k, k);
         let mut g = nalgebra::DVector::<f64>::zeros(k);
         for (pos, &(vr, vv)) in patterns.iter().enumerate() {
-            let x = ctx.driver_value(
-                &ctx.poses[obs.train[pos]],
-                *driver,
-                *driver_index,
-                axis.as_ref(),
-            );
-            let w = hat_weights(knots, *period, x);
+            let w = ctx.knot_weights(kind, obs.train[pos]);
             for &(c, wc) in &w {
                 g[c] += wc * vr;
                 for &(c2, wc2) in &w {
